@@ -10,3 +10,7 @@ and implemented in :mod:`cadra.conventions`.
 """
 
 __version__ = "0.1.0"
+
+from cadra._numba_cache import ensure_fresh_cache as _ensure_fresh_cache
+
+_ensure_fresh_cache()

@@ -92,7 +92,10 @@ def euler_to_quat(yaw: float, pitch: float, roll: float) -> np.ndarray:
 
 
 def quat_to_euler(q: np.ndarray) -> tuple[float, float, float]:
-    """Aircraft Euler angles (yaw, pitch, roll), rad, of quaternion B->E (pitch in [-pi/2, pi/2])."""
+    """Aircraft Euler angles (yaw, pitch, roll), rad, of quaternion B->E.
+
+    Pitch is in [-pi/2, pi/2].
+    """
     R = quat_to_matrix(q)
     pitch = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
     yaw = float(np.arctan2(R[1, 0], R[0, 0]))

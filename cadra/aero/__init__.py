@@ -1,1 +1,63 @@
-"""aero."""
+"""Aerodynamic models as data: the coefficient-form language, parameters, model files, and
+the compiled evaluator the 6-DOF integrator calls.
+
+Public API (docs/aero_models.md; frames and signs: docs/conventions.md):
+
+- :class:`Parameter`, :class:`AeroModel`, :func:`load_model`, :func:`save_model`,
+  :func:`model_from_dict`, :func:`load_bundled_model`, :func:`bundled_model_names`;
+- :class:`AeroProgram`, :func:`eval_coefficients` (numba), :data:`COEFFICIENTS`,
+  :data:`VARIABLES`;
+- :func:`parse_expression`, :func:`evaluate_tree`, :class:`ExpressionError`.
+"""
+
+from cadra.aero.expr import (
+    CONSTANTS,
+    FUNCTIONS,
+    ExpressionError,
+    compile_program,
+    evaluate_tree,
+    parse_expression,
+    to_text,
+)
+from cadra.aero.model import (
+    ANGLE_PLANES,
+    MODELS_DIR,
+    AeroModel,
+    Parameter,
+    bundled_model_names,
+    load_bundled_model,
+    load_model,
+    model_from_dict,
+    save_model,
+)
+from cadra.aero.program import (
+    COEFFICIENTS,
+    VARIABLES,
+    AeroProgram,
+    eval_coefficients,
+    eval_coefficients_batch,
+)
+
+__all__ = [
+    "ANGLE_PLANES",
+    "COEFFICIENTS",
+    "CONSTANTS",
+    "FUNCTIONS",
+    "MODELS_DIR",
+    "VARIABLES",
+    "AeroModel",
+    "AeroProgram",
+    "ExpressionError",
+    "Parameter",
+    "bundled_model_names",
+    "compile_program",
+    "eval_coefficients",
+    "eval_coefficients_batch",
+    "evaluate_tree",
+    "load_bundled_model",
+    "load_model",
+    "model_from_dict",
+    "parse_expression",
+    "save_model",
+    "to_text",
+]

@@ -1,1 +1,55 @@
-"""body."""
+"""Model geometry: bodies of revolution with exact silhouettes (docs/bodies.md).
+
+Bodies: :func:`sphere`, :func:`capsule` (seed 004 Fig. 6 / Table 1, presets M1, M2, M3) and
+:func:`cone`. Each is a :class:`Body` whose meridian ``s_m, r_m`` is measured from a documented
+**reference point** on the axis (the point stage one measures; the cg is offset from it and
+comes from the shot file): sphere = centre, capsule = centre of the maximum-diameter circle,
+cone = centre of the base plane. Body axes: x nose, y starboard, z down (docs/conventions.md).
+
+:func:`silhouette` gives the exact outline under parallel projection as a polygon whose
+vertices lie on the outline; :func:`silhouette_area_m2` its area in closed form.
+"""
+
+from cadra.body.capsule import (
+    PRESETS,
+    TABLE1_CM,
+    CapsuleOML,
+    axial_offset_from_virtual_apex,
+    capsule,
+    preset_dimensions_m,
+    solve_capsule_oml,
+)
+from cadra.body.mass import SolidProperties, solid_properties
+from cadra.body.model import (
+    KINDS,
+    Body,
+    axial_offset_from_base,
+    cg_offset_from_table2,
+    meridian,
+)
+from cadra.body.outline import silhouette, silhouette_area_m2, surface_points
+from cadra.body.shapes import cone, sphere
+from cadra.body.spec import body_from_spec
+
+__all__ = [
+    "KINDS",
+    "PRESETS",
+    "TABLE1_CM",
+    "Body",
+    "CapsuleOML",
+    "SolidProperties",
+    "axial_offset_from_base",
+    "axial_offset_from_virtual_apex",
+    "body_from_spec",
+    "capsule",
+    "cg_offset_from_table2",
+    "cone",
+    "meridian",
+    "preset_dimensions_m",
+    "silhouette",
+    "silhouette_area_m2",
+    "solid_properties",
+    "solve_capsule_oml",
+    "sphere",
+    "surface_points",
+]

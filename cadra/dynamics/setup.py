@@ -46,7 +46,8 @@ def plane_code(angle_plane: str) -> int:
     try:
         return _PLANES[angle_plane]
     except KeyError:
-        raise ValueError(f"angle_plane must be one of {sorted(_PLANES)}, got {angle_plane!r}")
+        raise ValueError(
+            f"angle_plane must be one of {sorted(_PLANES)}, got {angle_plane!r}") from None
 
 
 @dataclass(frozen=True)

@@ -1,1 +1,16 @@
-"""io."""
+"""File boundaries: shot files, unit conversions, atomic writes, seed-004 tables.
+
+Submodules (import what you need; none imports a heavy dependency at package import):
+
+* :mod:`cadra.io.units` -- torr/Pa, cm/m, g/kg, g cm^2/kg m^2, deg/rad: the one place where
+  file units meet SI;
+* :mod:`cadra.io.atomic` -- ``atomic_write_text``, ``atomic_write_bytes``,
+  ``atomic_output_dir``;
+* :mod:`cadra.io.shotfile` -- ``load_shot``, ``save_shot``, ``ShotFile`` (docs/shot_file.md);
+* :mod:`cadra.io.seed004` -- ``load_seed004_table`` (seed 004 Tables 2 and 3).
+"""
+
+from cadra.io import units
+from cadra.io.atomic import atomic_output_dir, atomic_write_bytes, atomic_write_text
+
+__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text", "units"]

@@ -1,0 +1,507 @@
+"""Aerodynamic models as data: parameters, coefficient forms, TOML files.
+
+An :class:`AeroModel` holds the coefficient forms (expression text, see :mod:`cadra.aero.expr`
+and docs/aero_models.md) and the :class:`Parameter` s they use. Parameters follow lmfit's
+semantics (``Parameter(name, value, vary, min, max)``); values inside the library are SI
+(angles in radians) whatever unit the file uses. Frames and coefficient senses:
+docs/conventions.md.
+
+Validation policy: every parameter a form uses must be declared, and every declared parameter
+must be used by some form (an unused parameter is an **error**: it would be a silent fit
+unknown with no effect, i.e. a singular Jacobian column).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from cadra.aero.expr import (
+    NAME_RE,
+    RESERVED,
+    ExpressionError,
+    compile_program,
+    parameter_names,
+    parse_expression,
+)
+from cadra.aero.program import (
+    COEFFICIENTS,
+    N_COEFFICIENTS,
+    N_VARIABLES,
+    AeroProgram,
+    eval_coefficients_batch,
+)
+
+#: the two kinds of model (docs/conventions.md, "Aerodynamic coefficients")
+ANGLE_PLANES = ("alpha_beta", "sigma")
+#: points the moment coefficients may be about
+MOMENT_REFERENCES = ("cg",)
+#: file units of parameter values -> factor to SI
+UNITS = {"": 1.0, "deg": math.pi / 180.0}
+#: coefficients a total-angle (sigma) model may not define (conventions: C_C and C_n are not
+#: used; C_mq damps both transverse rates, so C_nr would be ignored)
+SIGMA_UNUSED = ("CC", "Cn", "Cnr")
+#: the ``format`` key written by :func:`save_model`
+FILE_FORMAT = "cadra.aero/1"
+#: directory of the bundled model files
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+
+_MODEL_KEYS = ("format", "name", "description", "angle_plane", "moment_reference", "reference",
+               "coefficients", "parameters")
+_PARAM_KEYS = ("value", "vary", "min", "max", "unit", "note")
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(
+        x, bool | np.bool_)
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One model parameter (lmfit semantics), value and bounds in SI / radians.
+
+    Attributes
+    ----------
+    name : identifier (letters, digits, ``_``; starts with a letter; not a variable/function).
+    value : float, SI (radians for angles).
+    vary : bool, free in fits (True) or held (False).
+    min, max : bounds, SI; ``-inf``/``inf`` when unbounded. ``min <= value <= max``.
+    unit : unit of the value *in the file*: ``""`` (as is) or ``"deg"`` (file degrees).
+    note : free text (provenance, OCR decisions); kept through save/load.
+    """
+
+    name: str
+    value: float
+    vary: bool = True
+    min: float = -math.inf
+    max: float = math.inf
+    unit: str = ""
+    note: str = ""
+
+    def __post_init__(self):
+        key = f"parameters.{self.name}"
+        if not isinstance(self.name, str) or not NAME_RE.match(self.name):
+            raise ValueError(f"parameters.{self.name!r}: invalid name (letters, digits and '_', "
+                             "starting with a letter)")
+        if self.name in RESERVED:
+            raise ValueError(f"{key}: reserved name (a variable, function or constant)")
+        for attr in ("value", "min", "max"):
+            v = getattr(self, attr)
+            if not _is_number(v):
+                raise ValueError(f"{key}: {attr} must be a number, got {v!r}")
+            v = float(v)
+            if math.isnan(v):
+                raise ValueError(f"{key}: {attr} is NaN")
+            object.__setattr__(self, attr, v)
+        if not math.isfinite(self.value):
+            raise ValueError(f"{key}: value must be finite, got {self.value}")
+        if not isinstance(self.vary, bool | np.bool_):
+            raise ValueError(f"{key}: vary must be true or false, got {self.vary!r}")
+        object.__setattr__(self, "vary", bool(self.vary))
+        if self.min > self.max:
+            raise ValueError(f"{key}: min ({self.min:g}) > max ({self.max:g})")
+        if not (self.min <= self.value <= self.max):
+            raise ValueError(f"{key}: value {self.value:g} outside its bounds "
+                             f"[{self.min:g}, {self.max:g}] (SI units)")
+        if self.unit not in UNITS:
+            raise ValueError(f"{key}: unit must be one of {sorted(UNITS)}, got {self.unit!r}")
+        if not isinstance(self.note, str):
+            raise ValueError(f"{key}: note must be a string")
+
+    def replace(self, **changes) -> Parameter:
+        """A copy with some attributes changed (validated)."""
+        return Parameter(**{**self.__dict__, **changes})
+
+    @property
+    def file_value(self) -> float:
+        """The value in the file's unit (:attr:`unit`)."""
+        return _to_file(self.value, self.unit)
+
+
+def _to_file(x: float, unit: str) -> float:
+    """SI -> file unit, choosing the float whose conversion back is exactly ``x``."""
+    if unit == "" or not math.isfinite(x):
+        return x
+    d = math.degrees(x)
+    if _from_file(d, unit) == x:
+        return d
+    up = down = d
+    for _ in range(16):
+        up, down = math.nextafter(up, math.inf), math.nextafter(down, -math.inf)
+        for c in (up, down):
+            if _from_file(c, unit) == x:
+                return c
+    return d
+
+
+def _from_file(x: float, unit: str) -> float:
+    if unit == "" or not math.isfinite(x):
+        return float(x)
+    return math.radians(x)
+
+
+@dataclass(frozen=True)
+class AeroModel:
+    """An aerodynamic model: coefficient forms over variables and parameters.
+
+    Attributes
+    ----------
+    name : short identifier (e.g. ``"m2_m070"``).
+    angle_plane : ``"alpha_beta"`` (lifting bodies: forms in alpha, beta) or ``"sigma"``
+        (symmetric bodies: forms in the total angle of attack; see docs/conventions.md).
+    coefficients : coefficient name (of :data:`cadra.aero.program.COEFFICIENTS`) -> expression
+        text. Coefficients not listed are 0.
+    parameters : the declared parameters, in the order of :meth:`values`.
+    description : free text.
+    reference : reference-case metadata (e.g. ``{"case": "M2 M0.70", "mach_nominal": 0.7}``);
+        scalar values only.
+    moment_reference : point the moment coefficients are about: ``"cg"``.
+    """
+
+    name: str
+    angle_plane: str
+    coefficients: dict
+    parameters: tuple
+    description: str = ""
+    reference: dict = field(default_factory=dict)
+    moment_reference: str = "cg"
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError("name: must be a non-empty string")
+        if self.angle_plane not in ANGLE_PLANES:
+            raise ValueError(f"angle_plane: must be one of {ANGLE_PLANES}, "
+                             f"got {self.angle_plane!r}")
+        if self.moment_reference not in MOMENT_REFERENCES:
+            raise ValueError(f"moment_reference: must be one of {MOMENT_REFERENCES}, "
+                             f"got {self.moment_reference!r}")
+        if not isinstance(self.description, str):
+            raise ValueError("description: must be a string")
+        if not isinstance(self.reference, Mapping):
+            raise ValueError("reference: must be a table")
+        ref = {}
+        for k, v in self.reference.items():
+            if not isinstance(k, str) or not isinstance(v, str | int | float | bool):
+                raise ValueError(f"reference.{k}: values must be strings, numbers or booleans")
+            ref[k] = v
+        object.__setattr__(self, "reference", ref)
+        params = tuple(self.parameters)
+        seen = set()
+        for p in params:
+            if not isinstance(p, Parameter):
+                raise ValueError(f"parameters: expected Parameter objects, got {p!r}")
+            if p.name in seen:
+                raise ValueError(f"parameters.{p.name}: declared twice")
+            seen.add(p.name)
+        object.__setattr__(self, "parameters", params)
+        if not isinstance(self.coefficients, Mapping):
+            raise ValueError("coefficients: must be a table of name -> expression")
+        forms = {}
+        for k in self.coefficients:
+            if k not in COEFFICIENTS:
+                raise ValueError(f"coefficients.{k}: unknown coefficient (expected one of "
+                                 f"{', '.join(COEFFICIENTS)})")
+        for k in COEFFICIENTS:
+            if k in self.coefficients:
+                text = self.coefficients[k]
+                if not isinstance(text, str):
+                    raise ValueError(f"coefficients.{k}: must be an expression string")
+                forms[k] = text
+        if self.angle_plane == "sigma":
+            for k in SIGMA_UNUSED:
+                if k in forms:
+                    raise ValueError(
+                        f"coefficients.{k}: not used by total-angle (sigma) models "
+                        "(docs/conventions.md: C_C and C_n are not used, C_mq damps both "
+                        "transverse rates); use angle_plane = \"alpha_beta\"")
+        object.__setattr__(self, "coefficients", forms)
+        trees = {k: parse_expression(t, seen, context=f"coefficients.{k}")
+                 for k, t in forms.items()}
+        used = set()
+        for t in trees.values():
+            used |= parameter_names(t)
+        unused = [p.name for p in params if p.name not in used]
+        if unused:
+            raise ValueError(f"parameters.{unused[0]}: declared but not used by any "
+                             f"coefficient form" + (f" (also unused: {', '.join(unused[1:])})"
+                                                    if len(unused) > 1 else ""))
+        object.__setattr__(self, "_trees", trees)
+        object.__setattr__(self, "_index", {p.name: i for i, p in enumerate(params)})
+        object.__setattr__(self, "_cache", {})
+
+    # --- parameters ----------------------------------------------------------------------
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names, in the order of :meth:`values`."""
+        return tuple(p.name for p in self.parameters)
+
+    def index(self, name: str) -> int:
+        """Position of parameter ``name`` in :meth:`values`."""
+        try:
+            return self._index[name]
+        except KeyError:
+            raise KeyError(f"model {self.name!r} has no parameter {name!r}") from None
+
+    def parameter(self, name: str) -> Parameter:
+        """The parameter called ``name``."""
+        return self.parameters[self.index(name)]
+
+    def values(self) -> np.ndarray:
+        """Parameter values (SI), float64, in declaration order (the ``params`` vector)."""
+        return np.array([p.value for p in self.parameters], dtype=np.float64)
+
+    def free_names(self) -> tuple[str, ...]:
+        """Names of the parameters with ``vary=True``, in declaration order."""
+        return tuple(p.name for p in self.parameters if p.vary)
+
+    def free_indices(self) -> np.ndarray:
+        """Positions of the free parameters in :meth:`values`."""
+        return np.array([i for i, p in enumerate(self.parameters) if p.vary], dtype=np.int64)
+
+    def parameters_in(self, coefficient: str) -> tuple[str, ...]:
+        """Names of the parameters the form of ``coefficient`` uses (declaration order)."""
+        if coefficient not in COEFFICIENTS:
+            raise KeyError(f"unknown coefficient {coefficient!r}")
+        tree = self._trees.get(coefficient)
+        used = parameter_names(tree) if tree is not None else set()
+        return tuple(n for n in self.names if n in used)
+
+    def tree(self, coefficient: str) -> tuple | None:
+        """Parsed expression tree of ``coefficient`` (``None`` when it is 0)."""
+        return self._trees.get(coefficient)
+
+    def _derive(self, parameters: tuple) -> AeroModel:
+        # same forms and names: share the parsed trees and the compiled program
+        new = object.__new__(AeroModel)
+        for k, v in self.__dict__.items():
+            object.__setattr__(new, k, v)
+        object.__setattr__(new, "parameters", parameters)
+        return new
+
+    def _changed(self, changes: Mapping) -> AeroModel:
+        params = list(self.parameters)
+        for name, change in changes.items():
+            i = self.index(name)
+            try:
+                params[i] = params[i].replace(**change)
+            except TypeError as exc:  # pragma: no cover - internal misuse
+                raise ValueError(f"parameters.{name}: {exc}") from None
+        return self._derive(tuple(params))
+
+    def with_values(self, values: Mapping[str, float]) -> AeroModel:
+        """A copy with new parameter values (SI / radians); bounds are enforced."""
+        return self._changed({n: {"value": v} for n, v in values.items()})
+
+    def with_vary(self, vary: Mapping[str, bool]) -> AeroModel:
+        """A copy with parameters freed (True) or held (False)."""
+        return self._changed({n: {"vary": v} for n, v in vary.items()})
+
+    def with_bounds(self, bounds: Mapping[str, tuple[float, float]]) -> AeroModel:
+        """A copy with new ``(min, max)`` bounds (SI)."""
+        return self._changed({n: {"min": b[0], "max": b[1]} for n, b in bounds.items()})
+
+    def with_free_values(self, x: Iterable[float]) -> AeroModel:
+        """A copy with the free parameters (in :meth:`free_names` order) set to ``x``."""
+        x = list(x)
+        names = self.free_names()
+        if len(x) != len(names):
+            raise ValueError(f"expected {len(names)} free values, got {len(x)}")
+        return self.with_values(dict(zip(names, (float(v) for v in x), strict=True)))
+
+    # --- evaluation ----------------------------------------------------------------------
+
+    def compile(self) -> AeroProgram:
+        """The compiled program (cached; shared by copies that differ only in values)."""
+        prog = self._cache.get("program")
+        if prog is None:
+            prog = compile_program(self._trees, self.names, self.angle_plane,
+                                   self.moment_reference)
+            self._cache["program"] = prog
+        return prog
+
+    def evaluate(self, alpha, beta, sigma, mach, reynolds=0.0, p_hat=0.0, q_hat=0.0,
+                 r_hat=0.0, *, params=None) -> dict:
+        """The 9 coefficients at (arrays of) points, with the compiled numba program.
+
+        Inputs broadcast against each other; angles in radians. ``sigma=None`` computes
+        ``arccos(cos(alpha) cos(beta))``. ``params`` overrides :meth:`values`. Any complex
+        input gives complex results (complex step). Returns ``{name: array}`` in the order of
+        :data:`cadra.aero.program.COEFFICIENTS` (numpy scalars for scalar inputs).
+        """
+        if sigma is None:
+            sigma = np.arccos(np.cos(alpha) * np.cos(beta))
+        arrays = [np.asarray(a) for a in (alpha, beta, sigma, mach, reynolds, p_hat, q_hat,
+                                          r_hat)]
+        p = self.values() if params is None else np.asarray(params)
+        if p.shape != (len(self.parameters),):
+            raise ValueError(f"params must have shape ({len(self.parameters)},), "
+                             f"got {p.shape}")
+        complex_ = any(np.iscomplexobj(a) for a in (*arrays, p))
+        dtype = np.complex128 if complex_ else np.float64
+        b = np.broadcast_arrays(*arrays)
+        shape = b[0].shape
+        n = int(np.prod(shape))
+        var = np.empty((n, N_VARIABLES), dtype=dtype)
+        for j, a in enumerate(b):
+            var[:, j] = a.reshape(-1)
+        out = np.empty((n, N_COEFFICIENTS), dtype=dtype)
+        prog = self.compile()
+        eval_coefficients_batch(prog.ops, prog.args, prog.starts, var,
+                                np.ascontiguousarray(p, dtype=dtype), out, prog.new_stack(dtype))
+        if shape == ():
+            return {k: out[0, j] for j, k in enumerate(COEFFICIENTS)}
+        return {k: out[:, j].reshape(shape) for j, k in enumerate(COEFFICIENTS)}
+
+    # --- file form -----------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        """The TOML-ready dictionary :func:`save_model` writes (file units)."""
+        params = {}
+        for p in self.parameters:
+            d = {"value": _to_file(p.value, p.unit), "vary": p.vary}
+            if p.min != -math.inf:
+                d["min"] = _to_file(p.min, p.unit)
+            if p.max != math.inf:
+                d["max"] = _to_file(p.max, p.unit)
+            if p.unit:
+                d["unit"] = p.unit
+            if p.note:
+                d["note"] = p.note
+            params[p.name] = d
+        out = {"format": FILE_FORMAT, "name": self.name}
+        if self.description:
+            out["description"] = self.description
+        out["angle_plane"] = self.angle_plane
+        out["moment_reference"] = self.moment_reference
+        if self.reference:
+            out["reference"] = dict(self.reference)
+        out["coefficients"] = dict(self.coefficients)
+        out["parameters"] = params
+        return out
+
+
+def model_from_dict(data: Mapping, source: str = "model") -> AeroModel:
+    """An :class:`AeroModel` from the file dictionary (see docs/aero_models.md).
+
+    Errors are ``ValueError`` s that start with ``source`` and name the offending key.
+    """
+    try:
+        return _model_from_dict(data, source)
+    except ExpressionError as exc:
+        raise exc.prefixed(source) from None
+    except ValueError as exc:
+        raise ValueError(f"{source}: {exc}") from None
+
+
+def _model_from_dict(data: Mapping, source: str) -> AeroModel:
+    for k in data:
+        if k not in _MODEL_KEYS:
+            raise ValueError(f"{k}: unknown key (expected {', '.join(_MODEL_KEYS)})")
+    fmt = data.get("format", FILE_FORMAT)
+    if fmt != FILE_FORMAT:
+        raise ValueError(f"format: {fmt!r} is not {FILE_FORMAT!r}")
+    for k in ("angle_plane", "coefficients", "parameters"):
+        if k not in data:
+            raise ValueError(f"{k}: missing")
+    coefficients = data["coefficients"]
+    if not isinstance(coefficients, Mapping):
+        raise ValueError("coefficients: must be a table of name = \"expression\"")
+    ptable = data["parameters"]
+    if not isinstance(ptable, Mapping):
+        raise ValueError("parameters: must be a table of name = { value = ..., vary = ... }")
+    params = []
+    for name, entry in ptable.items():
+        key = f"parameters.{name}"
+        if not isinstance(entry, Mapping):
+            raise ValueError(f"{key}: must be a table such as {{ value = 1.0, vary = true }}")
+        for k in entry:
+            if k not in _PARAM_KEYS:
+                raise ValueError(f"{key}.{k}: unknown key (expected {', '.join(_PARAM_KEYS)})")
+        if "value" not in entry:
+            raise ValueError(f"{key}.value: missing")
+        unit = entry.get("unit", "")
+        if unit not in UNITS:
+            raise ValueError(f"{key}.unit: must be one of {sorted(UNITS)}, got {unit!r}")
+        conv = {}
+        for k, default in (("value", None), ("min", -math.inf), ("max", math.inf)):
+            v = entry.get(k, default)
+            if not _is_number(v):
+                raise ValueError(f"{key}.{k}: must be a number, got {v!r}")
+            conv[k] = _from_file(float(v), unit)
+        vary = entry.get("vary", True)
+        if not isinstance(vary, bool):
+            raise ValueError(f"{key}.vary: must be true or false, got {vary!r}")
+        note = entry.get("note", "")
+        if not isinstance(note, str):
+            raise ValueError(f"{key}.note: must be a string")
+        params.append(Parameter(name=str(name), value=conv["value"], vary=vary,
+                                min=conv["min"], max=conv["max"], unit=unit, note=note))
+    name = data.get("name", Path(source).stem)
+    return AeroModel(
+        name=name, angle_plane=data["angle_plane"], coefficients=dict(coefficients),
+        parameters=tuple(params), description=data.get("description", ""),
+        reference=dict(data.get("reference", {})),
+        moment_reference=data.get("moment_reference", "cg"),
+    )
+
+
+def load_model(path: str | os.PathLike) -> AeroModel:
+    """Read an aerodynamic model file (TOML; docs/aero_models.md)."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        try:
+            data = tomllib.load(f)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    data.setdefault("name", path.stem)
+    return model_from_dict(data, source=str(path))
+
+
+def save_model(model: AeroModel, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write ``model`` as TOML, atomically (temp file in the same directory + rename).
+
+    Refuses to replace an existing file unless ``overwrite=True`` (``FileExistsError``).
+    Returns the path written.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists (pass overwrite=True to replace it)")
+    text = ("# CADRA aerodynamic model (docs/aero_models.md), written by "
+            "cadra.aero.save_model\n" + tomli_w.dumps(model.to_dict()))
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
+def bundled_model_names() -> tuple[str, ...]:
+    """Names of the model files shipped in ``cadra/aero/models``."""
+    return tuple(sorted(p.stem for p in MODELS_DIR.glob("*.toml")))
+
+
+def load_bundled_model(name: str) -> AeroModel:
+    """A bundled model by name (e.g. ``"m2_m070"``)."""
+    path = MODELS_DIR / f"{name}.toml"
+    if not path.is_file():
+        raise KeyError(f"no bundled aero model {name!r} (have: "
+                       f"{', '.join(bundled_model_names())})")
+    return load_model(path)

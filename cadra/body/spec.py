@@ -1,0 +1,130 @@
+"""Body specs: the plain-data form of a body in shot files (file units, keys carry units).
+
+Examples::
+
+    {"kind": "capsule", "preset": "M2"}
+    {"kind": "capsule", "preset": "M2", "d_cm": 3.556, "h_cm": 2.342}    # Table 2, per shot
+    {"kind": "capsule", "d_cm": 3.557, "h_cm": 2.338, "R1_cm": 4.267, "R2_cm": 0.178,
+     "l1_cm": 1.008}
+    {"kind": "sphere", "d_cm": 2.0}
+    {"kind": "cone", "d_cm": 2.0, "half_angle_deg": 10.0, "nose_radius_mm": 0.1}
+
+Lengths take one of the suffixes ``_m``, ``_cm``, ``_mm``; angles ``_deg`` or ``_rad``. An
+optional ``name`` names the body. Unknown or missing keys raise ValueError naming the key.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from numbers import Real
+
+import numpy as np
+
+from cadra.body.capsule import PRESETS, capsule
+from cadra.body.model import KINDS, Body
+from cadra.body.shapes import cone, sphere
+
+_LENGTH_UNITS = {"_m": 1.0, "_cm": 1e-2, "_mm": 1e-3}
+_ANGLE_UNITS = {"_deg": np.pi / 180.0, "_rad": 1.0}
+
+#: kind -> (length quantities, angle quantities, other keys)
+_SCHEMA = {
+    "sphere": (("d",), (), ()),
+    "capsule": (("d", "h", "R1", "R2", "l1"), (), ("preset",)),
+    "cone": (("d", "nose_radius"), ("half_angle",), ()),
+}
+
+
+def _number(spec: Mapping, key: str) -> float:
+    v = spec[key]
+    if isinstance(v, bool) or not isinstance(v, Real) or not np.isfinite(float(v)):
+        raise ValueError(f"{key}: expected a finite number, got {v!r}")
+    return float(v)
+
+
+def _quantity(spec: Mapping, base: str, units: Mapping[str, float]) -> tuple[float | None, str]:
+    """SI value of quantity ``base`` given with any one unit suffix (None if absent), and the
+    key it was given under (``base + "_cm"`` if absent)."""
+    keys = [base + u for u in units if base + u in spec]
+    if len(keys) > 1:
+        raise ValueError(f"{keys[1]}: {base!r} is given twice ({', '.join(keys)})")
+    if not keys:
+        return None, base + "_cm"
+    return _number(spec, keys[0]) * units[keys[0][len(base):]], keys[0]
+
+
+def _missing(kind: str, base: str, units: Mapping[str, float], why: str = "") -> ValueError:
+    alts = "/".join(base + u for u in units)
+    return ValueError(f"{base}_cm: missing from the {kind} spec (give one of {alts}){why}")
+
+
+def body_from_spec(spec: Mapping) -> Body:
+    """Build a :class:`~cadra.body.model.Body` from a plain-data spec (module docstring).
+
+    Raises
+    ------
+    ValueError
+        naming the offending key: unknown kind or key, a missing dimension, a quantity given
+        in two units, a non-number, or dimensions that cannot make the body.
+    """
+    if not isinstance(spec, Mapping):
+        raise ValueError(f"body spec: expected a mapping, got {type(spec).__name__}")
+    if "kind" not in spec:
+        raise ValueError("kind: missing from the body spec (one of sphere, capsule, cone)")
+    kind = spec["kind"]
+    if kind not in KINDS:
+        raise ValueError(f"kind: {kind!r} is not one of {list(KINDS)}")
+    lengths, angles, others = _SCHEMA[kind]
+    known = {"kind", "name", *others}
+    known |= {q + u for q in lengths for u in _LENGTH_UNITS}
+    known |= {q + u for q in angles for u in _ANGLE_UNITS}
+    for key in spec:
+        if key not in known:
+            raise ValueError(f"{key}: unknown key for a {kind} spec (known: {sorted(known)})")
+    name = spec.get("name")
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"name: expected a string, got {name!r}")
+    val, where = {}, {}
+    for q in lengths + angles:
+        val[q], where[q] = _quantity(spec, q, _LENGTH_UNITS if q in lengths else _ANGLE_UNITS)
+    for q in lengths:
+        if val[q] is not None and not (val[q] > 0 or (q == "nose_radius" and val[q] == 0)):
+            raise ValueError(f"{where[q]}: must be a positive length, got {spec[where[q]]!r}")
+    try:
+        return _build(kind, spec, val, name)
+    except ValueError as exc:  # constructors name SI arguments ("h_m: ..."): use the spec key
+        msg = str(exc)
+        head, sep, tail = msg.partition(": ")
+        q = head[:-2] if head.endswith("_m") else head[:-4] if head.endswith("_rad") else None
+        if sep and q in where:
+            raise ValueError(f"{where[q]}: {tail}") from None
+        raise
+
+
+def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body:
+    lengths = _SCHEMA[kind][0]
+
+    if kind == "sphere":
+        if val["d"] is None:
+            raise _missing(kind, "d", _LENGTH_UNITS)
+        return sphere(val["d"], name=name or "sphere")
+    if kind == "cone":
+        if val["d"] is None:
+            raise _missing(kind, "d", _LENGTH_UNITS)
+        if val["half_angle"] is None:
+            raise ValueError("half_angle_deg: missing from the cone spec "
+                             "(give half_angle_deg or half_angle_rad)")
+        return cone(val["d"], val["half_angle"], nose_radius_m=val["nose_radius"] or 0.0,
+                    name=name or "cone")
+    preset = spec.get("preset")
+    if preset is not None and preset not in PRESETS:
+        raise ValueError(f"preset: {preset!r} is not one of {list(PRESETS)}")
+    if preset is None:
+        for q in lengths:
+            if val[q] is None:
+                raise _missing(kind, q, _LENGTH_UNITS, " when no preset is given")
+    return capsule(preset, d_m=val["d"], h_m=val["h"], R1_m=val["R1"], R2_m=val["R2"],
+                   l1_m=val["l1"], name=name)
+
+
+__all__ = ["body_from_spec"]

@@ -1,0 +1,723 @@
+"""Facility reference file: stations, views, optics, fiducial wires (docs/facility_file.md).
+
+A facility reference file (TOML) describes the range in the facility frame F (docs/
+conventions.md: origin station 1 on the centreline, x downrange, y port, z up; metres). Each
+station has a top view (sees x, y) and a side view (sees x, z). A *parallel* (collimated)
+view maps its two facility coordinates affinely to pixels: ``[a, b] = M @ [u, v, 1]`` with
+``M = image_to_plane`` (2x3), pixels (u, v) = (column, row) from the centre of the top-left
+pixel. Fiducial wires -- straight, with surveyed 3-D end points -- let stage one re-solve that
+affine per image (:func:`fit_affine_to_wires`). ``point_source`` (perspective) views are
+recognised and refused ("not supported yet"); the schema has room for their fields.
+
+Errors are :class:`FacilityFileError` naming the key path,
+e.g. ``stations[3].views.top.wires[1].p0_m: expected 3 numbers``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+#: Current facility-file schema version.
+SCHEMA_VERSION = 1
+#: Projections the loader knows; only the first ones are supported.
+PROJECTIONS_SUPPORTED = ("parallel",)
+PROJECTIONS_KNOWN = ("parallel", "point_source")
+#: Facility axes (0 = x, 1 = y, 2 = z) each view sees, in view-plane order (a, b).
+VIEW_AXES = {"top": (0, 1), "side": (0, 2)}
+BIT_DEPTHS = (8, 16)
+#: Minimum number of wires per view (an affine has 6 unknowns; each wire line gives 2).
+MIN_WIRES = 3
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+class FacilityFileError(ValueError):
+    """A facility reference file that cannot be right; the message names the key path."""
+
+
+class UnsupportedProjectionError(FacilityFileError, NotImplementedError):
+    """A projection the schema knows but this CADRA cannot use yet (``point_source``)."""
+
+
+# --------------------------------------------------------------------------- affine helpers
+
+
+def _ro(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def affine_inverse(M: np.ndarray) -> np.ndarray:
+    """Inverse of a 2x3 affine map ``y = M @ [x, 1]``, as a 2x3 map."""
+    M = np.asarray(M, dtype=float)
+    A_inv = np.linalg.inv(M[:, :2])
+    return np.hstack([A_inv, -(A_inv @ M[:, 2])[:, None]])
+
+
+def apply_affine(M: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Apply a 2x3 affine to points ``(..., 2)``."""
+    pts = np.asarray(pts, dtype=float)
+    M = np.asarray(M, dtype=float)
+    return pts @ M[:, :2].T + M[:, 2]
+
+
+def nominal_image_to_plane(x_station_m: float, scale_m_per_px: float, width_px: int,
+                           height_px: int) -> np.ndarray:
+    """The default image->view-plane affine (docs/conventions.md, "Images and pixels").
+
+    The image centre ``((W-1)/2, (H-1)/2)`` sees ``(x_station, 0)``; x increases to the right
+    (+u); the view's second coordinate (y port for top, z up for side) increases upward (-v).
+    """
+    s = float(scale_m_per_px)
+    cu, cv = (width_px - 1) / 2.0, (height_px - 1) / 2.0
+    return np.array([[s, 0.0, x_station_m - s * cu], [0.0, -s, s * cv]])
+
+
+def _clip_segment(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """Liang-Barsky clip of segment p0-p1 to the box [lo, hi]; None if outside."""
+    d = p1 - p0
+    t0, t1 = 0.0, 1.0
+    for k in range(2):
+        for p, q in ((-d[k], p0[k] - lo[k]), (d[k], hi[k] - p0[k])):
+            if p == 0.0:
+                if q < 0.0:
+                    return None
+                continue
+            r = q / p
+            if p < 0.0:
+                t0 = max(t0, r)
+            else:
+                t1 = min(t1, r)
+    if t0 > t1:
+        return None
+    return p0 + t0 * d, p0 + t1 * d
+
+
+# --------------------------------------------------------------------------- data model
+
+
+@dataclass(frozen=True, eq=False)
+class Wire:
+    """A straight fiducial wire: surveyed end points in F (m) and diameter (m)."""
+
+    name: str
+    p0_m: np.ndarray
+    p1_m: np.ndarray
+    diameter_m: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "p0_m", _ro(np.reshape(self.p0_m, 3)))
+        object.__setattr__(self, "p1_m", _ro(np.reshape(self.p1_m, 3)))
+        object.__setattr__(self, "diameter_m", float(self.diameter_m))
+
+
+@dataclass(frozen=True)
+class ReferenceMark:
+    """The scanner reference mark: a cross drawn on the film/scan at pixel (u, v).
+
+    ``arm_px`` is the half-length of each arm from the centre, ``width_px`` the line width.
+    """
+
+    u_px: float
+    v_px: float
+    arm_px: float
+    width_px: float
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One camera view of one station (see module doc).
+
+    Attributes
+    ----------
+    station : station id.
+    name : ``"top"`` (sees x, y) or ``"side"`` (sees x, z).
+    projection : ``"parallel"``.
+    axes : facility axis indices seen, (0, 1) for top, (0, 2) for side.
+    width_px, height_px : image size.
+    bit_depth : 8 or 16.
+    scale_m_per_px : nominal scale, m per pixel.
+    image_to_plane : (2, 3) nominal affine ``[a, b] = M @ [u, v, 1]`` (view-plane metres in F).
+    wires : the fiducial wires seen in this view.
+    reference_mark : the scanner reference mark.
+    """
+
+    station: int
+    name: str
+    projection: str
+    axes: tuple[int, int]
+    width_px: int
+    height_px: int
+    bit_depth: int
+    scale_m_per_px: float
+    image_to_plane: np.ndarray
+    wires: tuple[Wire, ...]
+    reference_mark: ReferenceMark
+
+    def __post_init__(self):
+        object.__setattr__(self, "image_to_plane", _ro(np.reshape(self.image_to_plane, (2, 3))))
+        object.__setattr__(self, "wires", tuple(self.wires))
+        object.__setattr__(self, "axes", tuple(int(a) for a in self.axes))
+
+    @property
+    def P_view(self) -> np.ndarray:
+        """(2, 3) selection matrix: view-plane coordinates ``ab = P_view @ r_F``."""
+        P = np.zeros((2, 3))
+        P[0, self.axes[0]] = 1.0
+        P[1, self.axes[1]] = 1.0
+        return P
+
+    @property
+    def plane_to_image(self) -> np.ndarray:
+        """(2, 3) inverse of :attr:`image_to_plane`: ``[u, v] = M_inv @ [a, b, 1]``."""
+        return affine_inverse(self.image_to_plane)
+
+    @property
+    def image_centre_px(self) -> np.ndarray:
+        """Pixel coordinates of the image centre, ``((W-1)/2, (H-1)/2)``."""
+        return np.array([(self.width_px - 1) / 2.0, (self.height_px - 1) / 2.0])
+
+    def project_points(self, r_F: np.ndarray) -> np.ndarray:
+        """Parallel projection of facility points ``(N, 3)`` (or ``(3,)``) to the view plane."""
+        r_F = np.asarray(r_F, dtype=float)
+        return r_F[..., list(self.axes)]
+
+    def plane_to_pixels(self, ab: np.ndarray, affine: np.ndarray | None = None) -> np.ndarray:
+        """View-plane points ``(N, 2)`` (m) to pixels ``(N, 2)`` (u, v).
+
+        ``affine`` is an image->plane map (2x3) to use instead of the nominal one (e.g. the
+        affine solved from this image's wires).
+        """
+        M = self.image_to_plane if affine is None else np.asarray(affine, dtype=float)
+        return apply_affine(affine_inverse(M), ab)
+
+    def pixels_to_plane(self, uv: np.ndarray, affine: np.ndarray | None = None) -> np.ndarray:
+        """Pixels ``(N, 2)`` (u, v) to view-plane points ``(N, 2)`` (m)."""
+        M = self.image_to_plane if affine is None else np.asarray(affine, dtype=float)
+        return apply_affine(M, uv)
+
+    def wire_lines_plane(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each wire's projected end points in the view plane (m), in :attr:`wires` order."""
+        return [(self.project_points(w.p0_m), self.project_points(w.p1_m)) for w in self.wires]
+
+    def wire_lines_px(self, affine: np.ndarray | None = None, margin_px: float = 0.0):
+        """Each wire's image segment ``((u0, v0), (u1, v1))``, clipped to the image.
+
+        One entry per wire, in :attr:`wires` order; ``None`` for a wire whose image misses
+        the (margin-expanded) picture (never for a valid facility file with the nominal
+        affine). The image extends to the outer pixel edges,
+        ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``; ``margin_px`` > 0 expands that box (a renderer
+        wants the wire to run on past the border so blur does not fade it at the edge; the
+        surveyed end points lie far enough outside the picture in the default facility).
+        """
+        lo = np.array([-0.5, -0.5]) - margin_px
+        hi = np.array([self.width_px - 0.5, self.height_px - 0.5]) + margin_px
+        out = []
+        for a0, a1 in self.wire_lines_plane():
+            uv = self.plane_to_pixels(np.array([a0, a1]), affine=affine)
+            seg = _clip_segment(uv[0], uv[1], lo, hi)
+            out.append(None if seg is None else
+                       ((float(seg[0][0]), float(seg[0][1])), (float(seg[1][0]),
+                                                                float(seg[1][1]))))
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class Station:
+    """An optical station: id, surveyed x (m, in F) and its views by name."""
+
+    id: int
+    x_m: float
+    views: dict[str, View]
+
+
+@dataclass(frozen=True, eq=False)
+class Facility:
+    """A loaded facility reference file."""
+
+    name: str
+    description: str
+    stations: tuple[Station, ...]
+    source_path: str | None = None
+
+    def station(self, station_id: int) -> Station:
+        """The station with id ``station_id`` (KeyError if none)."""
+        for s in self.stations:
+            if s.id == station_id:
+                return s
+        raise KeyError(f"facility {self.name}: no station {station_id}")
+
+    def view(self, station_id: int, name: str) -> View:
+        """View ``name`` of station ``station_id``."""
+        st = self.station(station_id)
+        if name not in st.views:
+            raise KeyError(f"facility {self.name}: station {station_id} has no {name!r} view")
+        return st.views[name]
+
+    @property
+    def station_ids(self) -> tuple[int, ...]:
+        return tuple(s.id for s in self.stations)
+
+    @property
+    def station_x_m(self) -> np.ndarray:
+        return np.array([s.x_m for s in self.stations])
+
+
+# --------------------------------------------------------------------------- wire affine fit
+
+
+@dataclass(frozen=True, eq=False)
+class AffineFit:
+    """Image->plane affine solved from fiducial-wire lines.
+
+    ``residuals_m`` are the distances (m, in the view plane) of the mapped image points from
+    their wires' surveyed lines; ``rms_m`` their rms; ``dof`` = equations - 6.
+    """
+
+    affine: np.ndarray
+    residuals_m: np.ndarray
+    rms_m: float
+    dof: int
+    wires_used: tuple[str, ...]
+
+
+def fit_affine_to_wires(view: View, lines_px, weights=None) -> AffineFit:
+    """Solve the image->plane affine of ``view`` from measured wire lines (least squares).
+
+    Parameters
+    ----------
+    view : the view whose wires (surveyed, from the reference file) were measured.
+    lines_px : one entry per wire of ``view.wires`` (same order): points ``(k, 2)`` (u, v)
+        on that wire's image -- e.g. a segment ``((u0, v0), (u1, v1))`` as
+        :meth:`View.wire_lines_px` returns, or many edge points -- or None if not measured.
+    weights : optional per-wire weights (default 1).
+
+    Each point gives one linear equation ``n . (M [u, v, 1]) = n . a0``, with ``n`` the unit
+    normal of the wire's projected line through ``a0``. With the four wires of the default
+    facility (two across, two along the range) the 6 unknowns are over-determined.
+    """
+    if len(lines_px) != len(view.wires):
+        raise ValueError(f"lines_px has {len(lines_px)} entries for {len(view.wires)} wires")
+    rows, rhs, w_rows, used = [], [], [], []
+    for i, ((a0, a1), pts) in enumerate(zip(view.wire_lines_plane(), lines_px, strict=True)):
+        if pts is None:
+            continue
+        pts = np.atleast_2d(np.asarray(pts, dtype=float))
+        d = a1 - a0
+        n = np.array([-d[1], d[0]]) / np.hypot(d[0], d[1])
+        wi = 1.0 if weights is None else float(weights[i])
+        for u, v in pts:
+            rows.append(np.concatenate([n[0] * np.array([u, v, 1.0]),
+                                        n[1] * np.array([u, v, 1.0])]))
+            rhs.append(n @ a0)
+            w_rows.append(wi)
+        used.append(view.wires[i].name)
+    A, b = np.array(rows).reshape(-1, 6), np.array(rhs)
+    # scale columns for conditioning: u, v are ~1e3 px
+    col = np.array([1e-3, 1e-3, 1.0, 1e-3, 1e-3, 1.0])
+    sv = np.linalg.svd(A * col, compute_uv=False) if len(rows) >= 6 else np.zeros(1)
+    if len(rows) < 6 or sv[-1] < 1e-6 * sv[0]:
+        raise ValueError(f"station {view.station} {view.name}: wires {used} cannot determine "
+                         f"the affine (need lines in two directions, >= 3 wires)")
+    sw = np.sqrt(np.array(w_rows))
+    m, *_ = np.linalg.lstsq((A * col) * sw[:, None], b * sw, rcond=None)
+    m = m * col
+    M = m.reshape(2, 3)
+    res = A @ m - b
+    return AffineFit(affine=M, residuals_m=res, rms_m=float(np.sqrt(np.mean(res ** 2))),
+                     dof=len(rows) - 6, wires_used=tuple(used))
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def _err(path: str, msg: str) -> FacilityFileError:
+    return FacilityFileError(f"{path}: {msg}")
+
+
+def _number(value, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise _err(path, f"expected a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise _err(path, f"must be finite, got {value!r}")
+    return value
+
+
+def _positive(value, path: str, upper: float | None = None) -> float:
+    x = _number(value, path)
+    if not x > 0:
+        raise _err(path, f"must be positive, got {value!r}")
+    if upper is not None and x > upper:
+        raise _err(path, f"{value!r} is implausibly large (> {upper:g}; check the unit)")
+    return x
+
+
+def _integer(value, path: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _err(path, f"expected an integer, got {value!r}")
+    if not lo <= value <= hi:
+        raise _err(path, f"{value!r} outside [{lo}, {hi}]")
+    return value
+
+
+def _vec(value, n: int, path: str) -> np.ndarray:
+    if not isinstance(value, list | tuple) or len(value) != n:
+        raise _err(path, f"expected {n} numbers, got {value!r}")
+    return np.array([_number(v, f"{path}[{i}]") for i, v in enumerate(value)])
+
+
+def _table(value, path: str) -> Mapping:
+    if not isinstance(value, Mapping):
+        raise _err(path, f"expected a table, got {type(value).__name__}")
+    return value
+
+
+def _require(data: Mapping, key: str, path: str):
+    if key not in data:
+        raise _err(f"{path}{key}", "missing")
+    return data[key]
+
+
+def _check_unknown(data: Mapping, known, path: str) -> None:
+    unknown = sorted(set(data) - set(known))
+    if unknown:
+        raise _err(f"{path}{unknown[0]}", f"unknown key (known: {sorted(known)})")
+
+
+_VIEW_KEYS = {"projection", "width_px", "height_px", "bit_depth", "scale_m_per_px",
+              "image_to_plane", "wires", "reference_mark", "source_position_m",
+              "film_distance_m"}
+_DEFAULT_KEYS = _VIEW_KEYS - {"image_to_plane", "wires", "projection"}
+
+
+def _check_projection(proj, where: str, view: Mapping, vpath: str) -> str:
+    if not isinstance(proj, str) or proj not in PROJECTIONS_KNOWN:
+        raise _err(where, f"unknown projection {proj!r}; known: {list(PROJECTIONS_KNOWN)}")
+    if proj not in PROJECTIONS_SUPPORTED:
+        # check the fields such a view needs, so the file is ready when support lands
+        _vec(_require(view, "source_position_m", vpath), 3, f"{vpath}source_position_m")
+        _positive(_require(view, "film_distance_m", vpath), f"{vpath}film_distance_m")
+        raise UnsupportedProjectionError(
+            f"{where}: projection {proj!r} (perspective, point-source spark) is recognised "
+            f"but not supported yet; CADRA handles {list(PROJECTIONS_SUPPORTED)} only")
+    return proj
+
+
+def _reference_mark(value, path: str, width: int, height: int) -> ReferenceMark:
+    mark = _table(value, path)
+    _check_unknown(mark, {"u_px", "v_px", "arm_px", "width_px"}, f"{path}.")
+    u = _number(_require(mark, "u_px", f"{path}."), f"{path}.u_px")
+    v = _number(_require(mark, "v_px", f"{path}."), f"{path}.v_px")
+    arm = _positive(_require(mark, "arm_px", f"{path}."), f"{path}.arm_px", 1e3)
+    wid = _positive(_require(mark, "width_px", f"{path}."), f"{path}.width_px", 1e2)
+    if not (arm <= u <= width - 1 - arm and arm <= v <= height - 1 - arm):
+        raise _err(path, f"the mark at ({u:g}, {v:g}) with arm {arm:g} px is not inside the "
+                         f"{width} x {height} image")
+    return ReferenceMark(u_px=u, v_px=v, arm_px=arm, width_px=wid)
+
+
+def _wire(value, path: str, axes: tuple[int, int]) -> Wire:
+    w = _table(value, path)
+    _check_unknown(w, {"name", "p0_m", "p1_m", "diameter_m"}, f"{path}.")
+    name = _require(w, "name", f"{path}.")
+    if not isinstance(name, str) or not name:
+        raise _err(f"{path}.name", f"expected a non-empty string, got {name!r}")
+    p0 = _vec(_require(w, "p0_m", f"{path}."), 3, f"{path}.p0_m")
+    p1 = _vec(_require(w, "p1_m", f"{path}."), 3, f"{path}.p1_m")
+    for key, p in (("p0_m", p0), ("p1_m", p1)):
+        if np.any(np.abs(p) > 1e4):
+            raise _err(f"{path}.{key}", f"{p.tolist()} is not a position in metres")
+    dia = _positive(_require(w, "diameter_m", f"{path}."), f"{path}.diameter_m", 5e-3)
+    d = (p1 - p0)[list(axes)]
+    if np.hypot(d[0], d[1]) < 1e-3:
+        raise _err(path, "the wire is seen end-on in this view (projected length < 1 mm)")
+    return Wire(name=name, p0_m=p0, p1_m=p1, diameter_m=dia)
+
+
+def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Mapping,
+          facility_projection: tuple[str, str]) -> View:
+    view = _table(data, path)
+    vpath = f"{path}."
+    _check_unknown(view, _VIEW_KEYS, vpath)
+    merged = {**defaults, **view}
+    if "projection" in view:
+        _check_projection(view["projection"], f"{vpath}projection", merged, vpath)
+        projection = view["projection"]
+    else:
+        proj, where = facility_projection
+        _check_projection(proj, where, merged, vpath)
+        projection = proj
+
+    def key_path(k):  # where a merged key came from
+        return f"{vpath}{k}" if k in view else f"view_defaults.{k}"
+
+    def get(k):
+        if k not in merged:
+            raise _err(f"{vpath}{k}", "missing (give it in the view or in [view_defaults])")
+        return merged[k]
+
+    width = _integer(get("width_px"), key_path("width_px"), 16, 100_000)
+    height = _integer(get("height_px"), key_path("height_px"), 16, 100_000)
+    bit_depth = get("bit_depth")
+    if bit_depth not in BIT_DEPTHS or isinstance(bit_depth, bool):
+        raise _err(key_path("bit_depth"), f"must be one of {list(BIT_DEPTHS)}, got {bit_depth!r}")
+    scale = _positive(get("scale_m_per_px"), key_path("scale_m_per_px"), 1e-2)
+    axes = VIEW_AXES[name]
+    if "image_to_plane" in view:
+        ipath = f"{vpath}image_to_plane"
+        raw = view["image_to_plane"]
+        if not isinstance(raw, list | tuple) or len(raw) != 2:
+            raise _err(ipath, f"expected 2 rows of 3 numbers, got {raw!r}")
+        M = np.array([_vec(r, 3, f"{ipath}[{i}]") for i, r in enumerate(raw)])
+        det = float(np.linalg.det(M[:, :2]))
+        if not abs(det) > 0:
+            raise _err(ipath, "the affine is singular")
+        if abs(math.sqrt(abs(det)) / scale - 1.0) > 0.02:
+            raise _err(ipath, f"its scale {math.sqrt(abs(det)):.6g} m/px disagrees with "
+                              f"scale_m_per_px = {scale:.6g} by more than 2 %")
+    else:
+        M = nominal_image_to_plane(x_m, scale, width, height)
+    mark = _reference_mark(get("reference_mark"), key_path("reference_mark"), width, height)
+    wires_raw = get("wires")
+    wpath = key_path("wires")
+    if not isinstance(wires_raw, list | tuple):
+        raise _err(wpath, "expected an array of wire tables")
+    wires = tuple(_wire(w, f"{wpath}[{i}]", axes) for i, w in enumerate(wires_raw))
+    names = [w.name for w in wires]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise _err(wpath, f"wire name {dup!r} used twice")
+    if len(wires) < MIN_WIRES:
+        raise _err(wpath, f"{len(wires)} wire(s); at least {MIN_WIRES} are needed to solve "
+                          f"the image->plane affine")
+    v = View(station=station_id, name=name, projection=projection, axes=axes, width_px=width,
+             height_px=height, bit_depth=int(bit_depth), scale_m_per_px=scale,
+             image_to_plane=M, wires=wires, reference_mark=mark)
+    lines = v.wire_lines_px()
+    for i, seg in enumerate(lines):
+        if seg is None:
+            raise _err(f"{wpath}[{i}]", f"wire {wires[i].name!r} is not in the image")
+    try:
+        fit = fit_affine_to_wires(v, lines)
+    except ValueError:
+        raise _err(wpath, f"the wires {names} cannot determine the affine (need lines in two "
+                          f"directions)") from None
+    if fit.dof < 1:
+        raise _err(wpath, "the wires determine the affine without redundancy; add a wire")
+    return v
+
+
+def facility_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) -> Facility:
+    """Validate a parsed facility file and build the :class:`Facility`."""
+    data = _table(data, "facility file")
+    _check_unknown(data, {"schema_version", "name", "description", "projection",
+                          "view_defaults", "stations"}, "")
+    version = _require(data, "schema_version", "")
+    if version != SCHEMA_VERSION:
+        raise _err("schema_version", f"{version!r} not supported (this CADRA reads version "
+                                     f"{SCHEMA_VERSION})")
+    name = _require(data, "name", "")
+    if not isinstance(name, str) or not name:
+        raise _err("name", f"expected a non-empty string, got {name!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise _err("description", "expected a string")
+    projection = (data.get("projection", "parallel"),
+                  "projection" if "projection" in data else "projection (default)")
+    if not isinstance(projection[0], str) or projection[0] not in PROJECTIONS_KNOWN:
+        raise _err("projection", f"unknown projection {projection[0]!r}; known: "
+                                 f"{list(PROJECTIONS_KNOWN)}")
+    defaults = dict(_table(data.get("view_defaults", {}), "view_defaults"))
+    _check_unknown(defaults, _DEFAULT_KEYS, "view_defaults.")
+    stations_raw = _require(data, "stations", "")
+    if not isinstance(stations_raw, list) or not stations_raw:
+        raise _err("stations", "expected a non-empty array of [[stations]] tables")
+    stations = []
+    for k, st in enumerate(stations_raw):
+        spath = f"stations[{k}]"
+        st = _table(st, spath)
+        _check_unknown(st, {"id", "x_m", "views"}, f"{spath}.")
+        sid = _integer(_require(st, "id", f"{spath}."), f"{spath}.id", 1, 10_000)
+        x_m = _number(_require(st, "x_m", f"{spath}."), f"{spath}.x_m")
+        views_raw = _table(_require(st, "views", f"{spath}."), f"{spath}.views")
+        if not views_raw:
+            raise _err(f"{spath}.views", "no views")
+        views = {}
+        for vname, vdata in views_raw.items():
+            if vname not in VIEW_AXES:
+                raise _err(f"{spath}.views.{vname}", f"unknown view; known: {list(VIEW_AXES)}")
+            views[vname] = _view(vdata, f"{spath}.views.{vname}", vname, sid, x_m, defaults,
+                                 projection)
+        stations.append(Station(id=sid, x_m=x_m, views=views))
+    ids = [s.id for s in stations]
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise _err(f"stations[{ids.index(dup, ids.index(dup) + 1)}].id", f"duplicate id {dup}")
+    for k in range(1, len(stations)):
+        if not (stations[k].id > stations[k - 1].id and stations[k].x_m > stations[k - 1].x_m):
+            raise _err(f"stations[{k}]", "stations must be listed in increasing id and x_m")
+    return Facility(name=name, description=description, stations=tuple(stations),
+                    source_path=str(source_path) if source_path is not None else None)
+
+
+def resolve_facility_path(path_or_name: str | os.PathLike) -> Path:
+    """A facility file path from a path or a bare name (``"hffaf"``).
+
+    A bare name (no directory part, no ``.toml``) is looked up as
+    ``<repo>/facilities/<name>.toml``, then ``./facilities/<name>.toml``, then
+    ``./<name>.toml``.
+    """
+    p = Path(path_or_name)
+    if isinstance(path_or_name, Path) or p.suffix == ".toml" or len(p.parts) > 1:
+        return p
+    candidates = [REPO_ROOT / "facilities" / f"{p.name}.toml",
+                  Path.cwd() / "facilities" / f"{p.name}.toml", Path.cwd() / f"{p.name}.toml"]
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise FileNotFoundError(f"facility {str(path_or_name)!r} not found; looked in "
+                            f"{[str(c) for c in candidates]}")
+
+
+_CACHE: dict[tuple[str, int], Facility] = {}
+
+
+def load_facility(path_or_name: str | os.PathLike) -> Facility:
+    """Load and validate a facility reference file (by path or bare name, see
+    :func:`resolve_facility_path`). The result is immutable and cached per file version."""
+    path = resolve_facility_path(path_or_name)
+    try:
+        stat = path.stat()
+        key = (str(path.resolve()), stat.st_mtime_ns)
+        if key in _CACHE:
+            return _CACHE[key]
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise FileNotFoundError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise FacilityFileError(f"{path}: not valid TOML ({exc})") from None
+    try:
+        fac = facility_from_dict(data, source_path=path)
+    except UnsupportedProjectionError as exc:
+        raise UnsupportedProjectionError(f"{path}: {exc}") from None
+    except FacilityFileError as exc:
+        raise FacilityFileError(f"{path}: {exc}") from None
+    _CACHE[key] = fac
+    return fac
+
+
+# --------------------------------------------------------------------------- default HFFAF
+
+
+def _survey_offsets(n: int, seed: int = 2009, half_range_m: float = 1.0e-3) -> list[float]:
+    """Deterministic pseudo-random survey offsets, uniform in +-half_range, 0.01 mm steps.
+
+    A 32-bit linear congruential generator (Numerical Recipes constants) so the default
+    facility file can be regenerated bit-for-bit on any platform and numpy version.
+    """
+    state, out = seed & 0xFFFFFFFF, []
+    for _ in range(n):
+        state = (1664525 * state + 1013904223) & 0xFFFFFFFF
+        u = state / 2.0**32 * 2.0 - 1.0
+        out.append(round(u * half_range_m, 5))
+    return out
+
+
+def default_hffaf_text() -> str:
+    """TOML text of ``facilities/hffaf.toml`` (the file is this function's output).
+
+    16 stations 1.524 m apart; top and side view each 1600 x 1200 px at 1.27e-4 m/px; per view
+    two wires across the range at x_station -+ 0.080 m and two along it at -+ 0.069 m in the
+    view's second coordinate, placed out of the other view's picture (top-view wires at
+    z = -0.12 m, side-view wires at y = -0.12 m), each end point offset by a deterministic
+    "survey" error of up to 1 mm.
+    """
+    spacing, n_st = 1.524, 16
+    w, h, s = 1600, 1200, 1.27e-4
+    across, along, off, half = 0.080, 0.069, 0.12, 0.15
+    offs = iter(_survey_offsets(n_st * 2 * 4 * 6))
+
+    def f(x):
+        return repr(round(float(x), 8))
+
+    def vec(p):
+        return "[" + ", ".join(f(v) for v in p) + "]"
+
+    lines = [
+        "# CADRA facility reference file (docs/facility_file.md). Facility frame F: origin",
+        "# station 1 on the range centreline, x downrange, y port, z up; metres. Pixels (u, v)",
+        "# = (column, row) from the centre of the top-left pixel.",
+        "# Generated by cadra.facility.reference.default_hffaf_text(); regenerate, don't edit.",
+        f"schema_version = {SCHEMA_VERSION}",
+        'name = "hffaf"',
+        'description = "Default facility modelled on the NASA Ames HFFAF (seed 004): 16 '
+        'shadowgraph stations 1.524 m apart, collimated (parallel-projection) top and side '
+        'views, 4 surveyed fiducial wires per view."',
+        'projection = "parallel"',
+        "",
+        "[view_defaults]",
+        f"width_px = {w}",
+        f"height_px = {h}",
+        "bit_depth = 8",
+        f"scale_m_per_px = {s!r}",
+        "reference_mark = { u_px = 100.0, v_px = 130.0, arm_px = 24.0, width_px = 3.0 }",
+    ]
+    for k in range(1, n_st + 1):
+        xs = round((k - 1) * spacing, 6)
+        lines += ["", "[[stations]]", f"id = {k}", f"x_m = {f(xs)}"]
+        for view in ("top", "side"):
+            M = nominal_image_to_plane(xs, s, w, h)
+            if view == "top":   # wires in horizontal planes below the flight line (z = -off)
+                nominal = [
+                    ("x-", (xs - across, -half, -off), (xs - across, half, -off)),
+                    ("x+", (xs + across, -half, -off), (xs + across, half, -off)),
+                    ("y-", (xs - half, -along, -off), (xs + half, -along, -off)),
+                    ("y+", (xs - half, along, -off), (xs + half, along, -off)),
+                ]
+            else:               # wires in the vertical plane y = -off (starboard window)
+                top = off - 0.01  # vertical wires stop short of the top-view wires' plane
+                nominal = [
+                    ("x-", (xs - across, -off, -top), (xs - across, -off, top)),
+                    ("x+", (xs + across, -off, -top), (xs + across, -off, top)),
+                    ("z-", (xs - half, -off, -along), (xs + half, -off, -along)),
+                    ("z+", (xs - half, -off, along), (xs + half, -off, along)),
+                ]
+            lines += ["", f"[stations.views.{view}]",
+                      f"image_to_plane = [{vec(M[0])}, {vec(M[1])}]", "wires = ["]
+            for name, p0, p1 in nominal:
+                q0 = [p + next(offs) for p in p0]
+                q1 = [p + next(offs) for p in p1]
+                lines.append(f'    {{ name = "{name}", p0_m = {vec(q0)}, p1_m = {vec(q1)}, '
+                             f"diameter_m = 0.00025 }},")
+            lines.append("]")
+    return "\n".join(lines) + "\n"
+
+
+def write_default_facility(path: str | os.PathLike | None = None,
+                           overwrite: bool = False) -> Path:
+    """Write :func:`default_hffaf_text` to ``path`` (default ``<repo>/facilities/hffaf.toml``)."""
+    from cadra.io.atomic import atomic_write_text
+
+    path = Path(path) if path is not None else REPO_ROOT / "facilities" / "hffaf.toml"
+    facility_from_dict(tomllib.loads(default_hffaf_text()))  # validate before writing
+    return atomic_write_text(path, default_hffaf_text(), overwrite=overwrite)
+
+
+__all__ = [
+    "BIT_DEPTHS", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED", "SCHEMA_VERSION", "VIEW_AXES",
+    "AffineFit", "Facility", "FacilityFileError", "ReferenceMark", "Station",
+    "UnsupportedProjectionError", "View", "Wire", "affine_inverse", "apply_affine",
+    "default_hffaf_text", "facility_from_dict", "fit_affine_to_wires", "load_facility",
+    "nominal_image_to_plane", "resolve_facility_path", "write_default_facility",
+]

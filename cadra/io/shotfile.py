@@ -1,0 +1,532 @@
+"""Shot file: one shot's model, mass properties, range air, spark times and images.
+
+A TOML file (schema in ``docs/shot_file.md``) in file units -- g, cm, g cm^2, torr, K, s --
+read into a frozen :class:`ShotFile` in SI. Mass properties are in **model axes** M (x along the
+symmetry axis toward the nose / heat shield, y port, z up with the model upright; seed 004
+Table 2; docs/conventions.md): the cg is given from the body's reference point
+(``cadra.body``; docs/bodies.md) and the inertia tensor about the cg.
+
+Every error is a :class:`ShotFileError` naming the offending key (``mass.inertia_g_cm2: ...``).
+:func:`save_shot` validates the complete file before writing anything and writes atomically
+(temporary file + :func:`os.replace`); it refuses to overwrite unless asked.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from cadra.atmosphere import Atmosphere
+from cadra.io import units
+from cadra.io.atomic import atomic_write_text
+
+#: Current shot-file schema version.
+SCHEMA_VERSION = 1
+#: Model kinds ``cadra.body.body_from_spec`` builds.
+MODEL_KINDS = ("sphere", "capsule", "cone")
+
+# Plausibility bounds: a value outside them is a unit error, not a range condition.
+PRESSURE_TORR_RANGE = (0.01, 7600.0)      # 1.3 Pa .. 10 atm
+TEMPERATURE_K_RANGE = (150.0, 400.0)
+MASS_G_RANGE = (0.0, 1e5)                 # exclusive lower bound; 100 kg upper bound
+CG_CM_MAX = 100.0                         # |cg offset| < 1 m
+MODEL_LENGTH_CM_MAX = 100.0               # model dimensions < 1 m
+VELOCITY_M_S_RANGE = (0.0, 2.0e4)
+#: Model-spec keys that are a size (must be > 0); other length keys need only |x| < 1 m.
+MODEL_SIZE_KEYS = ("d", "diameter", "h", "length", "l")
+_LENGTH_SUFFIXES = {"_cm": 1.0, "_mm": 0.1, "_m": 100.0}   # factor to cm
+
+_TOP_KEYS = ("schema_version", "shot_id", "facility", "notes", "nominal_velocity_m_s",
+             "model", "mass", "range", "stations")
+_INERTIA_COMPONENT_KEYS = {
+    "Ixx_g_cm2": (0, 0), "Iyy_g_cm2": (1, 1), "Izz_g_cm2": (2, 2),
+    "Ixy_g_cm2": (0, 1), "Ixz_g_cm2": (0, 2), "Iyz_g_cm2": (1, 2),
+}
+
+
+class ShotFileError(ValueError):
+    """A shot file (or ShotFile object) that cannot be right; the message names the key."""
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class MassProperties:
+    """Measured mass properties, SI, model axes M (docs/conventions.md).
+
+    Attributes
+    ----------
+    mass_kg : mass, kg.
+    cg_model_m : (3,) nominal cg minus the body's reference point, model axes, m.
+    inertia_model_kg_m2 : (3, 3) inertia tensor about the cg, model axes, kg m^2
+        (``I_ij = integral (r^2 delta_ij - x_i x_j) dm``; off-diagonals are minus the products
+        of inertia). ``I_B = D I_M D`` with ``D = diag(1, -1, -1)`` gives body axes.
+    """
+
+    mass_kg: float
+    cg_model_m: np.ndarray
+    inertia_model_kg_m2: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "mass_kg", float(self.mass_kg))
+        object.__setattr__(self, "cg_model_m", _ro(np.reshape(self.cg_model_m, 3)))
+        object.__setattr__(self, "inertia_model_kg_m2",
+                           _ro(np.reshape(self.inertia_model_kg_m2, (3, 3))))
+
+    def __eq__(self, other):
+        if not isinstance(other, MassProperties):
+            return NotImplemented
+        return (self.mass_kg == other.mass_kg
+                and np.array_equal(self.cg_model_m, other.cg_model_m)
+                and np.array_equal(self.inertia_model_kg_m2, other.inertia_model_kg_m2))
+
+    __hash__ = None  # mutable-looking numpy contents: not hashable
+
+
+@dataclass(frozen=True)
+class StationRecord:
+    """One station of a shot: spark time (s, from the shot's reference epoch) and images.
+
+    ``images`` maps view name (``"top"``, ``"side"``) to the image path as written in the
+    file (relative to the shot file unless absolute).
+    """
+
+    station: int
+    time_s: float
+    images: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ShotFile:
+    """A loaded shot file, SI units (see module doc and docs/shot_file.md).
+
+    Attributes
+    ----------
+    shot_id : e.g. ``"M2-2429"``.
+    model : the body spec as ``cadra.body.body_from_spec`` takes it (file units, e.g.
+        ``{"kind": "capsule", "preset": "M2", "d_cm": 3.556}``).
+    mass : :class:`MassProperties` (SI, model axes).
+    pressure_pa, temperature_k : range air.
+    facility : facility reference-file name or path (``cadra.facility.load_facility``).
+    stations : per-station records, in increasing station id.
+    notes : free text.
+    source_path : the file this was read from (None if built in memory).
+    nominal_velocity_m_s : optional nominal speed, m/s.
+    """
+
+    shot_id: str
+    model: dict
+    mass: MassProperties
+    pressure_pa: float
+    temperature_k: float
+    facility: str
+    stations: tuple[StationRecord, ...]
+    notes: str = ""
+    source_path: str | None = None
+    nominal_velocity_m_s: float | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "stations", tuple(self.stations))
+
+    def atmosphere(self, **kwargs) -> Atmosphere:
+        """Range air (``Atmosphere.from_pt``; keyword options are passed on)."""
+        return Atmosphere.from_pt(self.pressure_pa, self.temperature_k, **kwargs)
+
+    def station(self, station: int) -> StationRecord:
+        """The record of station id ``station`` (KeyError if the shot has none)."""
+        for rec in self.stations:
+            if rec.station == station:
+                return rec
+        raise KeyError(f"shot {self.shot_id}: no station {station}")
+
+    @property
+    def station_ids(self) -> tuple[int, ...]:
+        return tuple(rec.station for rec in self.stations)
+
+    @property
+    def times_s(self) -> np.ndarray:
+        """Spark times of :attr:`stations`, s."""
+        return np.array([rec.time_s for rec in self.stations], dtype=float)
+
+    def image_path(self, station: int, view: str) -> Path:
+        """Path of the ``view`` image of ``station``, resolved relative to the shot file."""
+        rec = self.station(station)
+        if view not in rec.images:
+            raise KeyError(f"shot {self.shot_id}: station {station} has no {view!r} image "
+                           f"(has {sorted(rec.images)})")
+        p = Path(rec.images[view])
+        if not p.is_absolute() and self.source_path is not None:
+            p = Path(self.source_path).parent / p
+        return p
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _number(value, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise ShotFileError(f"{key}: expected a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ShotFileError(f"{key}: must be finite, got {value!r}")
+    return value
+
+
+def _in_range(value: float, key: str, lo: float, hi: float, what: str) -> float:
+    if not (lo < value <= hi):
+        raise ShotFileError(f"{key}: {value!r} is outside ({lo:g}, {hi:g}] -- not {what} "
+                            f"(check the unit)")
+    return value
+
+
+def _table(data: Mapping, key: str, where: str = "") -> Mapping:
+    if key not in data:
+        raise ShotFileError(f"{where}{key}: missing")
+    value = data[key]
+    if not isinstance(value, Mapping):
+        raise ShotFileError(f"{where}{key}: expected a table, got {type(value).__name__}")
+    return value
+
+
+def _require(data: Mapping, key: str, where: str = ""):
+    if key not in data:
+        raise ShotFileError(f"{where}{key}: missing")
+    return data[key]
+
+
+def _vector3(value, key: str) -> np.ndarray:
+    if not isinstance(value, list | tuple | np.ndarray) or len(value) != 3:
+        raise ShotFileError(f"{key}: expected 3 numbers [x, y, z], got {value!r}")
+    return np.array([_number(v, f"{key}[{i}]") for i, v in enumerate(value)])
+
+
+def _check_unknown(data: Mapping, known, where: str) -> None:
+    unknown = sorted(set(data) - set(known))
+    if unknown:
+        raise ShotFileError(f"{where}{unknown[0]}: unknown key (known: {sorted(known)})")
+
+
+def validate_model_spec(model, key: str = "model") -> dict:
+    """Check a body spec: ``kind`` known, dimensions positive and plausible (cm scale).
+
+    Keys ending in ``_cm``, ``_mm`` or ``_m`` are lengths (finite, |x| < 1 m); the size keys
+    ``d_*``, ``diameter_*``, ``h_*``, ``length_*``, ``l_*`` must be > 0. Keys ending in ``_deg``
+    must be finite numbers. Everything else is passed through for ``cadra.body``.
+    """
+    if not isinstance(model, Mapping):
+        raise ShotFileError(f"{key}: expected a table, got {type(model).__name__}")
+    model = dict(model)
+    kind = _require(model, "kind", f"{key}.")
+    if kind not in MODEL_KINDS:
+        raise ShotFileError(f"{key}.kind: {kind!r} is not one of {list(MODEL_KINDS)}")
+    for k, v in model.items():
+        if k == "kind":
+            continue
+        for suffix, to_cm in _LENGTH_SUFFIXES.items():
+            if k.endswith(suffix):
+                x = _number(v, f"{key}.{k}")
+                size = k[: -len(suffix)] in MODEL_SIZE_KEYS
+                if size and not x > 0:
+                    raise ShotFileError(f"{key}.{k}: a model dimension must be > 0, got {v!r}")
+                if abs(x) * to_cm >= MODEL_LENGTH_CM_MAX:
+                    raise ShotFileError(f"{key}.{k}: {v!r} is not a model dimension "
+                                        f"(|x| < {MODEL_LENGTH_CM_MAX:g} cm; check the unit)")
+                break
+        else:
+            if k.endswith("_deg"):
+                _number(v, f"{key}.{k}")
+    return model
+
+
+def validate_inertia(inertia: np.ndarray, key: str) -> np.ndarray:
+    """Symmetric, positive definite, principal moments satisfying the triangle inequalities."""
+    inertia = np.asarray(inertia, dtype=float)
+    if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
+        raise ShotFileError(f"{key}: expected a finite 3x3 tensor")
+    scale = float(np.max(np.abs(inertia)))
+    if scale == 0.0:
+        raise ShotFileError(f"{key}: tensor is zero")
+    if not np.allclose(inertia, inertia.T, rtol=0.0, atol=1e-9 * scale):
+        raise ShotFileError(f"{key}: tensor is not symmetric")
+    eig = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))
+    if eig[0] <= 0.0:
+        raise ShotFileError(f"{key}: tensor is not positive definite (principal moments "
+                            f"{eig.tolist()})")
+    if eig[0] + eig[1] < eig[2] * (1.0 - 1e-9):
+        raise ShotFileError(f"{key}: principal moments {eig.tolist()} violate the triangle "
+                            f"inequality I1 + I2 >= I3 (no rigid body has them)")
+    return inertia
+
+
+def _mass_from_dict(mass: Mapping) -> MassProperties:
+    known = {"mass_g", "cg_from_reference_cm", "inertia_g_cm2", *_INERTIA_COMPONENT_KEYS}
+    _check_unknown(mass, known, "mass.")
+    m_g = _number(_require(mass, "mass_g", "mass."), "mass.mass_g")
+    if not m_g > 0:
+        raise ShotFileError(f"mass.mass_g: must be positive, got {m_g!r}")
+    _in_range(m_g, "mass.mass_g", *MASS_G_RANGE, "a model mass in grams")
+    cg_cm = _vector3(_require(mass, "cg_from_reference_cm", "mass."), "mass.cg_from_reference_cm")
+    if np.any(np.abs(cg_cm) >= CG_CM_MAX):
+        raise ShotFileError(f"mass.cg_from_reference_cm: {cg_cm.tolist()} is not a cg offset "
+                            f"in cm (|each| < {CG_CM_MAX:g}; check the unit)")
+    components = [k for k in _INERTIA_COMPONENT_KEYS if k in mass]
+    if "inertia_g_cm2" in mass:
+        key = "mass.inertia_g_cm2"
+        if components:
+            raise ShotFileError(f"mass.{components[0]}: give either inertia_g_cm2 (tensor) or "
+                                f"the Ixx_g_cm2 ... components, not both")
+        raw = mass["inertia_g_cm2"]
+        if (not isinstance(raw, list | tuple | np.ndarray) or len(raw) != 3
+                or not all(isinstance(r, list | tuple | np.ndarray) and len(r) == 3
+                           for r in raw)):
+            raise ShotFileError(f"{key}: expected a 3x3 tensor [[Ixx, Ixy, Ixz], "
+                                f"[Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]]")
+        inertia = np.array([[_number(v, f"{key}[{i}][{j}]") for j, v in enumerate(r)]
+                            for i, r in enumerate(raw)])
+    else:
+        key = "mass.inertia_g_cm2"
+        if not components:
+            raise ShotFileError(f"{key}: missing (a 3x3 tensor, or Ixx_g_cm2, Iyy_g_cm2, "
+                                f"Izz_g_cm2 [+ Ixy_g_cm2, Ixz_g_cm2, Iyz_g_cm2])")
+        inertia = np.zeros((3, 3))
+        for k, (i, j) in _INERTIA_COMPONENT_KEYS.items():
+            if i == j:
+                v = _number(_require(mass, k, "mass."), f"mass.{k}")
+            else:
+                v = _number(mass.get(k, 0.0), f"mass.{k}")
+            inertia[i, j] = inertia[j, i] = v
+        key = "mass.Ixx_g_cm2/Iyy_g_cm2/Izz_g_cm2"
+    validate_inertia(inertia, key)
+    return MassProperties(mass_kg=units.g_to_kg(m_g), cg_model_m=units.cm_to_m(cg_cm),
+                          inertia_model_kg_m2=units.g_cm2_to_kg_m2(inertia))
+
+
+def _stations_from_list(stations) -> tuple[StationRecord, ...]:
+    if not isinstance(stations, list | tuple) or not stations:
+        raise ShotFileError("stations: expected a non-empty array of tables "
+                            "([[stations]] station = 1, time_s = ..., images = {...})")
+    out = []
+    for n, rec in enumerate(stations):
+        where = f"stations[{n}]."
+        if not isinstance(rec, Mapping):
+            raise ShotFileError(f"stations[{n}]: expected a table")
+        _check_unknown(rec, {"station", "time_s", "images"}, where)
+        sid = _require(rec, "station", where)
+        if isinstance(sid, bool) or not isinstance(sid, int | np.integer) or sid < 1:
+            raise ShotFileError(f"{where}station: expected a station id (integer >= 1), "
+                                f"got {sid!r}")
+        t = _number(_require(rec, "time_s", where), f"{where}time_s")
+        if abs(t) > 10.0:
+            raise ShotFileError(f"{where}time_s: {t!r} s is not a spark time (check the unit: "
+                                f"seconds)")
+        images = rec.get("images", {})
+        if not isinstance(images, Mapping):
+            raise ShotFileError(f"{where}images: expected a table view = \"path\"")
+        for view, path in images.items():
+            if not isinstance(path, str) or not path.strip():
+                raise ShotFileError(f"{where}images.{view}: expected a non-empty path string")
+        out.append(StationRecord(station=int(sid), time_s=t, images=dict(images)))
+    ids = [r.station for r in out]
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise ShotFileError(f"stations: station {dup} appears more than once")
+    out.sort(key=lambda r: r.station)
+    for a, b in zip(out, out[1:], strict=False):
+        if not b.time_s > a.time_s:
+            n = ids.index(b.station)
+            raise ShotFileError(f"stations[{n}].time_s: station {b.station} fires at "
+                                f"{b.time_s!r} s, not after station {a.station} "
+                                f"({a.time_s!r} s)")
+    return tuple(out)
+
+
+def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) -> ShotFile:
+    """Validate a parsed shot file (file units) and build the SI :class:`ShotFile`."""
+    if not isinstance(data, Mapping):
+        raise ShotFileError("shot file: expected a table at top level")
+    _check_unknown(data, _TOP_KEYS, "")
+    version = _require(data, "schema_version")
+    if version != SCHEMA_VERSION:
+        raise ShotFileError(f"schema_version: {version!r} not supported (this CADRA reads "
+                            f"version {SCHEMA_VERSION})")
+    shot_id = _require(data, "shot_id")
+    if not isinstance(shot_id, str) or not shot_id.strip():
+        raise ShotFileError(f"shot_id: expected a non-empty string, got {shot_id!r}")
+    facility = _require(data, "facility")
+    if not isinstance(facility, str) or not facility.strip():
+        raise ShotFileError(f"facility: expected a facility name or path, got {facility!r}")
+    notes = data.get("notes", "")
+    if not isinstance(notes, str):
+        raise ShotFileError("notes: expected a string")
+    model = validate_model_spec(_require(data, "model"))
+    mass = _mass_from_dict(_table(data, "mass"))
+    rng = _table(data, "range")
+    _check_unknown(rng, {"pressure_torr", "temperature_k"}, "range.")
+    p_torr = _number(_require(rng, "pressure_torr", "range."), "range.pressure_torr")
+    _in_range(p_torr, "range.pressure_torr", *PRESSURE_TORR_RANGE, "a range pressure in torr")
+    t_k = _number(_require(rng, "temperature_k", "range."), "range.temperature_k")
+    _in_range(t_k, "range.temperature_k", *TEMPERATURE_K_RANGE, "a range temperature in K")
+    v_nom = data.get("nominal_velocity_m_s")
+    if v_nom is not None:
+        v_nom = _in_range(_number(v_nom, "nominal_velocity_m_s"), "nominal_velocity_m_s",
+                          *VELOCITY_M_S_RANGE, "a model speed in m/s")
+    stations = _stations_from_list(_require(data, "stations"))
+    return ShotFile(shot_id=shot_id, model=model, mass=mass,
+                    pressure_pa=units.torr_to_pa(p_torr), temperature_k=t_k,
+                    facility=facility, stations=stations, notes=notes,
+                    source_path=str(source_path) if source_path is not None else None,
+                    nominal_velocity_m_s=v_nom)
+
+
+def _plain(value):
+    """numpy scalars/arrays -> plain Python for writing."""
+    if isinstance(value, np.ndarray):
+        return [_plain(v) for v in value.tolist()]
+    if isinstance(value, np.bool_ | bool):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating | float):
+        return float(value)
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+def shot_to_dict(shot: ShotFile) -> dict:
+    """The file-unit dictionary of a :class:`ShotFile` (what :func:`save_shot` writes)."""
+    c = units.clean_float
+    try:
+        mass = shot.mass
+        inertia = units.kg_m2_to_g_cm2(np.asarray(mass.inertia_model_kg_m2, dtype=float))
+        cg = units.m_to_cm(np.asarray(mass.cg_model_m, dtype=float).reshape(3))
+        mass_d = {
+            "mass_g": c(units.kg_to_g(float(mass.mass_kg))),
+            "cg_from_reference_cm": [c(v) for v in cg],
+            "inertia_g_cm2": [[c(v) for v in row] for row in inertia.reshape(3, 3)],
+        }
+        p_torr = c(units.pa_to_torr(float(shot.pressure_pa)))
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise ShotFileError(f"mass: cannot convert ({exc})") from None
+    out = {
+        "schema_version": SCHEMA_VERSION,
+        "shot_id": shot.shot_id,
+        "facility": shot.facility,
+        "notes": shot.notes or "",
+    }
+    if shot.nominal_velocity_m_s is not None:
+        out["nominal_velocity_m_s"] = _plain(shot.nominal_velocity_m_s)
+    out["model"] = _plain(dict(shot.model))
+    out["mass"] = mass_d
+    out["range"] = {"pressure_torr": p_torr, "temperature_k": _plain(shot.temperature_k)}
+    out["stations"] = [{"station": _plain(r.station), "time_s": _plain(r.time_s),
+                        "images": {str(k): str(v) for k, v in r.images.items()}}
+                       for r in shot.stations]
+    return out
+
+
+# --------------------------------------------------------------------------- TOML text
+
+
+def _toml_key(key: str) -> str:
+    if key and all(ch.isalnum() or ch in "_-" for ch in key):
+        return key
+    return json.dumps(key, ensure_ascii=False)
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ShotFileError(f"cannot write non-finite number {value!r}")
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        if not value:
+            return "{}"
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}"
+                                for k, v in value.items()) + " }"
+    raise ShotFileError(f"cannot write {type(value).__name__} value {value!r} to TOML")
+
+
+def dumps_shot(shot: ShotFile) -> str:
+    """TOML text of ``shot`` (validated; raises :class:`ShotFileError` naming the key)."""
+    data = shot_to_dict(shot)
+    shot_from_dict(data)  # validate exactly what will be written
+    lines = [
+        "# CADRA shot file (docs/shot_file.md). Units are in the key names; mass properties",
+        "# in model axes (x nose, y port, z up, model upright), cg from the body reference",
+        "# point, inertia tensor about the cg. Image paths are relative to this file.",
+    ]
+    for k in ("schema_version", "shot_id", "facility", "notes", "nominal_velocity_m_s"):
+        if k in data:
+            lines.append(f"{k} = {_toml_value(data[k])}")
+    for section in ("model", "mass", "range"):
+        lines.append("")
+        lines.append(f"[{section}]")
+        for k, v in data[section].items():
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+    for rec in data["stations"]:
+        lines += ["", "[[stations]]", f"station = {rec['station']}",
+                  f"time_s = {_toml_value(rec['time_s'])}",
+                  f"images = {_toml_value(rec['images'])}"]
+    text = "\n".join(lines) + "\n"
+    if tomllib.loads(text) != data:  # the writer must be exact; never write what reads back wrong
+        raise ShotFileError("internal error: shot file text does not read back identically")
+    return text
+
+
+def load_shot(path: str | os.PathLike) -> ShotFile:
+    """Read and validate a shot file; errors are :class:`ShotFileError` naming the key."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ShotFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ShotFileError(f"{path}: not valid TOML ({exc})") from None
+    try:
+        return shot_from_dict(data, source_path=path)
+    except ShotFileError as exc:
+        raise ShotFileError(f"{path}: {exc}") from None
+
+
+def save_shot(shot: ShotFile, path: str | os.PathLike, overwrite: bool = False) -> None:
+    """Validate ``shot`` and write it to ``path`` atomically.
+
+    Nothing is written if validation fails (:class:`ShotFileError`) or if ``path`` exists and
+    ``overwrite`` is false (:class:`FileExistsError`).
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; refusing to overwrite (pass overwrite=True)")
+    text = dumps_shot(shot)
+    atomic_write_text(path, text, overwrite=overwrite)
+
+
+__all__ = [
+    "MODEL_KINDS", "SCHEMA_VERSION", "MassProperties", "ShotFile", "ShotFileError",
+    "StationRecord", "dumps_shot", "load_shot", "save_shot", "shot_from_dict", "shot_to_dict",
+    "validate_inertia", "validate_model_spec",
+]

@@ -1,0 +1,486 @@
+"""Synthetic shots: a shot specification -> trajectory -> shot file, shadowgraphs, exact truth.
+
+The specification (TOML, ``docs/simulation.md``) names the model, its mass properties and range
+conditions (or a seed-004 shot whose Tables 2/3 rows supply them), the aerodynamic model used as
+truth, the launch conditions, optional effects and the render settings. :func:`simulate_shot`
+flies the 6-DOF model (the same code the fitter uses), finds the light-sheet spark times and
+returns the exact per-station truth; :func:`write_shot` renders and writes everything,
+atomically, refusing to overwrite.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cadra.aero import AeroModel, load_model
+from cadra.atmosphere import Atmosphere
+from cadra.body import Body, body_from_spec, silhouette
+from cadra.conventions import body_to_facility_matrix, model_to_body_inertia, model_to_body_vector
+from cadra.dynamics.effects import Effects
+from cadra.dynamics.setup import DT_MAX_DEFAULT, RigidBody, propagate_states
+from cadra.dynamics.trajectory import Launch, crossing_times, truth_table
+from cadra.facility import Facility, load_facility
+from cadra.io import units
+from cadra.io.seed004 import load_seed004_table
+
+BUNDLED_MODELS = Path(__file__).resolve().parent / "aero" / "models"
+
+#: Kerr-cell exposure of seed 004 (30-40 ns); the motion blur is V * exposure
+EXPOSURE_S = 35e-9
+
+
+class SpecError(ValueError):
+    """A shot specification that cannot be simulated; the message names the key."""
+
+
+def resolve_model(name_or_path: str | os.PathLike, base_dir: Path | None = None) -> AeroModel:
+    """An aero model from a bundled name (``"m2_m070"``) or a file path."""
+    p = Path(name_or_path)
+    candidates = [p] if p.suffix else []
+    if base_dir is not None and p.suffix:
+        candidates.insert(0, base_dir / p)
+    candidates.append(BUNDLED_MODELS / f"{p.stem}.toml")
+    for c in candidates:
+        if c.is_file():
+            return load_model(c)
+    raise SpecError(f"aero_model: no bundled model or file named {str(name_or_path)!r} "
+                    f"(bundled: {sorted(x.stem for x in BUNDLED_MODELS.glob('*.toml'))})")
+
+
+@dataclass(frozen=True)
+class FilmPlacement:
+    """Per-image random placement of the film/scan relative to the nominal image map (1-sigma).
+
+    Stage one must solve each image's map from its fiducial wires; this makes that necessary.
+    """
+
+    shift_px: float = 4.0
+    rotation_deg: float = 0.05
+    scale_rel: float = 5e-4
+
+
+@dataclass(frozen=True)
+class ShotSpec:
+    """Everything that defines a synthetic shot (SI inside; see docs/simulation.md)."""
+
+    shot_id: str
+    model: dict
+    mass_kg: float
+    cg_model_m: tuple[float, float, float]          # nominal cg minus reference point, model axes
+    inertia_model_kg_m2: tuple                      # 3x3 about the cg, model axes
+    pressure_pa: float
+    temperature_k: float
+    aero_model: str
+    launch: Launch
+    effects: Effects = field(default_factory=Effects)
+    aero_values: dict = field(default_factory=dict)  # parameter overrides (SI)
+    facility: str = "hffaf"
+    n_stations: int | None = None
+    trigger_offset_mean_m: float = 0.004
+    trigger_offset_sd_m: float = 0.002
+    film: FilmPlacement = field(default_factory=FilmPlacement)
+    render: dict = field(default_factory=dict)
+    seed: int = 0
+    dt_max_s: float = DT_MAX_DEFAULT
+    source_path: str | None = None
+    seed004_shot: int | None = None
+    aim: str = "none"            # "centre": slant the gun so the path stays centred in view
+
+
+def _get(d: dict, key: str, where: str, kind=float):
+    if key not in d:
+        raise SpecError(f"{where}{key}: missing")
+    try:
+        return kind(d[key])
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"{where}{key}: {exc}") from None
+
+
+def load_shot_spec(path: str | os.PathLike) -> ShotSpec:
+    """Read a shot specification TOML; errors name the offending key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise SpecError(f"{path}: {exc}") from None
+    return spec_from_dict(data, source_path=path)
+
+
+def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
+    """Build a :class:`ShotSpec` from plain data (file units: see docs/simulation.md)."""
+    data = dict(data)
+    known = {"shot_id", "seed004_shot", "model", "mass", "range", "aero_model", "aero_values",
+             "launch", "effects", "facility", "n_stations", "trigger", "film", "render", "seed",
+             "dt_max_s", "aim"}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise SpecError(f"unknown key(s) {unknown}; known: {sorted(known)}")
+    row = None
+    if "seed004_shot" in data:
+        table = load_seed004_table()
+        hit = table[table["shot"] == int(data["seed004_shot"])]
+        if hit.empty:
+            raise SpecError(f"seed004_shot: no shot {data['seed004_shot']} in Tables 2/3")
+        row = hit.iloc[0]
+    model = dict(data.get("model") or {})
+    if not model:
+        raise SpecError("model: missing (e.g. {kind = \"capsule\", preset = \"M2\"})")
+    if row is not None and model.get("kind") == "capsule":
+        model.setdefault("d_cm", float(row["d_cm"]))
+        model.setdefault("h_cm", float(row["h_cm"]))
+    try:
+        body = body_from_spec(model)
+    except ValueError as exc:
+        raise SpecError(f"model: {exc}") from None
+
+    mass = dict(data.get("mass") or {})
+    if row is not None:
+        mass.setdefault("mass_g", float(row["mass_g"]))
+        mass.setdefault("x_cg_from_base_cm", float(row["x_cg_from_base_cm"]))
+        mass.setdefault("y_cg_cm", float(row["y_cg_cm"]))
+        mass.setdefault("z_cg_cm", float(row["z_cg_cm"]))
+        mass.setdefault("inertia_g_cm2", [float(row["Ixx_g_cm2"]), float(row["Iyy_g_cm2"]),
+                                          float(row["Izz_g_cm2"])])
+    mass_kg = units.g_to_kg(_get(mass, "mass_g", "mass."))
+    if not mass_kg > 0:
+        raise SpecError(f"mass.mass_g: must be positive, got {mass['mass_g']}")
+    if "x_cg_from_base_cm" in mass:
+        x_cg = body.base_s_m + units.cm_to_m(_get(mass, "x_cg_from_base_cm", "mass."))
+    else:
+        x_cg = units.cm_to_m(_get(mass, "x_cg_from_ref_cm", "mass."))
+    cg_model = (x_cg, units.cm_to_m(float(mass.get("y_cg_cm", 0.0))),
+                units.cm_to_m(float(mass.get("z_cg_cm", 0.0))))
+    inertia = np.asarray(mass.get("inertia_g_cm2"), dtype=float) if "inertia_g_cm2" in mass \
+        else None
+    if inertia is None:
+        raise SpecError("mass.inertia_g_cm2: missing ([Ixx, Iyy, Izz] or a 3x3 tensor)")
+    if inertia.shape == (3,):
+        inertia = np.diag(inertia)
+    if inertia.shape != (3, 3):
+        raise SpecError("mass.inertia_g_cm2: expected [Ixx, Iyy, Izz] or a 3x3 tensor")
+    inertia = units.g_cm2_to_kg_m2(inertia)
+    if not np.allclose(inertia, inertia.T) or np.any(np.linalg.eigvalsh(inertia) <= 0):
+        raise SpecError("mass.inertia_g_cm2: not a symmetric positive-definite tensor")
+
+    rng_ = dict(data.get("range") or {})
+    if row is not None:
+        rng_.setdefault("pressure_torr", float(row["pressure_torr"]))
+        rng_.setdefault("temperature_k", float(row["temperature_k"]))
+    p_pa = units.torr_to_pa(_get(rng_, "pressure_torr", "range."))
+    t_k = _get(rng_, "temperature_k", "range.")
+    if not (1.0 < p_pa < 1e6):
+        raise SpecError(
+            f"range.pressure_torr: {rng_['pressure_torr']} torr is not a range pressure")
+    if not (150.0 < t_k < 400.0):
+        raise SpecError(f"range.temperature_k: {t_k} K is not a range temperature")
+
+    la = dict(data.get("launch") or {})
+    if row is not None:
+        la.setdefault("speed_m_s", float(row["velocity_m_s"]))
+    launch_kw = {}
+    for key, value in la.items():
+        if key.endswith("_deg"):
+            launch_kw[key[:-4] + "_rad"] = np.radians(float(value))
+        elif key.endswith("_deg_s"):
+            launch_kw[key[:-6] + "_rad_s"] = np.radians(float(value))
+        else:
+            launch_kw[key] = float(value)
+    try:
+        launch = Launch(**launch_kw)
+    except TypeError as exc:
+        raise SpecError(f"launch: {exc}") from None
+    if not launch.speed_m_s > 0:
+        raise SpecError("launch.speed_m_s: must be positive")
+    try:
+        effects = Effects.from_dict(data.get("effects"))
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
+    if "aero_model" not in data:
+        raise SpecError("aero_model: missing (a bundled name such as \"m2_m070\" or a path)")
+    trig = dict(data.get("trigger") or {})
+    film = dict(data.get("film") or {})
+    try:
+        film_placement = FilmPlacement(**{k: float(v) for k, v in film.items()})
+    except TypeError as exc:
+        raise SpecError(f"film: {exc}") from None
+    aero_values = {}
+    for k, v in dict(data.get("aero_values") or {}).items():
+        aero_values[k[:-4] if k.endswith("_deg") else k] = (
+            np.radians(float(v)) if k.endswith("_deg") else float(v))
+    return ShotSpec(
+        shot_id=str(data.get("shot_id") or (f"{row['model']}-{int(row['shot'])}"
+                                             if row is not None else "")) or "shot",
+        model=body.to_spec(), mass_kg=mass_kg, cg_model_m=cg_model,
+        inertia_model_kg_m2=tuple(map(tuple, inertia)), pressure_pa=p_pa, temperature_k=t_k,
+        aero_model=str(data["aero_model"]), launch=launch, effects=effects,
+        aero_values=aero_values, facility=str(data.get("facility", "hffaf")),
+        n_stations=int(data["n_stations"]) if "n_stations" in data else None,
+        trigger_offset_mean_m=float(trig.get("offset_mean_m", 0.004)),
+        trigger_offset_sd_m=float(trig.get("offset_sd_m", 0.002)),
+        film=film_placement, render=dict(data.get("render") or {}),
+        seed=int(data.get("seed", 0)), dt_max_s=float(data.get("dt_max_s", DT_MAX_DEFAULT)),
+        source_path=str(source_path) if source_path else None,
+        seed004_shot=int(data["seed004_shot"]) if "seed004_shot" in data else None,
+        aim=_aim(data.get("aim", "none")),
+    )
+
+
+def _aim(value) -> str:
+    if value not in ("none", "centre"):
+        raise SpecError(f"aim: expected \"none\" or \"centre\", got {value!r}")
+    return value
+
+
+def aim_launch(launch: Launch, rigid: RigidBody, program, params, x_first: float,
+               x_last: float, dt_max: float = DT_MAX_DEFAULT) -> Launch:
+    """Slant the gun (seed 004 Fig. 5) so the path's vertical and lateral excursions are centred.
+
+    The reference point's z(t) and y(t) between the first and last station are fitted by
+    parabolas; the launch height/offset and flight-path angles are then corrected so each
+    parabola's extremes are symmetric about the centreline (the lowest point mid-range for a
+    model that lifts upward). Two passes of this linear correction converge.
+    """
+    for _ in range(3):
+        y0 = launch.state(rigid)
+        t = crossing_times(y0, rigid, program, params, [x_first, x_last], dt_max=dt_max)
+        tt = np.linspace(0.0, t[1], 41)
+        obs_t = propagate_states(y0, 0.0, tt, rigid.phys(), program, params, dt_max)
+        from cadra.dynamics.observe import observe
+
+        obs = observe(obs_t, rigid.ref_from_cg_body_m())
+        t1, t2 = t
+        mid = 0.5 * (t1 + t2)
+        new = {}
+        for comp, key_pos, key_vel in (("z_m", "z_m", "vz"), ("y_m", "y_m", "vy")):
+            c2, c1, c0 = np.polyfit(tt, obs[comp], 2)
+            # desired: vertex at mid-range, band centred on 0 over [t1, t2]
+            dv = -(2 * c2 * mid + c1)              # change of the slope at t = 0
+            half = 0.5 * c2 * (0.5 * (t2 - t1)) ** 2
+            z_mid_now = c2 * mid**2 + c1 * mid + c0 + dv * mid
+            new[key_pos] = getattr(launch, key_pos) - (z_mid_now + half)
+            new[key_vel] = dv
+        V = launch.speed_m_s
+        vel = launch.velocity_F() + np.array([0.0, new["vy"], new["vz"]])
+        gamma = float(np.arcsin(vel[2] / np.linalg.norm(vel)))
+        chi = float(np.arctan2(vel[1], vel[0]))
+        launch = Launch(**{**launch.__dict__, "z_m": new["z_m"], "y_m": new["y_m"],
+                           "gamma_rad": gamma, "chi_rad": chi, "speed_m_s": V})
+    return launch
+
+
+def rigid_body(spec: ShotSpec, body: Body | None = None) -> RigidBody:
+    """The dynamics' view of the shot: mass properties in body axes, air, effects."""
+    atm = Atmosphere.from_pt(spec.pressure_pa, spec.temperature_k)
+    body = body or body_from_spec(spec.model)
+    return RigidBody(
+        mass_kg=spec.mass_kg,
+        inertia_body_kg_m2=model_to_body_inertia(np.asarray(spec.inertia_model_kg_m2)),
+        d_m=body.diameter_m,
+        cg_from_ref_body_m=model_to_body_vector(np.asarray(spec.cg_model_m)),
+        density_kg_m3=atm.density, speed_of_sound_m_s=atm.speed_of_sound,
+        viscosity_pa_s=atm.viscosity, effects=spec.effects,
+    )
+
+
+@dataclass(frozen=True)
+class SimulatedShot:
+    """A flown shot: spark times, exact states and the per-station truth table."""
+
+    spec: ShotSpec
+    body: Body
+    rigid: RigidBody
+    model: AeroModel
+    facility: Facility
+    stations: tuple[int, ...]
+    times_s: np.ndarray          # spark times, s, relative to the station-1 (first) spark
+    states: np.ndarray           # (n, 13) exact states at the sparks
+    truth: pd.DataFrame
+
+
+def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> SimulatedShot:
+    """Fly ``spec`` through the range; spark times from light-sheet crossings."""
+    facility = facility or load_facility(spec.facility)
+    body = body_from_spec(spec.model)
+    rigid = rigid_body(spec, body)
+    model = resolve_model(spec.aero_model,
+                          Path(spec.source_path).parent if spec.source_path else None)
+    if spec.aero_values:
+        try:
+            model = model.with_values(spec.aero_values)
+        except (KeyError, ValueError) as exc:
+            raise SpecError(f"aero_values: {exc}") from None
+    program = model.compile()
+    params = model.values()
+    stations = facility.stations[: spec.n_stations] if spec.n_stations else facility.stations
+    rng = np.random.default_rng(spec.seed)
+    offsets = rng.normal(spec.trigger_offset_mean_m, spec.trigger_offset_sd_m, len(stations))
+    x_planes = np.array([s.x_m for s in stations]) + offsets
+    launch = spec.launch
+    if spec.aim == "centre":
+        launch = aim_launch(launch, rigid, program, params, x_planes[0], x_planes[-1],
+                            spec.dt_max_s)
+    y0 = launch.state(rigid)
+    if not launch.x_m < x_planes[0]:
+        raise SpecError("launch.x_m: the launch point must be upstream of the first station")
+    t_abs = crossing_times(y0, rigid, program, params, x_planes, dt_max=spec.dt_max_s)
+    states = propagate_states(y0, 0.0, t_abs, rigid.phys(), program, params, spec.dt_max_s)
+    if not np.all(np.isfinite(states)):
+        raise SpecError("launch: the trajectory diverged (non-finite state)")
+    times = t_abs - t_abs[0]
+    truth = truth_table(times, states, rigid, [s.id for s in stations])
+    return SimulatedShot(spec, body, rigid, model, facility, tuple(s.id for s in stations),
+                         times, states, truth)
+
+
+# --------------------------------------------------------------------------- images
+
+
+def _film_affine(nominal: np.ndarray, film: FilmPlacement, rng: np.random.Generator,
+                 width: int, height: int) -> np.ndarray:
+    """A perturbed image->plane affine: the film/scan placed slightly off nominal.
+
+    The perturbation is a rotation and scale about the image centre plus a shift, in pixels.
+    """
+    ang = np.radians(rng.normal(0.0, film.rotation_deg))
+    s = 1.0 + rng.normal(0.0, film.scale_rel)
+    c = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    shift = rng.normal(0.0, film.shift_px, 2)
+    Rm = s * np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+    # pixel (as scanned) -> pixel (nominal film): p_nom = Rm (p - c) + c + shift
+    A = np.eye(3)
+    A[:2, :2] = Rm
+    A[:2, 2] = c - Rm @ c + shift
+    return nominal @ A
+
+
+def render_station_views(shot: SimulatedShot, k: int, rng: np.random.Generator,
+                         render_config) -> list[dict]:
+    """Render both views of station index ``k``; returns dicts with image and truth."""
+    from cadra.imaging.render import Scene, render
+
+    station = shot.facility.stations[k]
+    y = shot.states[k]
+    R = body_to_facility_matrix(y[6:10])
+    ref = shot.rigid.ref_from_cg_body_m()
+    r_ref = y[0:3] + R @ ref
+    v = y[3:6]
+    out = []
+    for name, view in sorted(station.views.items()):
+        affine = _film_affine(view.image_to_plane, shot.spec.film, rng, view.width_px,
+                              view.height_px)
+        poly_plane = silhouette(shot.body, R, r_ref, view.P_view)
+        poly_px = view.plane_to_pixels(poly_plane, affine=affine)
+        ref_px = view.plane_to_pixels((view.P_view @ r_ref)[None, :], affine=affine)[0]
+        nose_px = view.plane_to_pixels((view.P_view @ (r_ref + 0.01 * R[:, 0]))[None, :],
+                                       affine=affine)[0]
+        vel_px = view.plane_to_pixels((view.P_view @ (r_ref + v * EXPOSURE_S))[None, :],
+                                      affine=affine)[0] - ref_px
+        flight_px = view.plane_to_pixels((view.P_view @ (r_ref + v * 1e-4))[None, :],
+                                         affine=affine)[0] - ref_px
+        flight_dir = flight_px / np.linalg.norm(flight_px)
+        radius_px = 0.5 * shot.body.diameter_m / view.scale_m_per_px
+        wires = tuple((np.asarray(seg[0], float), np.asarray(seg[1], float),
+                       w.diameter_m / view.scale_m_per_px)
+                      for seg, w in zip(view.wire_lines_px(affine=affine, margin_px=20.0),
+                                        view.wires, strict=True) if seg is not None)
+        mark = view.reference_mark
+        scene = Scene(
+            width_px=view.width_px, height_px=view.height_px, bodies=(poly_px,), wires=wires,
+            reference_mark=(mark.u_px, mark.v_px, mark.arm_px, mark.width_px),
+            motion_blur_px=(float(vel_px[0]), float(vel_px[1])),
+            body_hint=(float(ref_px[0]), float(ref_px[1]), float(flight_dir[0]),
+                       float(flight_dir[1]), float(radius_px)),
+        )
+        mach = float(shot.truth["mach"].iloc[k])
+        config = render_config.replace(bow_shock=render_config.bow_shock and mach > 1.0,
+                                       bow_shock_mach=max(mach, 1.0 + 1e-6))
+        image = render(scene, config, rng)
+        axis_px = nose_px - ref_px
+        out.append({
+            "station": station.id, "view": name, "image": image, "affine": affine,
+            "truth": {
+                "station": station.id, "view": name,
+                "u_ref_px": ref_px[0], "v_ref_px": ref_px[1],
+                "axis_angle_image_deg": float(np.degrees(np.arctan2(axis_px[1], axis_px[0]))),
+                "motion_blur_du_px": float(vel_px[0]), "motion_blur_dv_px": float(vel_px[1]),
+                **{f"affine_{i}{j}": float(affine[i, j]) for i in range(2) for j in range(3)},
+            },
+        })
+    return out
+
+
+def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool = True,
+               overwrite: bool = False, progress: bool = True) -> Path:
+    """Write the shot file, truth tables and (optionally) the rendered images to ``out_dir``.
+
+    Everything is written into a temporary sibling directory and moved into place at the end,
+    so an interrupted or failed run leaves nothing behind; an existing ``out_dir`` is refused
+    unless ``overwrite``.
+    """
+    from cadra.imaging.render import write_image
+    from cadra.imaging.render_config import RenderConfig
+    from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, save_shot
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not overwrite:
+        raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use overwrite=True)")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        records = []
+        image_truth = []
+        render_config = RenderConfig.from_dict({"seed": shot.spec.seed, **shot.spec.render})
+        rng = np.random.default_rng([shot.spec.seed, 1])
+        iterator = range(len(shot.stations))
+        if progress and images:
+            from tqdm import tqdm
+
+            iterator = tqdm(iterator, desc=f"rendering {shot.spec.shot_id}", unit="station")
+        for k in iterator:
+            paths = {}
+            if images:
+                (tmp / "images").mkdir(exist_ok=True)
+                for item in render_station_views(shot, k, rng, render_config):
+                    rel = f"images/st{item['station']:02d}_{item['view']}.png"
+                    write_image(tmp / rel, item["image"])
+                    paths[item["view"]] = rel
+                    image_truth.append(item["truth"])
+            records.append(StationRecord(station=shot.stations[k],
+                                         time_s=float(shot.times_s[k]), images=paths))
+        mass = MassProperties(
+            mass_kg=shot.spec.mass_kg, cg_model_m=np.asarray(shot.spec.cg_model_m),
+            inertia_model_kg_m2=np.asarray(shot.spec.inertia_model_kg_m2))
+        shotfile = ShotFile(
+            shot_id=shot.spec.shot_id, model=shot.spec.model, mass=mass,
+            pressure_pa=shot.spec.pressure_pa, temperature_k=shot.spec.temperature_k,
+            facility=shot.spec.facility, stations=tuple(records),
+            notes=(f"synthetic shot simulated by cadra from "
+                   f"{shot.spec.source_path or 'a spec'}; truth aero model "
+                   f"{shot.spec.aero_model}; effects {list(shot.rigid.effects.active)}"),
+            source_path=None)
+        save_shot(shotfile, tmp / "shot.toml")
+        shot.truth.to_csv(tmp / "truth.csv", index=False, float_format="%.12g")
+        if image_truth:
+            pd.DataFrame(image_truth).to_csv(tmp / "truth_images.csv", index=False,
+                                             float_format="%.12g")
+        if shot.spec.source_path:
+            shutil.copyfile(shot.spec.source_path, tmp / "spec.toml")
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out_dir
+
+
+__all__ = ["ShotSpec", "SimulatedShot", "SpecError", "load_shot_spec", "simulate_shot",
+           "spec_from_dict", "write_shot", "rigid_body"]
