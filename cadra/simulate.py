@@ -361,32 +361,36 @@ def _film_affine(nominal: np.ndarray, film: FilmPlacement, rng: np.random.Genera
     return nominal @ A
 
 
-def render_station_views(shot: SimulatedShot, k: int, rng: np.random.Generator,
-                         render_config) -> list[dict]:
-    """Render both views of station index ``k``; returns dicts with image and truth."""
-    from cadra.imaging.render import Scene, render
+def station_scenes(shot: SimulatedShot, k: int, rng: np.random.Generator) -> list[dict]:
+    """Pixel-space scenes of both views of station index ``k`` with their exact truth.
+
+    Each item: ``station``, ``view``, ``scene`` (:class:`cadra.imaging.render.Scene`), ``affine``
+    (the image->view-plane map actually used, film placement included) and ``truth`` (reference
+    point pixel position, image-plane axis angle, motion blur, the affine's entries).
+    """
+    from cadra.imaging.render import Scene
 
     station = shot.facility.stations[k]
     y = shot.states[k]
     R = body_to_facility_matrix(y[6:10])
-    ref = shot.rigid.ref_from_cg_body_m()
-    r_ref = y[0:3] + R @ ref
+    r_ref = y[0:3] + R @ shot.rigid.ref_from_cg_body_m()
     v = y[3:6]
     out = []
     for name, view in sorted(station.views.items()):
         affine = _film_affine(view.image_to_plane, shot.spec.film, rng, view.width_px,
                               view.height_px)
-        poly_plane = silhouette(shot.body, R, r_ref, view.P_view)
-        poly_px = view.plane_to_pixels(poly_plane, affine=affine)
-        ref_px = view.plane_to_pixels((view.P_view @ r_ref)[None, :], affine=affine)[0]
-        nose_px = view.plane_to_pixels((view.P_view @ (r_ref + 0.01 * R[:, 0]))[None, :],
-                                       affine=affine)[0]
-        vel_px = view.plane_to_pixels((view.P_view @ (r_ref + v * EXPOSURE_S))[None, :],
-                                      affine=affine)[0] - ref_px
-        flight_px = view.plane_to_pixels((view.P_view @ (r_ref + v * 1e-4))[None, :],
-                                         affine=affine)[0] - ref_px
+
+        def to_px(points_F, _view=view, _affine=affine):
+            return _view.plane_to_pixels(np.atleast_2d(points_F) @ _view.P_view.T,
+                                         affine=_affine)
+
+        poly_px = view.plane_to_pixels(silhouette(shot.body, R, r_ref, view.P_view),
+                                       affine=affine)
+        ref_px = to_px(r_ref)[0]
+        axis_px = to_px(r_ref + 0.01 * R[:, 0])[0] - ref_px
+        blur_px = to_px(r_ref + v * EXPOSURE_S)[0] - ref_px
+        flight_px = to_px(r_ref + v * 1e-4)[0] - ref_px
         flight_dir = flight_px / np.linalg.norm(flight_px)
-        radius_px = 0.5 * shot.body.diameter_m / view.scale_m_per_px
         wires = tuple((np.asarray(seg[0], float), np.asarray(seg[1], float),
                        w.diameter_m / view.scale_m_per_px)
                       for seg, w in zip(view.wire_lines_px(affine=affine, margin_px=20.0),
@@ -395,26 +399,38 @@ def render_station_views(shot: SimulatedShot, k: int, rng: np.random.Generator,
         scene = Scene(
             width_px=view.width_px, height_px=view.height_px, bodies=(poly_px,), wires=wires,
             reference_mark=(mark.u_px, mark.v_px, mark.arm_px, mark.width_px),
-            motion_blur_px=(float(vel_px[0]), float(vel_px[1])),
+            motion_blur_px=(float(blur_px[0]), float(blur_px[1])),
             body_hint=(float(ref_px[0]), float(ref_px[1]), float(flight_dir[0]),
-                       float(flight_dir[1]), float(radius_px)),
+                       float(flight_dir[1]), 0.5 * shot.body.diameter_m / view.scale_m_per_px),
         )
-        mach = float(shot.truth["mach"].iloc[k])
-        config = render_config.replace(bow_shock=render_config.bow_shock and mach > 1.0,
-                                       bow_shock_mach=max(mach, 1.0 + 1e-6))
-        image = render(scene, config, rng)
-        axis_px = nose_px - ref_px
         out.append({
-            "station": station.id, "view": name, "image": image, "affine": affine,
+            "station": station.id, "view": name, "scene": scene, "affine": affine,
             "truth": {
                 "station": station.id, "view": name,
                 "u_ref_px": ref_px[0], "v_ref_px": ref_px[1],
                 "axis_angle_image_deg": float(np.degrees(np.arctan2(axis_px[1], axis_px[0]))),
-                "motion_blur_du_px": float(vel_px[0]), "motion_blur_dv_px": float(vel_px[1]),
+                "motion_blur_du_px": float(blur_px[0]), "motion_blur_dv_px": float(blur_px[1]),
                 **{f"affine_{i}{j}": float(affine[i, j]) for i in range(2) for j in range(3)},
             },
         })
     return out
+
+
+def render_station_views(shot: SimulatedShot, k: int, rng: np.random.Generator,
+                         render_config) -> list[dict]:
+    """Render both views of station index ``k``: :func:`station_scenes` plus an ``image``.
+
+    The bow shock is drawn only when the station's Mach number exceeds 1, at that Mach.
+    """
+    from cadra.imaging.render import render
+
+    mach = float(shot.truth["mach"].iloc[k])
+    config = render_config.replace(bow_shock=render_config.bow_shock and mach > 1.0,
+                                   bow_shock_mach=max(mach, 1.0 + 1e-6))
+    items = station_scenes(shot, k, rng)
+    for item in items:
+        item["image"] = render(item["scene"], config, rng)
+    return items
 
 
 def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool = True,

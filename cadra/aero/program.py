@@ -21,7 +21,11 @@ or an integer index stored as a float (variable, parameter, temporary slot or co
 Machine: an accumulator ``acc`` (the top of the stack, kept in a register) over a value stack
 in ``stack[0:depth]``; temporaries live at the *end* of ``stack``: slot ``t`` is
 ``stack[len(stack) - 1 - t]``. A ``stack`` of length ``AeroProgram.stack_size`` (= maximum
-depth + number of temporaries) is enough; longer is fine.
+depth + number of temporaries) is enough; longer is fine. Opcodes are dense small integers in
+one ``if/elif ==`` chain (LLVM makes it a jump table): fused ops combine the accumulator with
+an operand from a constant (C), variable (V), parameter (P) or temporary (T); ``PMUL``/``AMUL``
+push or add a product of two V/P/T operands (the parameter-times-term pattern of Table 4).
+Table of opcodes: docs/aero_models.md.
 
 Complex-step rules (docs/aero_models.md): comparisons, ``min``/``max``, ``abs`` and ``where``
 decide on real parts; everything else is the analytic complex function, so
@@ -105,7 +109,8 @@ class AeroProgram:
     ops : (n,) int64 opcodes.
     args : (n,) float64 operands (constants, or indices stored as floats).
     starts : (10,) int64; coefficient ``k``'s program is ``ops[starts[k]:starts[k+1]]``;
-        ``ops[:starts[0]]`` is the prelude of shared subexpressions.
+        ``ops[0]`` is the format header, ``ops[1:starts[0]]`` the prelude of shared
+        subexpressions.
     stack_size : int, the length ``stack`` must have (depth + temporaries), >= 1.
     param_names : names of the ``params`` vector, in order.
     angle_plane : ``"alpha_beta"`` or ``"sigma"`` (docs/conventions.md).
@@ -253,6 +258,10 @@ def eval_coefficients(ops, args, starts, variables, params, out, stack) -> None:
     stack : scratch of ``out``'s dtype, length >= ``AeroProgram.stack_size``.
     """
     n = starts[starts.shape[0] - 1]
+    if starts[0] < 1 or ops[0] != HEADER or args[0] != PROGRAM_FORMAT:
+        # not a program of this format (or a stale cached copy of this evaluator): NaNs.
+        # (n = 0 rather than an early return: LLVM lays the loop out better, ~30% faster)
+        n = 0
     for k in range(out.shape[0]):
         out[k] = 0.0
     tb = stack.shape[0] - 1  # temporary slot t is stack[tb - t]
@@ -487,10 +496,7 @@ def eval_coefficients(ops, args, starts, variables, params, out, stack) -> None:
             out[int(args[i])] = acc
             acc = stack[sp]
             sp -= 1
-    # checked after the loop: an early exit before it costs ~30% (LLVM lays the loop out
-    # worse); starts[0] >= 1 first, so that an empty ops is never read
-    if starts[0] < 1 or ops[0] != HEADER or args[0] != PROGRAM_FORMAT:
-        # not a program of this format (or a stale cached copy of this evaluator)
+    if n == 0:
         for k in range(out.shape[0]):
             out[k] = np.nan
 
