@@ -1,9 +1,10 @@
 """Regenerate the sample shots from their specifications, deterministically.
 
 Every ``sample_shots/specs/*.toml`` is flown and written to ``sample_shots/<name>/`` (shot
-file + exact truth). Images are rendered only for the shots named with ``--images`` (default:
-the bundled demo shot ``m2_2429``, whose images are committed); ``--images all`` renders every
-shot (about 20 MB a shot: regenerate, don't commit). Same seed -> same bytes.
+file + exact truth, a few kB: committed). Images are rendered only for the shots named with
+``--images`` (``all`` for every shot); they are about 34 MB a shot of incompressible film
+noise, so they are regenerated (about 30 s a shot), never committed (.gitignore). Same seed ->
+same bytes.
 
 Usage:
     python tools/make_sample_shots.py [--only NAME ...] [--images NAME ... | all | none]
@@ -18,7 +19,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BUNDLED_WITH_IMAGES = ("m2_2429",)
 
 
 def main(argv=None) -> int:
@@ -26,7 +26,7 @@ def main(argv=None) -> int:
     parser.add_argument("--specs", default=str(ROOT / "sample_shots" / "specs"))
     parser.add_argument("--out", default=str(ROOT / "sample_shots"))
     parser.add_argument("--only", nargs="*", help="spec names (file stems) to regenerate")
-    parser.add_argument("--images", nargs="*", default=list(BUNDLED_WITH_IMAGES),
+    parser.add_argument("--images", nargs="*", default=["none"],
                         help="spec names to render images for, 'all' or 'none'")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace existing outputs (otherwise existing shots are skipped)")
