@@ -25,7 +25,7 @@ from cadra.atmosphere import Atmosphere
 from cadra.body import Body, body_from_spec, silhouette
 from cadra.conventions import body_to_facility_matrix, model_to_body_inertia, model_to_body_vector
 from cadra.dynamics.effects import Effects
-from cadra.dynamics.setup import DT_MAX_DEFAULT, RigidBody, propagate_states
+from cadra.dynamics.setup import DT_MAX_DEFAULT, DT_MAX_TRUTH, RigidBody, propagate_states
 from cadra.dynamics.trajectory import Launch, crossing_times, truth_table
 from cadra.facility import Facility, load_facility
 from cadra.io import units
@@ -89,7 +89,7 @@ class ShotSpec:
     film: FilmPlacement = field(default_factory=FilmPlacement)
     render: dict = field(default_factory=dict)
     seed: int = 0
-    dt_max_s: float = DT_MAX_DEFAULT
+    dt_max_s: float = DT_MAX_TRUTH
     source_path: str | None = None
     seed004_shot: int | None = None
     aim: str = "none"            # "centre": slant the gun so the path stays centred in view
@@ -226,7 +226,7 @@ def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
         trigger_offset_mean_m=float(trig.get("offset_mean_m", 0.004)),
         trigger_offset_sd_m=float(trig.get("offset_sd_m", 0.002)),
         film=film_placement, render=dict(data.get("render") or {}),
-        seed=int(data.get("seed", 0)), dt_max_s=float(data.get("dt_max_s", DT_MAX_DEFAULT)),
+        seed=int(data.get("seed", 0)), dt_max_s=float(data.get("dt_max_s", DT_MAX_TRUTH)),
         source_path=str(source_path) if source_path else None,
         seed004_shot=int(data["seed004_shot"]) if "seed004_shot" in data else None,
         aim=_aim(data.get("aim", "none")),

@@ -170,6 +170,8 @@ def disassemble(ops, args, starts, param_names=()) -> str:
                 operand = param_names[j] if j < len(param_names) else f"p[{j}]"
             else:
                 operand = f"t{int(a)}"
+        elif op == HEADER:
+            operand = f"format {a:g}"
         elif op >= PMUL_VV:
             k = (int(op) - PMUL_VV) % 9
             ix, iy = int(a) % PAIR, int(a) // PAIR
@@ -182,9 +184,7 @@ def disassemble(ops, args, starts, param_names=()) -> str:
                 else:
                     names.append(f"t{j}")
             operand = " * ".join(names)
-        elif op == HEADER:
-            operand = f"format {a:g}"
-        elif op in (STORE_T,):
+        elif op == STORE_T:
             operand = f"t{int(a)}"
         elif op == OUT:
             operand = COEFFICIENTS[int(a)]

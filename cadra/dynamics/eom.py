@@ -143,18 +143,15 @@ def aero_force_moment(v_b, V, rho, phys, coef, plane, F_b, M_b):
 
 
 @njit(cache=True)
-def derivative(y, phys, I, Iinv, ops, args, starts, params, plane, work, coef, stack, dy):
+def derivative(y, phys, I, Iinv, ops, args, starts, params, plane, R, v_b, variables, F_b,
+               M_b, coef, stack, dy):
     """dy/dt of the 13-state at ``y`` (time-invariant: the range is steady).
 
-    ``I``/``Iinv`` are the body-axis inertia tensor about the cg and its inverse; ``work`` is a
-    scratch array of length >= 32 of the state's dtype (rotation, velocities, variables).
+    ``I``/``Iinv`` are the body-axis inertia tensor about the cg and its inverse; ``R`` (3, 3),
+    ``v_b`` (3,), ``variables`` (8,), ``F_b`` (3,), ``M_b`` (3,), ``coef`` (9,) and ``stack`` are
+    scratch arrays of the state's dtype (separate arrays: views made per call cost time).
     """
-    R = work[:9].reshape((3, 3))
     rotation_fb(y, R)
-    v_b = work[9:12]
-    variables = work[12:20]
-    F_b = work[20:23]
-    M_b = work[23:26]
     V, rho = air_data(y, phys, R, v_b, variables)
     eval_coefficients(ops, args, starts, variables, params, coef, stack)
     damp_p, damp_q, damp_r = aero_force_moment(v_b, V, rho, phys, coef, plane, F_b, M_b)

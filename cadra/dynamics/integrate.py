@@ -16,9 +16,6 @@ from numba import njit
 from cadra.dynamics.eom import derivative
 from cadra.dynamics.layout import N_STATE, P_INERTIA
 
-WORK_SIZE = 32
-
-
 @njit(cache=True)
 def inverse3(A, out):
     """Inverse of a 3x3 matrix by the adjugate (complex-step safe)."""
@@ -38,20 +35,25 @@ def inverse3(A, out):
 
 
 @njit(cache=True)
-def _rk4_span(y, h, n, phys, I, Iinv, ops, args, starts, params, plane, work, coef, stack,
+def _rk4_span(y, h, n, phys, I, Iinv, ops, args, starts, params, plane, scratch, coef, stack,
               k1, k2, k3, k4, tmp):
     """Advance ``y`` in place by ``n`` RK4 steps of size ``h`` (h may be negative)."""
+    R, v_b, variables, F_b, M_b = scratch
     for _ in range(n):
-        derivative(y, phys, I, Iinv, ops, args, starts, params, plane, work, coef, stack, k1)
+        derivative(y, phys, I, Iinv, ops, args, starts, params, plane, R, v_b, variables, F_b,
+                   M_b, coef, stack, k1)
         for i in range(N_STATE):
             tmp[i] = y[i] + 0.5 * h * k1[i]
-        derivative(tmp, phys, I, Iinv, ops, args, starts, params, plane, work, coef, stack, k2)
+        derivative(tmp, phys, I, Iinv, ops, args, starts, params, plane, R, v_b, variables,
+                   F_b, M_b, coef, stack, k2)
         for i in range(N_STATE):
             tmp[i] = y[i] + 0.5 * h * k2[i]
-        derivative(tmp, phys, I, Iinv, ops, args, starts, params, plane, work, coef, stack, k3)
+        derivative(tmp, phys, I, Iinv, ops, args, starts, params, plane, R, v_b, variables,
+                   F_b, M_b, coef, stack, k3)
         for i in range(N_STATE):
             tmp[i] = y[i] + h * k3[i]
-        derivative(tmp, phys, I, Iinv, ops, args, starts, params, plane, work, coef, stack, k4)
+        derivative(tmp, phys, I, Iinv, ops, args, starts, params, plane, R, v_b, variables,
+                   F_b, M_b, coef, stack, k4)
         for i in range(N_STATE):
             y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
@@ -79,7 +81,9 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
             I[i, j] = phys[P_INERTIA + 3 * i + j] * dtype_one
     Iinv = np.empty((3, 3), dtype=y0.dtype)
     inverse3(I, Iinv)
-    work = np.empty(WORK_SIZE, dtype=y0.dtype)
+    scratch = (np.empty((3, 3), dtype=y0.dtype), np.empty(3, dtype=y0.dtype),
+               np.empty(8, dtype=y0.dtype), np.empty(3, dtype=y0.dtype),
+               np.empty(3, dtype=y0.dtype))
     coef = np.empty(9, dtype=y0.dtype)
     stack = np.empty(max(stack_size, 1), dtype=y0.dtype)
     k1 = np.empty(N_STATE, dtype=y0.dtype)
@@ -101,7 +105,7 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
         span = t_out[j] - t
         if span > 0.0:
             n = int(np.ceil(span / dt_max - 1e-9))
-            _rk4_span(y, span / n, n, phys, I, Iinv, ops, args, starts, params, plane, work,
+            _rk4_span(y, span / n, n, phys, I, Iinv, ops, args, starts, params, plane, scratch,
                       coef, stack, k1, k2, k3, k4, tmp)
         t = t_out[j]
         for i in range(N_STATE):
@@ -114,7 +118,7 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
         span = t_out[j] - t
         if span < 0.0:
             n = int(np.ceil(-span / dt_max - 1e-9))
-            _rk4_span(y, span / n, n, phys, I, Iinv, ops, args, starts, params, plane, work,
+            _rk4_span(y, span / n, n, phys, I, Iinv, ops, args, starts, params, plane, scratch,
                       coef, stack, k1, k2, k3, k4, tmp)
         t = t_out[j]
         for i in range(N_STATE):

@@ -34,9 +34,13 @@ from cadra.dynamics.layout import (
     PLANE_SIGMA,
 )
 
-#: default largest RK4 step, s. At the fastest pitch rates of seed 004's shots
-#: (omega ~ 200 rad/s) omega*dt = 0.04: the phase error over a 16-station shot is ~1e-5 rad.
+#: default largest RK4 step, s. For smooth coefficient forms at the fastest pitch rates of seed
+#: 004's shots (omega ~ 200 rad/s) the error over a 16-station shot is < 0.01 um and 4e-6 deg;
+#: forms with a kink (Table 4's max(A1, A2 + A3 sin^2 sigma) C_mq) lose RK4's order at each
+#: crossing: up to ~60 um and 0.01 deg at this step (docs/dynamics.md, "Accuracy").
 DT_MAX_DEFAULT = 2.0e-4
+#: step used for synthetic truth: error < 0.1 um and 3e-5 deg even across Table 4's kinks
+DT_MAX_TRUTH = 2.5e-5
 
 _PLANES = {"alpha_beta": PLANE_ALPHA_BETA, "sigma": PLANE_SIGMA}
 
