@@ -16,6 +16,7 @@ from numba import njit
 from cadra.dynamics.eom import derivative
 from cadra.dynamics.layout import N_STATE, P_INERTIA
 
+
 @njit(cache=True)
 def inverse3(A, out):
     """Inverse of a 3x3 matrix by the adjugate (complex-step safe)."""

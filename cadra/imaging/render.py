@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +46,7 @@ from cadra.imaging.render_config import (
     load_render_config,
     save_render_config,
 )
+from cadra.io.atomic import atomic_write_bytes
 
 __all__ = [
     "PsfShape",
@@ -1089,7 +1089,8 @@ def quantize(image: np.ndarray, bit_depth: int) -> np.ndarray:
 def write_image(path: str | os.PathLike, image: np.ndarray, overwrite: bool = False) -> Path:
     """Write a ``uint8``/``uint16`` grey image as PNG (bit depth kept), atomically.
 
-    The image goes to a temporary file in the destination folder, then ``os.replace``.
+    Encoded in memory, then written by :func:`cadra.io.atomic.atomic_write_bytes` (temporary
+    file in the destination folder, then ``os.replace``).
 
     Raises
     ------
@@ -1104,18 +1105,10 @@ def write_image(path: str | os.PathLike, image: np.ndarray, overwrite: bool = Fa
         raise ValueError(f"image must be 2-D uint8 or uint16, got {image.dtype} {image.shape}")
     if path.suffix.lower() != ".png":
         raise ValueError(f"{path}: only .png is written")
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists (pass overwrite=True to replace it)")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent or ".")
-    os.close(fd)
-    try:
-        if not cv2.imwrite(tmp, np.ascontiguousarray(image)):
-            raise OSError(f"cv2 could not write {tmp}")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    ok, encoded = cv2.imencode(".png", np.ascontiguousarray(image))
+    if not ok:
+        raise OSError(f"cv2 could not encode {path} as PNG")
+    atomic_write_bytes(path, encoded.tobytes(), overwrite=overwrite)
     return path
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tempfile
 import tomllib
 from dataclasses import dataclass
 from enum import StrEnum
@@ -25,6 +24,8 @@ from pathlib import Path
 from typing import Any
 
 import tomli_w
+
+from cadra.io.atomic import atomic_write_text
 
 
 class PsfShape(StrEnum):
@@ -220,16 +221,6 @@ def save_render_config(
         If ``path`` exists and ``overwrite`` is false.
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists (pass overwrite=True to replace it)")
     text = "# cadra.imaging RenderConfig (docs/renderer.md)\n" + tomli_w.dumps(config.to_dict())
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write_text(path, text, overwrite=overwrite)
     return path
