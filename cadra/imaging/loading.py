@@ -1,0 +1,53 @@
+"""Reading station images for stage one, with a clear reason for every refusal.
+
+A station image is refused (and that station flagged, never the whole shot) when it is
+missing, unreadable or truncated, not greyscale, of another size or bit depth than its view
+declares, or holds non-finite values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ImageProblem:
+    """Why an image cannot be measured (falsy, so it cannot pass for an image)."""
+
+    path: str
+    reason: str
+
+    def __bool__(self) -> bool:
+        return False
+
+
+def load_station_image(path: str | Path, width_px: int, height_px: int,
+                       bit_depth: int) -> np.ndarray | ImageProblem:
+    """The image as float64 in [0, 1] (full scale of its bit depth), or an :class:`ImageProblem`.
+
+    PNG truncation is detected by decoding: OpenCV returns nothing for a damaged file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return ImageProblem(str(path), "missing image file")
+    data = np.fromfile(path, dtype=np.uint8)
+    if data.size == 0:
+        return ImageProblem(str(path), "empty image file")
+    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        return ImageProblem(str(path), "unreadable or truncated image file")
+    if img.ndim != 2:
+        return ImageProblem(str(path), f"not a greyscale image (shape {img.shape})")
+    bits = {np.dtype(np.uint8): 8, np.dtype(np.uint16): 16}.get(img.dtype)
+    if bits is None:
+        return ImageProblem(str(path), f"unexpected pixel type {img.dtype}")
+    if bits != bit_depth:
+        return ImageProblem(str(path), f"{bits}-bit image, the view declares {bit_depth}-bit")
+    if img.shape != (height_px, width_px):
+        return ImageProblem(str(path), f"{img.shape[1]}x{img.shape[0]} px, the view declares "
+                                       f"{width_px}x{height_px}")
+    return img.astype(np.float64) / float(2**bits - 1)

@@ -1,0 +1,86 @@
+"""Stage-one plots: the measured trajectory on one page and per-image overlays.
+
+Plot functions take plain tables/arrays, return the figure or image, never show anything, and
+import matplotlib lazily (Agg), so headless use never loads a GUI stack.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def trajectory_figure(traj, truth=None):
+    """One page: x-z and x-y paths (cm), theta and psi (deg) vs x, with 1-sigma error bars.
+
+    ``traj`` is a trajectory-measurement table (docs/stage1.md columns); ``truth`` an optional
+    table with ``x_m, y_m, z_m, theta_deg, psi_deg`` drawn as a line.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    ok = traj[traj["ok"]] if "ok" in traj else traj
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True, constrained_layout=True)
+    panels = (
+        (axes[0, 0], "z_m", "sigma_z_m", 100.0, "z (cm, + up)", "side view: x-z"),
+        (axes[0, 1], "y_m", "sigma_y_m", 100.0, "y (cm, + port)", "top view: x-y"),
+        (axes[1, 0], "theta_deg", "sigma_theta_deg", 1.0, "theta (deg, + nose up)",
+         "inclination to the x-y plane"),
+        (axes[1, 1], "psi_deg", "sigma_psi_deg", 1.0, "psi (deg, + nose to port)",
+         "inclination to the x-z plane"),
+    )
+    for ax, col, scol, scale, label, title in panels:
+        if truth is not None and col in truth:
+            ax.plot(truth["x_m"], truth[col] * scale, "-", color="0.6", lw=1, label="truth")
+        ax.errorbar(ok["x_m"], ok[col] * scale, yerr=ok[scol] * scale, fmt="o", ms=4,
+                    color="C0", ecolor="C3", capsize=2, label="measured (1 sigma)")
+        bad = traj[~traj["ok"]] if "ok" in traj else traj.iloc[:0]
+        for x in bad["x_m"].dropna() if "x_m" in bad else ():
+            ax.axvline(x, color="C3", alpha=0.3)
+        ax.set_ylabel(label)
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel("x (m, downrange)")
+    axes[0, 0].legend(fontsize=8)
+    return fig
+
+
+def overlay_image(image, *, wire_lines=(), outline_px=None, ref_px=None, axis_px=None,
+                  centroid_px=None, labels=()):
+    """An RGB uint8 overlay: fitted wires (green), fitted silhouette (red), reference point
+    (yellow cross) and axis direction, centroid (cyan), text labels top-left."""
+    import cv2
+
+    img = np.asarray(image, dtype=np.float64)
+    if img.max() > 1.0:
+        img = img / (255.0 if img.max() <= 255 else 65535.0)
+    rgb = cv2.cvtColor((np.clip(img, 0, 1) * 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    shift = 4
+    scale = 1 << shift
+
+    def pt(p):
+        return (int(round(p[0] * scale)), int(round(p[1] * scale)))
+
+    for (p0, p1) in wire_lines:
+        cv2.line(rgb, pt(p0), pt(p1), (0, 200, 0), 1, cv2.LINE_AA, shift)
+    if outline_px is not None and len(outline_px):
+        pts = np.round(np.asarray(outline_px) * scale).astype(np.int32)
+        cv2.polylines(rgb, [pts], True, (0, 0, 255), 1, cv2.LINE_AA, shift)
+    if ref_px is not None:
+        u, v = ref_px
+        for du, dv in ((8, 0), (0, 8)):
+            cv2.line(rgb, pt((u - du, v - dv)), pt((u + du, v + dv)), (0, 255, 255), 1,
+                     cv2.LINE_AA, shift)
+        if axis_px is not None:
+            a = np.asarray(axis_px, dtype=float)
+            a = a / np.linalg.norm(a)
+            cv2.line(rgb, pt((u, v)), pt((u + 60 * a[0], v + 60 * a[1])), (0, 255, 255), 1,
+                     cv2.LINE_AA, shift)
+    if centroid_px is not None:
+        cv2.circle(rgb, pt(centroid_px), 4 * scale, (255, 255, 0), 1, cv2.LINE_AA, shift)
+    for i, text in enumerate(labels):
+        cv2.putText(rgb, text, (10, 24 + 22 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 255),
+                    1, cv2.LINE_AA)
+    return rgb
