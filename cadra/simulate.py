@@ -361,58 +361,68 @@ def _film_affine(nominal: np.ndarray, film: FilmPlacement, rng: np.random.Genera
     return nominal @ A
 
 
+def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: np.ndarray,
+               v_F: np.ndarray, exposure_s: float = EXPOSURE_S):
+    """One view's pixel-space :class:`~cadra.imaging.render.Scene` and its exact truth.
+
+    ``affine`` is the image->view-plane map actually used (film placement included), ``R_FB``
+    the attitude, ``r_ref_F`` the reference point (m), ``v_F`` the velocity (m/s, for motion
+    blur and the flow-clutter direction). Truth: reference-point pixel position, image-plane
+    axis angle (atan2(dv, du) of the nose direction), motion blur, the affine's entries.
+    """
+    from cadra.imaging.render import Scene
+
+    def to_px(points_F):
+        return view.plane_to_pixels(np.atleast_2d(points_F) @ view.P_view.T, affine=affine)
+
+    r_ref = np.asarray(r_ref_F, float)
+    v = np.asarray(v_F, float)
+    poly_px = view.plane_to_pixels(silhouette(body, R_FB, r_ref, view.P_view), affine=affine)
+    ref_px = to_px(r_ref)[0]
+    axis_px = to_px(r_ref + 0.01 * R_FB[:, 0])[0] - ref_px
+    blur_px = to_px(r_ref + v * exposure_s)[0] - ref_px
+    flight_px = to_px(r_ref + v * 1e-4)[0] - ref_px
+    flight_dir = flight_px / np.linalg.norm(flight_px)
+    wires = tuple((np.asarray(seg[0], float), np.asarray(seg[1], float),
+                   w.diameter_m / view.scale_m_per_px)
+                  for seg, w in zip(view.wire_lines_px(affine=affine, margin_px=20.0),
+                                    view.wires, strict=True) if seg is not None)
+    mark = view.reference_mark
+    scene = Scene(
+        width_px=view.width_px, height_px=view.height_px, bodies=(poly_px,), wires=wires,
+        reference_mark=(mark.u_px, mark.v_px, mark.arm_px, mark.width_px),
+        motion_blur_px=(float(blur_px[0]), float(blur_px[1])),
+        body_hint=(float(ref_px[0]), float(ref_px[1]), float(flight_dir[0]),
+                   float(flight_dir[1]), 0.5 * body.diameter_m / view.scale_m_per_px),
+    )
+    truth = {
+        "station": view.station, "view": view.name,
+        "u_ref_px": ref_px[0], "v_ref_px": ref_px[1],
+        "axis_angle_image_deg": float(np.degrees(np.arctan2(axis_px[1], axis_px[0]))),
+        "motion_blur_du_px": float(blur_px[0]), "motion_blur_dv_px": float(blur_px[1]),
+        **{f"affine_{i}{j}": float(affine[i, j]) for i in range(2) for j in range(3)},
+    }
+    return scene, truth
+
+
 def station_scenes(shot: SimulatedShot, k: int, rng: np.random.Generator) -> list[dict]:
     """Pixel-space scenes of both views of station index ``k`` with their exact truth.
 
     Each item: ``station``, ``view``, ``scene`` (:class:`cadra.imaging.render.Scene`), ``affine``
-    (the image->view-plane map actually used, film placement included) and ``truth`` (reference
-    point pixel position, image-plane axis angle, motion blur, the affine's entries).
+    (the image->view-plane map actually used, film placement included) and ``truth`` (see
+    :func:`view_scene`).
     """
-    from cadra.imaging.render import Scene
-
     station = shot.facility.stations[k]
     y = shot.states[k]
     R = body_to_facility_matrix(y[6:10])
     r_ref = y[0:3] + R @ shot.rigid.ref_from_cg_body_m()
-    v = y[3:6]
     out = []
     for name, view in sorted(station.views.items()):
         affine = _film_affine(view.image_to_plane, shot.spec.film, rng, view.width_px,
                               view.height_px)
-
-        def to_px(points_F, _view=view, _affine=affine):
-            return _view.plane_to_pixels(np.atleast_2d(points_F) @ _view.P_view.T,
-                                         affine=_affine)
-
-        poly_px = view.plane_to_pixels(silhouette(shot.body, R, r_ref, view.P_view),
-                                       affine=affine)
-        ref_px = to_px(r_ref)[0]
-        axis_px = to_px(r_ref + 0.01 * R[:, 0])[0] - ref_px
-        blur_px = to_px(r_ref + v * EXPOSURE_S)[0] - ref_px
-        flight_px = to_px(r_ref + v * 1e-4)[0] - ref_px
-        flight_dir = flight_px / np.linalg.norm(flight_px)
-        wires = tuple((np.asarray(seg[0], float), np.asarray(seg[1], float),
-                       w.diameter_m / view.scale_m_per_px)
-                      for seg, w in zip(view.wire_lines_px(affine=affine, margin_px=20.0),
-                                        view.wires, strict=True) if seg is not None)
-        mark = view.reference_mark
-        scene = Scene(
-            width_px=view.width_px, height_px=view.height_px, bodies=(poly_px,), wires=wires,
-            reference_mark=(mark.u_px, mark.v_px, mark.arm_px, mark.width_px),
-            motion_blur_px=(float(blur_px[0]), float(blur_px[1])),
-            body_hint=(float(ref_px[0]), float(ref_px[1]), float(flight_dir[0]),
-                       float(flight_dir[1]), 0.5 * shot.body.diameter_m / view.scale_m_per_px),
-        )
-        out.append({
-            "station": station.id, "view": name, "scene": scene, "affine": affine,
-            "truth": {
-                "station": station.id, "view": name,
-                "u_ref_px": ref_px[0], "v_ref_px": ref_px[1],
-                "axis_angle_image_deg": float(np.degrees(np.arctan2(axis_px[1], axis_px[0]))),
-                "motion_blur_du_px": float(blur_px[0]), "motion_blur_dv_px": float(blur_px[1]),
-                **{f"affine_{i}{j}": float(affine[i, j]) for i in range(2) for j in range(3)},
-            },
-        })
+        scene, truth = view_scene(shot.body, view, affine, R, r_ref, y[3:6])
+        out.append({"station": station.id, "view": name, "scene": scene, "affine": affine,
+                    "truth": truth})
     return out
 
 

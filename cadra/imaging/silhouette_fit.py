@@ -1,0 +1,749 @@
+"""Measure the model's pose in one shadowgraph: silhouette least squares and area centroid.
+
+Stage one's two methods (seed 004, "Data Reduction and Analysis"; docs/stage1.md):
+
+(a) **Least squares** (:func:`fit_silhouette`): the body's exact outline (:mod:`cadra.body`) is
+    placed at a trial pose; pixels in a band around it are grouped into short contour
+    *segments*; in each segment a blurred-edge model ``I = L (1 - g) + D g``,
+    ``g = Phi((delta - d) / s)`` (d = the pixel centre's signed distance from the outline,
+    + outside; L, D the local bright and dark levels; s the edge width, one per image) gives
+    the segment's edge offset ``delta`` along the outward normal, with its variance (stage A).
+    The pose correction then follows from all offsets by weighted least squares (stage B)::
+
+        delta_k = n_k . (dr + dphi x (x_k - r_ref)) - c kappa_k
+
+    The last term is the curvature bias of a blurred edge: the half-intensity contour of a
+    blurred convex edge lies inside the true outline by ``(blur variance along the tangent)
+    kappa / 2`` (Mendonca et al., ECCV 2004); a diffraction fringe adds a term of the same
+    form. ``c`` (px^2) is fitted, not assumed, so the correction holds for a PSF shape or a
+    fringe the measurement does not model. Iterated to convergence (band and segments re-built
+    at each pose). Uncertainty: Newey-West sandwich over the contour-ordered segment residuals,
+    so correlated noise (film grain) and misfit show up in the sigma.
+
+(b) **Centroid** (:func:`centroid_pose`): area moments of the shadow with subpixel thresholding:
+    pixels in the edge band weigh by their opacity ``(L - I) / (L - D)`` from the local levels
+    of (a), pixels inside weigh 1. The reference point is the centroid minus the exact
+    silhouette's centroid offset; the angle is the principal axis of the same moments.
+
+Geometry is in the *view plane* (metres in F, docs/conventions.md) through the image's wire
+affine ``image_to_plane`` (2x3); the pose of one view is ``(a, b, phi)``: the reference point's
+view-plane coordinates and the in-plane axis angle from the first view axis toward the second
+(top view: psi_p = atan2(a_y, a_x); side view: theta_p = atan2(a_z, a_x)). The outline depends
+also on the axis' tilt out of the view plane (seen by the other view): ``tilt_rad`` (its sign
+does not matter: the outline depends on |cos| of the angle to the line of sight).
+
+Everything here is a pure function of plain arrays and frozen dataclasses (picklable).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numba
+import numpy as np
+from scipy.special import ndtr
+
+from cadra.body import Body, silhouette
+from cadra.conventions import FLIP, quat_from_axis_roll, quat_to_matrix
+from cadra.facility.reference import VIEW_AXES, affine_inverse, apply_affine
+
+SQRT2PI = math.sqrt(2.0 * math.pi)
+
+#: Turning angle above which an outline vertex is a sharp corner (excluded from the fit).
+CORNER_TURN_RAD = 0.3
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Knobs of the silhouette fit (docs/stage1.md); defaults suit ~1 px blur."""
+
+    band_px: float = 5.0            # half-width of the pixel band about the outline
+    segment_px: float = 6.0         # contour segment length
+    corner_clear_px: float = 3.0    # segments this close to a sharp corner are not used
+    min_fill: float = 0.6           # a segment needs this fraction of its expected pixels
+    max_iter: int = 8               # pose iterations (band rebuilt each time)
+    tol_px: float = 2e-4            # stop when the pose moves less than this (px at the rim)
+    outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
+    hac_lags: int = 3               # Newey-West lags over contour-ordered segments
+    fit_curvature_bias: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class Template:
+    """The body's outline in one view at zero pose: reference point at the origin, projected
+    axis along the first view axis; view-plane metres, counter-clockwise."""
+
+    outline_m: np.ndarray
+    centroid_m: np.ndarray        # area centroid relative to the reference point
+    area_m2: float
+    tilt_rad: float
+    axisymmetric_point: bool      # a sphere: the in-plane angle is not observable
+    principal_is_axis: bool       # the body axis is the major (True) or minor principal axis
+
+
+def make_template(body: Body, view_name: str, tilt_rad: float = 0.0,
+                  n_points: int = 4096) -> Template:
+    """Outline template of ``body`` for a view (``"top"``/``"side"``) at out-of-plane tilt."""
+    axes = VIEW_AXES[view_name]
+    P = np.zeros((2, 3))
+    P[0, axes[0]] = 1.0
+    P[1, axes[1]] = 1.0
+    out_axis = 3 - axes[0] - axes[1]
+    a = np.zeros(3)
+    a[axes[0]] = math.cos(tilt_rad)
+    a[out_axis] = math.sin(tilt_rad)
+    R_FB = FLIP @ quat_to_matrix(quat_from_axis_roll(a))
+    poly = silhouette(body, R_FB, np.zeros(3), P, n_points=n_points)
+    area, centroid, m2 = _polygon_moments(poly)
+    # principal axes of the outline: is the body axis (the first view axis) the major one?
+    principal_is_axis = bool(m2[0, 0] >= m2[1, 1])
+    return Template(outline_m=poly, centroid_m=centroid, area_m2=area, tilt_rad=float(tilt_rad),
+                    axisymmetric_point=body.kind == "sphere",
+                    principal_is_axis=principal_is_axis)
+
+
+def _polygon_moments(poly: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Area, centroid and central second-moment matrix (per unit area) of a simple polygon."""
+    ref = poly.mean(axis=0)
+    x, y = poly[:, 0] - ref[0], poly[:, 1] - ref[1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cr = x * yn - xn * y
+    a = 0.5 * cr.sum()
+    cx = ((x + xn) * cr).sum() / (6 * a)
+    cy = ((y + yn) * cr).sum() / (6 * a)
+    ixx = ((x * x + x * xn + xn * xn) * cr).sum() / (12 * a) - cx * cx
+    iyy = ((y * y + y * yn + yn * yn) * cr).sum() / (12 * a) - cy * cy
+    ixy = ((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * cr).sum() / (24 * a) - cx * cy
+    return abs(a), np.array([cx, cy]) + ref, np.array([[ixx, ixy], [ixy, iyy]])
+
+
+def _rot(phi: float) -> np.ndarray:
+    c, s = math.cos(phi), math.sin(phi)
+    return np.array([[c, -s], [s, c]])
+
+
+def outline_px(template: Template, pose: tuple[float, float, float],
+               image_to_plane: np.ndarray) -> np.ndarray:
+    """The template at ``pose = (a_m, b_m, phi_rad)`` in pixels ``(N, 2)`` (u, v)."""
+    a, b, phi = pose
+    plane = template.outline_m @ _rot(phi).T + np.array([a, b])
+    return apply_affine(affine_inverse(image_to_plane), plane)
+
+
+# =============================================================================== outline geometry
+
+
+@dataclass(frozen=True, eq=False)
+class _Outline:
+    """Per-edge geometry of the pixel-space outline polygon."""
+
+    p0: np.ndarray        # (N, 2) edge start, px
+    d: np.ndarray         # (N, 2) edge vector, px
+    ell: np.ndarray       # (N,) edge length
+    normal: np.ndarray    # (N, 2) outward unit normal
+    kv: np.ndarray        # (N,) curvature at the edge's start vertex, 1/px
+    straight: np.ndarray  # (N,) a flat (single long edge): curvature 0 along it
+    s0: np.ndarray        # (N,) arc length at the edge start
+    corner: np.ndarray    # (N,) within corner_clear_px of a sharp corner
+    perimeter: float
+
+
+def _outline_geometry(poly: np.ndarray, corner_clear_px: float) -> _Outline:
+    d = np.roll(poly, -1, axis=0) - poly
+    ell = np.hypot(d[:, 0], d[:, 1])
+    keep = ell > 1e-9
+    poly, d, ell = poly[keep], d[keep], ell[keep]
+    n = len(poly)
+    area2 = np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+    t = d / ell[:, None]
+    # outward normal: for a counter-clockwise polygon (positive shoelace in (u, v) axes),
+    # outward is the tangent turned clockwise, (t_v, -t_u)
+    sgn = 1.0 if area2 > 0 else -1.0
+    nrm = sgn * np.column_stack([t[:, 1], -t[:, 0]])
+    ang = np.arctan2(t[:, 1], t[:, 0])
+    turn = np.abs(np.angle(np.exp(1j * (ang - np.roll(ang, 1)))))  # at vertex i (edges i-1, i)
+    straight = ell > 1.5  # arc chords are sub-pixel; flats are single long edges
+    prev_len, next_len = np.roll(ell, 1), ell
+    prev_st, next_st = np.roll(straight, 1), straight
+    kv = np.zeros(n)
+    both = ~prev_st & ~next_st
+    kv[both] = turn[both] / (0.5 * (prev_len[both] + next_len[both]))
+    one = prev_st ^ next_st
+    arc_len = np.where(prev_st, next_len, prev_len)
+    kv[one] = 2.0 * turn[one] / arc_len[one]
+    corner_v = (turn > CORNER_TURN_RAD) | (prev_st & next_st & (turn > 1e-6))
+    s0 = np.concatenate([[0.0], np.cumsum(ell)[:-1]])
+    perim = float(ell.sum())
+    corner = np.zeros(n, bool)
+    if corner_v.any():
+        cs = s0[corner_v]
+        mid = s0 + 0.5 * ell
+        dist = np.abs(mid[:, None] - cs[None, :])
+        dist = np.minimum(dist, perim - dist)
+        corner = dist.min(axis=1) < corner_clear_px + 0.5 * ell
+    return _Outline(p0=poly, d=d, ell=ell, normal=nrm, kv=kv, straight=straight, s0=s0,
+                    corner=corner, perimeter=perim)
+
+
+@numba.njit(cache=True)
+def _band_kernel(p0, dv, ell, nrm, band, u_lo, v_lo, best, sd, edge, tt):
+    """For every ROI pixel within ``band`` px of the polygon: the signed distance to the
+    polygon (+ outside), the nearest edge and the foot's fraction along it. Exact (brute
+    force over each edge's neighbourhood); ROI arrays are (rows, cols), ``best`` starts at inf.
+    """
+    H, W = best.shape
+    reach = band + 1.0
+    for e in range(p0.shape[0]):
+        ax, ay = p0[e, 0], p0[e, 1]
+        bx, by = ax + dv[e, 0], ay + dv[e, 1]
+        L2 = ell[e] * ell[e]
+        u0 = max(int(math.floor(min(ax, bx) - reach)) - u_lo, 0)
+        u1 = min(int(math.ceil(max(ax, bx) + reach)) - u_lo, W - 1)
+        v0 = max(int(math.floor(min(ay, by) - reach)) - v_lo, 0)
+        v1 = min(int(math.ceil(max(ay, by) + reach)) - v_lo, H - 1)
+        for r in range(v0, v1 + 1):
+            y = float(r + v_lo)
+            for c in range(u0, u1 + 1):
+                x = float(c + u_lo)
+                t = ((x - ax) * dv[e, 0] + (y - ay) * dv[e, 1]) / L2
+                if t < 0.0:
+                    t = 0.0
+                elif t > 1.0:
+                    t = 1.0
+                fx = ax + t * dv[e, 0]
+                fy = ay + t * dv[e, 1]
+                rx, ry = x - fx, y - fy
+                dd = rx * rx + ry * ry
+                if dd < best[r, c]:
+                    best[r, c] = dd
+                    s = rx * nrm[e, 0] + ry * nrm[e, 1]
+                    sd[r, c] = math.sqrt(dd) if s >= 0.0 else -math.sqrt(dd)
+                    edge[r, c] = e
+                    tt[r, c] = t
+
+
+def _band_pixels(geo: _Outline, band: float, shape: tuple[int, int]):
+    """Pixels within ``band`` px of the outline: linear index, signed distance, edge, t."""
+    H, W = shape
+    lo = np.floor(geo.p0.min(axis=0) - band - 2).astype(int)
+    hi = np.ceil(geo.p0.max(axis=0) + band + 2).astype(int)
+    u_lo, v_lo = max(lo[0], 0), max(lo[1], 0)
+    u_hi, v_hi = min(hi[0], W - 1), min(hi[1], H - 1)
+    if u_hi < u_lo or v_hi < v_lo:
+        z = np.zeros(0)
+        return z.astype(np.int64), z, z.astype(np.int64), z
+    shp = (v_hi - v_lo + 1, u_hi - u_lo + 1)
+    best = np.full(shp, np.inf)
+    sd = np.zeros(shp)
+    edge = np.zeros(shp, np.int64)
+    tt = np.zeros(shp)
+    _band_kernel(geo.p0, geo.d, geo.ell, geo.normal, float(band), int(u_lo), int(v_lo),
+                 best, sd, edge, tt)
+    rr, cc = np.nonzero(best <= band * band)
+    lin = (rr + v_lo) * W + (cc + u_lo)
+    return lin, sd[rr, cc], edge[rr, cc], tt[rr, cc]
+
+
+# =============================================================================== stage A
+
+
+@numba.njit(cache=True)
+def _gn_accumulate(I, d, k, w, L, D, delta, s, A, b):
+    """Gauss-Newton normal equations per segment for (L, D, delta) with edge width s, and
+    the global width's gradient terms. Returns (sum w r^2, sum w Js r, sum w Js^2)."""
+    A[:] = 0.0
+    b[:] = 0.0
+    chi2 = 0.0
+    gs = 0.0
+    hs = 0.0
+    for j in range(I.shape[0]):
+        kk = k[j]
+        z = (delta[kk] - d[j]) / s
+        g = 0.5 * math.erfc(-z / math.sqrt(2.0))
+        p = math.exp(-0.5 * z * z) / SQRT2PI
+        r = I[j] - (L[kk] * (1.0 - g) + D[kk] * g)
+        c0 = 1.0 - g
+        c1 = g
+        c2 = (D[kk] - L[kk]) * p / s
+        ww = w[j]
+        A[kk, 0, 0] += ww * c0 * c0
+        A[kk, 0, 1] += ww * c0 * c1
+        A[kk, 0, 2] += ww * c0 * c2
+        A[kk, 1, 1] += ww * c1 * c1
+        A[kk, 1, 2] += ww * c1 * c2
+        A[kk, 2, 2] += ww * c2 * c2
+        b[kk, 0] += ww * c0 * r
+        b[kk, 1] += ww * c1 * r
+        b[kk, 2] += ww * c2 * r
+        js = -c2 * z
+        chi2 += ww * r * r
+        gs += ww * js * r
+        hs += ww * js * js
+    for kk in range(A.shape[0]):
+        A[kk, 1, 0] = A[kk, 0, 1]
+        A[kk, 2, 0] = A[kk, 0, 2]
+        A[kk, 2, 1] = A[kk, 1, 2]
+    return chi2, gs, hs
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeSegments:
+    """Per-segment edge offsets of one pose iteration (stage A)."""
+
+    delta_px: np.ndarray      # (K,) edge offset along the outward normal
+    var_px2: np.ndarray       # (K,) its variance (formal, from the fitted noise model)
+    normal: np.ndarray        # (K, 2) mean outward normal, px
+    foot_px: np.ndarray       # (K, 2) mean outline point, px
+    kappa: np.ndarray         # (K,) mean curvature, 1/px
+    bright: np.ndarray        # (K,) L
+    dark: np.ndarray          # (K,) D
+    index: np.ndarray         # (K,) segment number along the contour
+    edge_sigma_px: float
+    resid_rms: float
+    noise_coef: np.ndarray    # variance model v0 + v1 m + v2 m^2 (m = model intensity)
+    pixels: dict = field(default_factory=dict)   # per-pixel arrays for the centroid method
+
+
+def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: float,
+             noise_coef=None):
+    lin, d, e, t = _band_pixels(geo, settings.band_px, img.shape)
+    if len(lin) == 0:
+        return None
+    bad = geo.corner[e]
+    if exclude is not None:
+        bad = bad | exclude.ravel()[lin]
+    I = img.ravel()[lin]
+    nseg = max(int(round(geo.perimeter / settings.segment_px)), 4)
+    seg_len = geo.perimeter / nseg
+    fs = geo.s0[e] + t * geo.ell[e]
+    seg = np.minimum((fs / seg_len).astype(np.int64), nseg - 1)
+    expected = np.bincount(seg, minlength=nseg)
+    use = ~bad
+    got = np.bincount(seg[use], minlength=nseg)
+    good_seg = got >= settings.min_fill * np.median(expected[expected > 0])
+    use &= good_seg[seg]
+    segs = np.flatnonzero(good_seg)
+    K = len(segs)
+    if K < 8:
+        return None
+    remap = -np.ones(nseg, np.int64)
+    remap[segs] = np.arange(K)
+    d_u, I_u = d[use], I[use]
+    k = remap[seg[use]]
+
+    def mean_where(mask, default):
+        num = np.bincount(k[mask], weights=I_u[mask], minlength=K)
+        den = np.bincount(k[mask], minlength=K)
+        return np.where(den > 0, num / np.maximum(den, 1), default)
+
+    out_m, in_m = d_u > 2.0, d_u < -2.0
+    L = mean_where(out_m, np.median(I_u[out_m]) if out_m.any() else 1.0)
+    D = mean_where(in_m, np.median(I_u[in_m]) if in_m.any() else 0.0)
+    delta = np.zeros(K)
+    s = float(edge_sigma0)
+    A = np.empty((K, 3, 3))
+    b = np.empty((K, 3))
+    if noise_coef is None:
+        w = np.ones_like(I_u)
+    else:
+        m0 = np.clip(I_u, 0.0, 1.0)
+        w = 1.0 / np.maximum(noise_coef[0] + noise_coef[1] * m0 + noise_coef[2] * m0 * m0,
+                             1e-10)
+    coef = noise_coef
+    n_outer = 3 if noise_coef is None else 2
+    for outer in range(n_outer):
+        for _ in range(3):
+            _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
+            A[:, 2, 2] += 1e-12
+            step = np.linalg.solve(A, b[..., None])[..., 0]
+            L = L + step[:, 0]
+            D = D + step[:, 1]
+            delta = delta + np.clip(step[:, 2], -1.5, 1.5)
+        _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
+        s = float(np.clip(s + gs / hs, 0.2, 5.0))
+        if outer == 0 or outer == n_outer - 1:
+            # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
+            z = (delta[k] - d_u) / s
+            g = ndtr(z)
+            m = L[k] * (1 - g) + D[k] * g
+            r = I_u - m
+            X = np.column_stack([np.ones_like(m), m, m * m])
+            coef, *_ = np.linalg.lstsq(X, r * r, rcond=None)
+            var = X @ coef
+            w = 1.0 / np.maximum(var, max(0.05 * np.mean(r * r), 1e-12))
+    chi2, _, _ = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
+    A[:, 2, 2] += 1e-12
+    npix = len(I_u)
+    scale = chi2 / max(npix - 3 * K, 1)
+    var_delta = np.linalg.inv(A)[:, 2, 2] * scale
+    # segment geometry, weighted by the pixels' information about delta
+    z = (delta[k] - d_u) / s
+    p = np.exp(-0.5 * z * z) / SQRT2PI
+    wi = w * ((D[k] - L[k]) * p / s) ** 2
+    wsum = np.bincount(k, weights=wi, minlength=K)
+    eu, tu = e[use], t[use]
+    nx = np.bincount(k, weights=wi * geo.normal[eu, 0], minlength=K) / wsum
+    ny = np.bincount(k, weights=wi * geo.normal[eu, 1], minlength=K) / wsum
+    nn = np.hypot(nx, ny)
+    foot = geo.p0[eu] + tu[:, None] * geo.d[eu]
+    fx = np.bincount(k, weights=wi * foot[:, 0], minlength=K) / wsum
+    fy = np.bincount(k, weights=wi * foot[:, 1], minlength=K) / wsum
+    nxt = (eu + 1) % len(geo.kv)
+    kap_pix = np.where(geo.straight[eu], 0.0, (1 - tu) * geo.kv[eu] + tu * geo.kv[nxt])
+    kap = np.bincount(k, weights=wi * kap_pix, minlength=K) / wsum
+    pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
+    return EdgeSegments(delta_px=delta, var_px2=var_delta, normal=np.column_stack([nx / nn,
+                                                                                  ny / nn]),
+                        foot_px=np.column_stack([fx, fy]), kappa=kap, bright=L, dark=D,
+                        index=segs, edge_sigma_px=s, resid_rms=float(math.sqrt(chi2 / npix)),
+                        noise_coef=np.asarray(coef), pixels=pixels)
+
+
+# =============================================================================== stage B
+
+
+def _newey_west(X: np.ndarray, e: np.ndarray, lags: int) -> np.ndarray:
+    """Newey-West estimate of Var(X^T e) for contour-ordered rows (circular)."""
+    xe = X * e[:, None]
+    S = xe.T @ xe
+    n = len(e)
+    for lag in range(1, min(lags, n - 1) + 1):
+        wgt = 1.0 - lag / (lags + 1.0)
+        G = xe.T @ np.roll(xe, -lag, axis=0)
+        S += wgt * (G + G.T)
+    return S
+
+
+@dataclass(frozen=True)
+class ViewFit:
+    """One view's silhouette measurement (method a) and centroid measurement (method b).
+
+    ``pose`` = (a_m, b_m, phi_rad) in the view plane; ``cov`` its 3x3 covariance (for a sphere
+    phi is not measured: 0 with infinite variance). Pixel-space figures are for diagnostics
+    and comparison with renderer truth: ``ref_px`` and ``axis_angle_px_rad`` (atan2(dv, du) of
+    the nose direction in the image).
+    """
+
+    ok: bool
+    reason: str
+    pose: tuple[float, float, float]
+    cov: np.ndarray
+    ref_px: tuple[float, float]
+    axis_angle_px_rad: float
+    sigma_ref_px: tuple[float, float]
+    sigma_axis_px_rad: float
+    curvature_bias_px2: float
+    edge_sigma_px: float
+    resid_rms: float              # intensity residual rms (fraction of full scale)
+    offset_rms_px: float          # rms of the segment offsets about the fitted outline
+    n_segments: int
+    n_rejected: int
+    iterations: int
+    converged: bool
+    outline_outside_frac: float
+    centroid_ref_px: tuple[float, float]
+    centroid_axis_px_rad: float
+    centroid_pose: tuple[float, float, float]
+    warnings: tuple[str, ...] = ()
+
+
+def _pose_px(template: Template, pose, M) -> tuple[np.ndarray, float]:
+    Minv = affine_inverse(M)
+    ref = apply_affine(Minv, np.array(pose[:2]))
+    tip = apply_affine(Minv, np.array(pose[:2]) + 1e-3 * np.array([math.cos(pose[2]),
+                                                                   math.sin(pose[2])]))
+    return ref, math.atan2(tip[1] - ref[1], tip[0] - ref[0])
+
+
+def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarray,
+                   pose0: tuple[float, float, float], *, exclude: np.ndarray | None = None,
+                   settings: FitSettings | None = None, edge_sigma0: float = 0.9) -> ViewFit:
+    """Least-squares silhouette fit (method a) from ``pose0``; see the module docstring.
+
+    ``img`` float (H, W) in [0, 1]; ``exclude`` True on pixels not to use (wires, other
+    clutter known in advance). Never raises for bad data: ``ok`` False with a reason.
+    """
+    settings = FitSettings() if settings is None else settings
+    M = np.asarray(image_to_plane, float)
+    Minv = affine_inverse(M)
+    A_lin = Minv[:, :2]              # plane (m) -> pixel displacement
+    Jrot = np.array([[0.0, -1.0], [1.0, 0.0]])
+    pose = np.array(pose0, float)
+    fit_phi = not template.axisymmetric_point
+    nan3 = np.full((3, 3), np.nan)
+    H, W = img.shape
+    converged = False
+    seg = None
+    cov = nan3
+    c_bias = 0.0
+    n_rej = 0
+    it = 0
+    outside = 0.0
+    noise_coef = None
+    for it in range(1, settings.max_iter + 1):  # noqa: B007 (it is reported)
+        poly = outline_px(template, pose, M)
+        inside = ((poly[:, 0] >= settings.band_px) & (poly[:, 0] <= W - 1 - settings.band_px)
+                  & (poly[:, 1] >= settings.band_px) & (poly[:, 1] <= H - 1 - settings.band_px))
+        outside = 1.0 - float(inside.mean())
+        if outside > 0.5:
+            return _failed(f"model mostly out of frame ({outside:.0%} of its outline)", pose,
+                           outside)
+        geo = _outline_geometry(poly, settings.corner_clear_px)
+        seg = _stage_a(img, geo, settings, exclude, edge_sigma0, noise_coef)
+        if seg is None:
+            return _failed("too few usable edge segments", pose, outside)
+        edge_sigma0 = seg.edge_sigma_px
+        noise_coef = seg.noise_coef
+        ref_px = apply_affine(Minv, pose[:2])
+        lever = apply_affine(M, seg.foot_px) - pose[:2]            # plane, m
+        cols = [seg.normal @ A_lin[:, 0], seg.normal @ A_lin[:, 1]]
+        if fit_phi:
+            cols.append(np.einsum("ij,ij->i", seg.normal, (lever @ Jrot.T) @ A_lin.T))
+        if settings.fit_curvature_bias:
+            cols.append(-seg.kappa)
+        X = np.column_stack(cols)
+        y = seg.delta_px
+        wts = 1.0 / seg.var_px2
+        keep = np.isfinite(y) & np.isfinite(wts) & (wts > 0)
+        for _ in range(3):  # robust: drop outlying segments (dust, wire crossings)
+            sw = np.sqrt(wts[keep])
+            colscale = np.linalg.norm(X[keep] * sw[:, None], axis=0)
+            colscale[colscale == 0] = 1.0
+            beta, *_ = np.linalg.lstsq(X[keep] * sw[:, None] / colscale, y[keep] * sw,
+                                       rcond=None)
+            beta = beta / colscale
+            e = (y - X @ beta) * np.sqrt(wts)
+            mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
+            new_keep = keep & (np.abs(e) <= settings.outlier_sigma * max(mad, 1e-12))
+            if new_keep.sum() == keep.sum():
+                break
+            keep = new_keep
+        n_rej = int((~keep).sum())
+        npar = X.shape[1]
+        if keep.sum() < npar + 5:
+            return _failed("too few consistent edge segments", pose, outside)
+        # covariance: Newey-West sandwich on the kept, contour-ordered segments
+        Xw = X[keep] * np.sqrt(wts[keep])[:, None]
+        ew = (y[keep] - X[keep] @ beta) * np.sqrt(wts[keep])
+        bread = np.linalg.pinv(Xw.T @ Xw)
+        meat = _newey_west(Xw, ew, settings.hac_lags)
+        n_k = int(keep.sum())
+        cov_b = bread @ meat @ bread * n_k / max(n_k - npar, 1)
+        dpose = np.zeros(3)
+        dpose[0], dpose[1] = beta[0], beta[1]
+        if fit_phi:
+            dpose[2] = beta[2]
+        c_bias = float(beta[-1]) if settings.fit_curvature_bias else 0.0
+        pose = pose + dpose
+        cov = np.full((3, 3), 0.0)
+        idx = [0, 1, 2] if fit_phi else [0, 1]
+        cov[np.ix_(idx, idx)] = cov_b[: len(idx), : len(idx)]
+        if not fit_phi:
+            cov[2, 2] = np.inf
+        # convergence: movement at the rim in px
+        rim = 0.5 * math.sqrt(template.area_m2 / math.pi) / math.sqrt(abs(np.linalg.det(M[:, :2])))
+        move = np.hypot(*(A_lin @ dpose[:2])) + (abs(dpose[2]) * rim if fit_phi else 0.0)
+        if move < settings.tol_px:
+            converged = True
+            break
+    ref_px, ang_px = _pose_px(template, pose, M)
+    # pixel-space sigmas by linear propagation
+    Jp = np.zeros((3, 3))
+    Jp[:2, :2] = A_lin
+    h = 1e-7
+    _, a_plus = _pose_px(template, pose + [0, 0, h], M)
+    Jp[2, 2] = (a_plus - ang_px) / h
+    cov_fin = np.where(np.isfinite(cov), cov, 0.0)
+    cov_px = Jp @ cov_fin @ Jp.T
+    resid = (seg.delta_px - (-c_bias * seg.kappa))  # offsets about the fitted outline
+    cen = centroid_pose(img, template, M, pose, seg, exclude)
+    warnings = []
+    if not converged:
+        warnings.append(f"silhouette fit not converged in {settings.max_iter} iterations")
+    if outside > 0.0:
+        warnings.append(f"model partly out of frame ({outside:.0%} of its outline)")
+    return ViewFit(
+        ok=True, reason="", pose=tuple(float(x) for x in pose), cov=cov,
+        ref_px=(float(ref_px[0]), float(ref_px[1])), axis_angle_px_rad=float(ang_px),
+        sigma_ref_px=(float(math.sqrt(cov_px[0, 0])), float(math.sqrt(cov_px[1, 1]))),
+        sigma_axis_px_rad=float(math.sqrt(cov_px[2, 2])) if fit_phi else math.inf,
+        curvature_bias_px2=c_bias, edge_sigma_px=seg.edge_sigma_px, resid_rms=seg.resid_rms,
+        offset_rms_px=float(np.sqrt(np.mean(resid ** 2))), n_segments=len(seg.delta_px),
+        n_rejected=n_rej, iterations=it, converged=converged, outline_outside_frac=outside,
+        centroid_ref_px=cen[0], centroid_axis_px_rad=cen[1], centroid_pose=cen[2],
+        warnings=tuple(warnings))
+
+
+def _failed(reason: str, pose, outside: float) -> ViewFit:
+    nan = math.nan
+    return ViewFit(ok=False, reason=reason, pose=tuple(float(x) for x in pose),
+                   cov=np.full((3, 3), np.nan), ref_px=(nan, nan), axis_angle_px_rad=nan,
+                   sigma_ref_px=(nan, nan), sigma_axis_px_rad=nan, curvature_bias_px2=nan,
+                   edge_sigma_px=nan, resid_rms=nan, offset_rms_px=nan, n_segments=0,
+                   n_rejected=0, iterations=0, converged=False,
+                   outline_outside_frac=outside, centroid_ref_px=(nan, nan),
+                   centroid_axis_px_rad=nan, centroid_pose=(nan, nan, nan))
+
+
+# =============================================================================== method (b)
+
+
+def centroid_pose(img, template: Template, M, pose, seg: EdgeSegments, exclude=None):
+    """Area-moment pose (method b) with subpixel thresholding; see the module docstring.
+
+    Returns ``((u, v) ref px, axis angle px rad, (a, b, phi) plane)``. Band pixels weigh by
+    their opacity from their segment's local levels; interior pixels weigh 1; pixels of
+    unusable segments (corners, wires) are filled with the opacity of the fitted outline.
+    """
+    H, W = img.shape
+    px = seg.pixels
+    lin, d, k_all = px["lin"], px["d"], px["seg_all"]
+    L, D = px["L"], px["D"]
+    band = np.abs(d) <= 4.0
+    lin_b, d_b, k_b = lin[band], d[band], k_all[band]
+    I = img.ravel()[lin_b]
+    have = k_b >= 0
+    if exclude is not None:
+        have &= ~exclude.ravel()[lin_b]
+    op = np.empty(len(lin_b))
+    op[have] = (L[k_b[have]] - I[have]) / (L[k_b[have]] - D[k_b[have]])
+    # no usable level: the fitted edge model's opacity
+    s = seg.edge_sigma_px
+    op[~have] = ndtr(-d_b[~have] / s)
+    uu, vv = (lin_b % W).astype(float), (lin_b // W).astype(float)
+    # interior: pixels inside the outline but not in the band
+    poly = outline_px(template, pose, M)
+    mask = np.zeros((H, W), np.uint8)
+    shift = 4
+    pts = np.rint((poly + 0.0) * (1 << shift)).astype(np.int32)
+    cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=shift)
+    mflat = mask.ravel()
+    mflat[lin_b] = 0
+    inner = np.flatnonzero(mflat)
+    ui, vi = (inner % W).astype(float), (inner // W).astype(float)
+    w = np.concatenate([op, np.ones(len(inner))])
+    u = np.concatenate([uu, ui])
+    v = np.concatenate([vv, vi])
+    A = w.sum()
+    cu, cv = (w * u).sum() / A, (w * v).sum() / A
+    du, dv = u - cu, v - cv
+    muu, mvv, muv = (w * du * du).sum() / A, (w * dv * dv).sum() / A, (w * du * dv).sum() / A
+    Minv = affine_inverse(M)
+    if template.axisymmetric_point:
+        phi_img = math.nan
+        c_plane = apply_affine(M, np.array([cu, cv]))
+        ref_plane = c_plane - template.centroid_m
+        ref_px = apply_affine(Minv, ref_plane)
+        return (float(ref_px[0]), float(ref_px[1])), phi_img, (float(ref_plane[0]),
+                                                               float(ref_plane[1]), math.nan)
+    # principal axis in the image, then the nose direction closest to the fitted one
+    ev, evec = np.linalg.eigh(np.array([[muu, muv], [muv, mvv]]))
+    ax = evec[:, 1] if template.principal_is_axis else evec[:, 0]
+    _, ang_fit = _pose_px(template, pose, M)
+    if ax @ np.array([math.cos(ang_fit), math.sin(ang_fit)]) < 0:
+        ax = -ax
+    # to the plane: angle of the mapped direction
+    dirp = M[:, :2] @ ax
+    phi = math.atan2(dirp[1], dirp[0])
+    c_plane = apply_affine(M, np.array([cu, cv]))
+    ref_plane = c_plane - _rot(phi) @ template.centroid_m
+    ref_px = apply_affine(Minv, ref_plane)
+    return ((float(ref_px[0]), float(ref_px[1])), float(math.atan2(ax[1], ax[0])),
+            (float(ref_plane[0]), float(ref_plane[1]), float(phi)))
+
+
+# =============================================================================== locate
+
+
+@dataclass(frozen=True)
+class CoarsePose:
+    """First guess of the model in an image, or why there is none."""
+
+    ok: bool
+    reason: str
+    centroid_px: tuple[float, float] = (math.nan, math.nan)
+    angle_px_rad: float = math.nan            # principal axis (nose direction toward +u)
+    area_px: float = math.nan
+    bbox: tuple[int, int, int, int] = (0, 0, 0, 0)   # u0, v0, u1, v1 (inclusive)
+    touches_border: bool = False
+
+
+def locate_model(img: np.ndarray, template: Template, image_to_plane: np.ndarray,
+                 exclude: np.ndarray | None = None) -> CoarsePose:
+    """Find the model: the dark blob whose area matches the body's silhouette.
+
+    On a 4x reduced copy: threshold halfway between the background and shadow levels, cut
+    thin features (wires, the reference mark, scratches) with a morphological opening, keep the
+    connected component whose area is closest to the expected one (within a factor 2.5); then
+    centroid and principal axis of the thresholded blob at full resolution in its box. The nose
+    direction is taken toward +u (downrange): ballistic models fly nose first.
+    """
+    H, W = img.shape
+    f = 4
+    small = cv2.resize(img.astype(np.float32), (W // f, H // f), interpolation=cv2.INTER_AREA)
+    scale_px = math.sqrt(abs(np.linalg.det(np.asarray(image_to_plane)[:, :2])))
+    expect = template.area_m2 / scale_px**2
+    bg = float(np.percentile(small, 75))
+    dark = float(np.percentile(small, 0.2))
+    if bg - dark < 0.1:
+        return CoarsePose(False, f"no model found: image has no dark shadow (background "
+                                 f"{bg:.2f}, darkest {dark:.2f} of full scale)")
+    thr = 0.5 * (bg + max(dark, 0.0))
+    mask = (small < thr).astype(np.uint8)
+    if exclude is not None:
+        ex = cv2.resize(exclude.astype(np.uint8), (W // f, H // f),
+                        interpolation=cv2.INTER_NEAREST)
+        mask[ex > 0] = 0
+    r = max(1, int(round(0.03 * math.sqrt(expect) / f)))
+    ker = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, ker)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
+    if n <= 1:
+        return CoarsePose(False, f"no model found: no dark blob (expected ~{expect:.0f} px^2)")
+    areas = stats[1:, cv2.CC_STAT_AREA].astype(float) * f * f
+    ratio = np.abs(np.log(areas / expect))
+    best = int(np.argmin(ratio))
+    x0, y0, w, h = (int(x) for x in stats[1 + best, :4])
+    touches = bool(x0 <= 0 or y0 <= 0 or x0 + w >= W // f or y0 + h >= H // f)
+    if ratio[best] > math.log(2.5) and not touches:
+        return CoarsePose(False, f"no model found: largest dark blob {areas.max():.0f} px^2, "
+                                 f"expected ~{expect:.0f} px^2")
+    if touches and areas[best] < 0.25 * expect:
+        return CoarsePose(False, f"model mostly out of frame (blob of {areas[best]:.0f} px^2 "
+                                 f"at the border, expected ~{expect:.0f} px^2)")
+    # full resolution in the blob's box (+ margin): thresholded moments of the biggest part
+    u0, v0 = max(f * x0 - 2 * f, 0), max(f * y0 - 2 * f, 0)
+    u1, v1 = min(f * (x0 + w) + 2 * f, W - 1), min(f * (y0 + h) + 2 * f, H - 1)
+    roi = (img[v0:v1 + 1, u0:u1 + 1] < thr).astype(np.uint8)
+    if exclude is not None:
+        roi[exclude[v0:v1 + 1, u0:u1 + 1]] = 0
+    n2, lab2, st2, _ = cv2.connectedComponentsWithStats(roi, connectivity=8)
+    if n2 <= 1:
+        return CoarsePose(False, "no model found at full resolution")
+    big = 1 + int(np.argmax(st2[1:, cv2.CC_STAT_AREA]))
+    m = cv2.moments((lab2 == big).astype(np.uint8), binaryImage=True)
+    cu, cv = m["m10"] / m["m00"] + u0, m["m01"] / m["m00"] + v0
+    C = np.array([[m["mu20"], m["mu11"]], [m["mu11"], m["mu02"]]]) / m["m00"]
+    ev, evec = np.linalg.eigh(C)
+    ax = evec[:, 1] if template.principal_is_axis else evec[:, 0]
+    if ax[0] < 0:
+        ax = -ax
+    return CoarsePose(True, "", (float(cu), float(cv)), float(math.atan2(ax[1], ax[0])),
+                      float(m["m00"]), (u0, v0, u1, v1), touches)
+
+
+def pose_from_coarse(coarse: CoarsePose, template: Template,
+                     image_to_plane: np.ndarray) -> tuple[float, float, float]:
+    """Plane pose ``(a, b, phi)`` from a coarse blob: centroid minus the template offset."""
+    M = np.asarray(image_to_plane, float)
+    c_plane = apply_affine(M, np.array(coarse.centroid_px))
+    if template.axisymmetric_point:
+        ref = c_plane - template.centroid_m
+        return float(ref[0]), float(ref[1]), 0.0
+    ax = np.array([math.cos(coarse.angle_px_rad), math.sin(coarse.angle_px_rad)])
+    dirp = M[:, :2] @ ax
+    phi = math.atan2(dirp[1], dirp[0])
+    ref = c_plane - _rot(phi) @ template.centroid_m
+    return float(ref[0]), float(ref[1]), float(phi)
