@@ -1,12 +1,15 @@
 """``cadra1``: stage one of the pipeline (shadowgraphs -> trajectory measurements).
 
-Available now:
-
+* ``cadra1 SHOT_FILE [-o OUT_DIR]`` — measure every station (docs/stage1.md); outputs
+  (trajectory.csv, quality.csv, trajectory.png, overlays/, report.md) go to OUT_DIR (default
+  ``<shot dir>/cadra1``), written atomically, never over the inputs.
 * ``cadra1 --check SHOT_FILE`` — preflight a shot: the shot file and its facility reference
   file load and validate, and every station image exists, is readable and has the size and bit
   depth its view declares. One line per problem; nothing is written.
 
-Exit status: 0 all good, 1 problems found, 2 usage error.
+Exit status: 0 all stations measured, 1 some station failed (the others are still measured
+and written), 2 the shot could not be processed at all (bad shot or facility file, output
+directory exists, usage error).
 """
 
 from __future__ import annotations
@@ -63,18 +66,59 @@ def check_shot(path) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="cadra1", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="cadra1",
+        description="Stage one: measure the model's position and attitude in every station's "
+                    "shadowgraphs (docs/stage1.md).")
     parser.add_argument("shot_file", help="shot file (TOML, docs/shot_file.md)")
-    parser.add_argument("--check", action="store_true", required=True,
-                        help="validate the shot, its facility and images (measuring images "
-                             "is the stage-one issue, not yet in this version)")
+    parser.add_argument("-o", "--out", default=None,
+                        help="output directory (default: <shot file's directory>/cadra1)")
+    parser.add_argument("--check", action="store_true",
+                        help="only validate the shot, its facility and images; write nothing")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="processes (default: all cores; 1 = no subprocesses)")
+    parser.add_argument("--no-overlays", action="store_true", help="skip the overlay PNGs")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an existing output directory (atomically, at the end)")
+    parser.add_argument("--truth", default=None,
+                        help="optional truth table (CSV with x_m, y_m, z_m, theta_deg, "
+                             "psi_deg) drawn on the trajectory plot")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
-    problems = check_shot(args.shot_file)
-    for p in problems:
-        print(f"cadra1: {p}", file=sys.stderr)
-    if not problems:
-        print(f"cadra1: {args.shot_file}: shot file, facility and images OK")
-    return 1 if problems else 0
+    if args.check:
+        problems = check_shot(args.shot_file)
+        for p in problems:
+            print(f"cadra1: {p}", file=sys.stderr)
+        if not problems:
+            print(f"cadra1: {args.shot_file}: shot file, facility and images OK")
+        return 1 if problems else 0
+    from pathlib import Path
+
+    import pandas as pd
+
+    from cadra.stage1 import measure_shot
+
+    out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
+    truth = pd.read_csv(args.truth) if args.truth else None
+    try:
+        res = measure_shot(args.shot_file, out, workers=args.workers, progress=not args.quiet,
+                           overlays=not args.no_overlays, overwrite=args.overwrite,
+                           truth=truth)
+    except (ValueError, OSError) as exc:
+        print(f"cadra1: {exc}", file=sys.stderr)
+        return 2
+    t = res.trajectory
+    n_fail = int((t["status"] == "failed").sum())
+    n_warn = int((t["status"] == "warning").sum())
+    for r in t.itertuples():
+        if r.status == "failed":
+            print(f"cadra1: station {r.station}: FAILED: {r.reason}", file=sys.stderr)
+        elif r.status == "warning":
+            print(f"cadra1: station {r.station}: warning: {r.warnings}", file=sys.stderr)
+    print(f"cadra1: {len(t) - n_fail}/{len(t)} stations measured ({n_warn} with warnings) "
+          f"in {res.seconds:.1f} s; wrote {out}/trajectory.csv, quality.csv, trajectory.png, "
+          f"overlays/, report.md")
+    return 1 if n_fail else 0
 
 
 if __name__ == "__main__":

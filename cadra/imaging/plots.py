@@ -6,6 +6,8 @@ import matplotlib lazily (Agg), so headless use never loads a GUI stack.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -84,3 +86,75 @@ def overlay_image(image, *, wire_lines=(), outline_px=None, ref_px=None, axis_px
         cv2.putText(rgb, text, (10, 24 + 22 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 255),
                     1, cv2.LINE_AA)
     return rgb
+
+
+def encode_png(rgb: np.ndarray, compression: int = 1) -> bytes:
+    """PNG bytes of an image array (fast compression level by default)."""
+    import cv2
+
+    ok, buf = cv2.imencode(".png", rgb, [cv2.IMWRITE_PNG_COMPRESSION, int(compression)])
+    if not ok:
+        raise OSError("cv2 could not encode the overlay as PNG")
+    return buf.tobytes()
+
+
+def view_overlay(image, result, template, station_id: int, crop_half_px: int = 200):
+    """Overlay of one view's measurement: the full frame at 1/3 scale (fitted wires green,
+    silhouette red) beside a 1:1 crop around the model with the outline, reference point and
+    axis, and the figures or the failure reason as text."""
+    import cv2
+
+    from cadra.imaging.silhouette_fit import outline_px
+
+    fit = getattr(result, "fit", None)
+    wires = getattr(result, "wires", None)
+    lines = []
+    if wires is not None:
+        for w in wires.wires:
+            if w.found:
+                p = np.asarray(w.point_px, float)
+                t = np.asarray(w.direction_px, float)
+                lines.append((p - 3000 * t, p + 3000 * t))
+    outline = ref = axis = cen = None
+    labels = [f"station {station_id} {result.view}"]
+    if fit is not None and fit.ok and template is not None:
+        outline = outline_px(template, fit.pose, result.affine)
+        ref = fit.ref_px
+        if math.isfinite(fit.axis_angle_px_rad):
+            axis = (math.cos(fit.axis_angle_px_rad), math.sin(fit.axis_angle_px_rad))
+        cen = fit.centroid_ref_px
+        labels.append(f"ref ({fit.ref_px[0]:.3f}, {fit.ref_px[1]:.3f}) px "
+                      f"+- ({fit.sigma_ref_px[0]:.4f}, {fit.sigma_ref_px[1]:.4f})")
+        if axis is not None:
+            labels.append(f"axis {math.degrees(fit.axis_angle_px_rad):.4f} deg "
+                          f"+- {math.degrees(fit.sigma_axis_px_rad):.5f}")
+        labels.append(f"edge rms {fit.offset_rms_px:.4f} px, {fit.n_segments} segments, "
+                      f"{fit.n_rejected} rejected")
+    if not result.ok:
+        labels.append(f"FAILED: {result.reason}")
+    for w in getattr(result, "warnings", ()):
+        labels.append(f"warning: {w}")
+    full = overlay_image(image, wire_lines=lines, outline_px=outline, ref_px=ref,
+                         axis_px=axis, centroid_px=None, labels=())
+    half = cv2.resize(full, (full.shape[1] // 3, full.shape[0] // 3),
+                      interpolation=cv2.INTER_AREA)
+    H = half.shape[0]
+    c = 2 * crop_half_px
+    crop = np.full((c, c, 3), 40, np.uint8)
+    if ref is not None and all(map(math.isfinite, ref)):
+        u0, v0 = int(round(ref[0])) - crop_half_px, int(round(ref[1])) - crop_half_px
+        sub = overlay_image(image[max(v0, 0):v0 + c, max(u0, 0):u0 + c], wire_lines=[
+            (p0 - [max(u0, 0), max(v0, 0)], p1 - [max(u0, 0), max(v0, 0)]) for p0, p1 in lines],
+            outline_px=outline - [max(u0, 0), max(v0, 0)],
+            ref_px=(ref[0] - max(u0, 0), ref[1] - max(v0, 0)), axis_px=axis,
+            centroid_px=(cen[0] - max(u0, 0), cen[1] - max(v0, 0))
+            if cen is not None and all(map(math.isfinite, cen)) else None)
+        crop[:sub.shape[0], :sub.shape[1]] = sub
+    panel = np.full((H, half.shape[1] + c, 3), 255, np.uint8)
+    panel[:, :half.shape[1]] = half
+    panel[:min(c, H), half.shape[1]:] = crop[:min(c, H)]
+    for i, text in enumerate(labels):
+        cv2.putText(panel, text[:110], (half.shape[1] + 6, c + 22 + 20 * i),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 200) if "FAIL" in text else (0, 0, 0),
+                    1, cv2.LINE_AA)
+    return panel

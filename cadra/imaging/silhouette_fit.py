@@ -53,6 +53,9 @@ SQRT2PI = math.sqrt(2.0 * math.pi)
 
 #: Turning angle above which an outline vertex is a sharp corner (excluded from the fit).
 CORNER_TURN_RAD = 0.3
+#: Outline curvature (1/px) above which the edge model's linear curvature bias no longer
+#: holds (radius < 4 px, a few blur widths): such stretches are treated like corners.
+MAX_EDGE_CURVATURE = 0.25
 
 
 @dataclass(frozen=True)
@@ -84,7 +87,7 @@ class Template:
 
 
 def make_template(body: Body, view_name: str, tilt_rad: float = 0.0,
-                  n_points: int = 4096) -> Template:
+                  n_points: int = 2048) -> Template:
     """Outline template of ``body`` for a view (``"top"``/``"side"``) at out-of-plane tilt."""
     axes = VIEW_AXES[view_name]
     P = np.zeros((2, 3))
@@ -146,7 +149,7 @@ class _Outline:
     kv: np.ndarray        # (N,) curvature at the edge's start vertex, 1/px
     straight: np.ndarray  # (N,) a flat (single long edge): curvature 0 along it
     s0: np.ndarray        # (N,) arc length at the edge start
-    corner: np.ndarray    # (N,) within corner_clear_px of a sharp corner
+    corner_s: np.ndarray  # arc lengths of the sharp corners
     perimeter: float
 
 
@@ -173,18 +176,12 @@ def _outline_geometry(poly: np.ndarray, corner_clear_px: float) -> _Outline:
     one = prev_st ^ next_st
     arc_len = np.where(prev_st, next_len, prev_len)
     kv[one] = 2.0 * turn[one] / arc_len[one]
-    corner_v = (turn > CORNER_TURN_RAD) | (prev_st & next_st & (turn > 1e-6))
+    corner_v = ((turn > CORNER_TURN_RAD) | (prev_st & next_st & (turn > 1e-6))
+                | (kv > MAX_EDGE_CURVATURE))
     s0 = np.concatenate([[0.0], np.cumsum(ell)[:-1]])
     perim = float(ell.sum())
-    corner = np.zeros(n, bool)
-    if corner_v.any():
-        cs = s0[corner_v]
-        mid = s0 + 0.5 * ell
-        dist = np.abs(mid[:, None] - cs[None, :])
-        dist = np.minimum(dist, perim - dist)
-        corner = dist.min(axis=1) < corner_clear_px + 0.5 * ell
     return _Outline(p0=poly, d=d, ell=ell, normal=nrm, kv=kv, straight=straight, s0=s0,
-                    corner=corner, perimeter=perim)
+                    corner_s=s0[corner_v], perimeter=perim)
 
 
 @numba.njit(cache=True)
@@ -288,6 +285,14 @@ def _gn_accumulate(I, d, k, w, L, D, delta, s, A, b):
     return chi2, gs, hs
 
 
+def _ridge(A: np.ndarray) -> None:
+    """Tiny ridge on each segment's 3x3 normal matrix: a segment whose pixels all lie on one
+    side of the edge keeps its unseen level instead of making the system singular."""
+    tr = np.trace(A, axis1=1, axis2=2)[:, None]
+    idx = np.arange(3)
+    A[:, idx, idx] += 1e-9 * tr + 1e-15
+
+
 @dataclass(frozen=True, eq=False)
 class EdgeSegments:
     """Per-segment edge offsets of one pose iteration (stage A)."""
@@ -311,13 +316,20 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     lin, d, e, t = _band_pixels(geo, settings.band_px, img.shape)
     if len(lin) == 0:
         return None
-    bad = geo.corner[e]
+    fs = geo.s0[e] + t * geo.ell[e]
+    bad = np.zeros(len(lin), bool)
+    if len(geo.corner_s):
+        # stretches of outline near a sharp corner: chunked to bound the temporary's size
+        for c0 in range(0, len(geo.corner_s), 64):
+            cs = geo.corner_s[c0:c0 + 64]
+            dist = np.abs(fs[:, None] - cs[None, :])
+            dist = np.minimum(dist, geo.perimeter - dist)
+            bad |= dist.min(axis=1) < settings.corner_clear_px
     if exclude is not None:
         bad = bad | exclude.ravel()[lin]
     I = img.ravel()[lin]
     nseg = max(int(round(geo.perimeter / settings.segment_px)), 4)
     seg_len = geo.perimeter / nseg
-    fs = geo.s0[e] + t * geo.ell[e]
     seg = np.minimum((fs / seg_len).astype(np.int64), nseg - 1)
     expected = np.bincount(seg, minlength=nseg)
     use = ~bad
@@ -356,13 +368,14 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     for outer in range(n_outer):
         for _ in range(3):
             _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
-            A[:, 2, 2] += 1e-12
+            _ridge(A)
             step = np.linalg.solve(A, b[..., None])[..., 0]
             L = L + step[:, 0]
             D = D + step[:, 1]
             delta = delta + np.clip(step[:, 2], -1.5, 1.5)
         _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
-        s = float(np.clip(s + gs / hs, 0.2, 5.0))
+        if hs > 0.0 and math.isfinite(gs / hs):
+            s = float(np.clip(s + gs / hs, 0.2, 5.0))
         if outer == 0 or outer == n_outer - 1:
             # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
             z = (delta[k] - d_u) / s
@@ -374,7 +387,7 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
             var = X @ coef
             w = 1.0 / np.maximum(var, max(0.05 * np.mean(r * r), 1e-12))
     chi2, _, _ = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
-    A[:, 2, 2] += 1e-12
+    _ridge(A)
     npix = len(I_u)
     scale = chi2 / max(npix - 3 * K, 1)
     var_delta = np.linalg.inv(A)[:, 2, 2] * scale
@@ -615,15 +628,22 @@ def centroid_pose(img, template: Template, M, pose, seg: EdgeSegments, exclude=N
     uu, vv = (lin_b % W).astype(float), (lin_b // W).astype(float)
     # interior: pixels inside the outline but not in the band
     poly = outline_px(template, pose, M)
-    mask = np.zeros((H, W), np.uint8)
+    u_lo = int(max(math.floor(poly[:, 0].min()) - 1, 0))
+    v_lo = int(max(math.floor(poly[:, 1].min()) - 1, 0))
+    u_hi = int(min(math.ceil(poly[:, 0].max()) + 1, W - 1))
+    v_hi = int(min(math.ceil(poly[:, 1].max()) + 1, H - 1))
+    Wr = u_hi - u_lo + 1
+    mask = np.zeros((v_hi - v_lo + 1, Wr), np.uint8)
     shift = 4
-    pts = np.rint((poly + 0.0) * (1 << shift)).astype(np.int32)
+    pts = np.rint((poly - [u_lo, v_lo]) * (1 << shift)).astype(np.int32)
     cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=shift)
-    mflat = mask.ravel()
-    mflat[lin_b] = 0
-    inner = np.flatnonzero(mflat)
-    ui, vi = (inner % W).astype(float), (inner // W).astype(float)
-    w = np.concatenate([op, np.ones(len(inner))])
+    ub, vb = lin_b % W - u_lo, lin_b // W - v_lo
+    inb = (ub >= 0) & (ub < Wr) & (vb >= 0) & (vb < mask.shape[0])
+    mask[vb[inb], ub[inb]] = 0
+    vi, ui = np.nonzero(mask)
+    ui = ui.astype(float) + u_lo
+    vi = vi.astype(float) + v_lo
+    w = np.concatenate([op, np.ones(len(ui))])
     u = np.concatenate([uu, ui])
     v = np.concatenate([vv, vi])
     A = w.sum()

@@ -1,0 +1,248 @@
+"""Measure one station: both views' images -> the station's 3-D pose (stage one, per station).
+
+:func:`measure_station` is a pure function of plain, picklable data (paths, the body's spec
+dict, settings) returning a :class:`StationResult`, so a process pool or a Dask scheduler can
+ship it. Per view (docs/stage1.md):
+
+1. read the image (:func:`cadra.imaging.loading.load_station_image`; a bad file fails that
+   view with its reason);
+2. locate the model roughly (:func:`cadra.imaging.silhouette_fit.locate_model`);
+3. find and fit the fiducial wires, solve the image->plane affine
+   (:func:`cadra.imaging.wires.measure_wires`), the model's box excluded;
+4. fit the silhouette (method a) and the area centroid (method b) with the wires masked.
+
+The two views are then alternated: each view's outline depends on the axis' tilt out of its
+plane, which the other view measures; two or three rounds converge (the outline depends on the
+tilt only through its cosine). Finally :func:`cadra.imaging.combine.combine_views`.
+
+Every problem is a reason string on the view or station; nothing raises for bad data.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cadra.conventions import axis_from_projected_angles
+from cadra.imaging.combine import StationPose, ViewPose, combine_views
+from cadra.imaging.loading import load_station_image
+from cadra.imaging.silhouette_fit import (
+    FitSettings,
+    ViewFit,
+    fit_silhouette,
+    locate_model,
+    make_template,
+    outline_px,
+    pose_from_coarse,
+)
+
+VIEWS = ("top", "side")
+
+#: Half-width (px) of the pixel mask about each found wire that the silhouette fit ignores.
+WIRE_MASK_HALF_WIDTH_PX = 4.0
+
+
+@dataclass(frozen=True)
+class ViewResult:
+    """One view's outcome: the fit (or why there is none) and the wire measurement."""
+
+    view: str
+    image_path: str
+    ok: bool
+    reason: str
+    fit: ViewFit | None = None
+    wires: object | None = None            # cadra.imaging.wires.WireMeasurement
+    affine: np.ndarray | None = None       # image -> plane actually used
+    tilt_rad: float = 0.0
+    warnings: tuple[str, ...] = ()
+    seconds: float = 0.0
+    overlay_png: bytes | None = None
+
+
+@dataclass(frozen=True)
+class StationResult:
+    """A station's outcome. ``status``: ``"ok"``, ``"warning"`` (measured, see ``warnings``)
+    or ``"failed"`` (not measured, see ``reason``)."""
+
+    station: int
+    status: str
+    reason: str
+    pose: StationPose | None
+    views: dict = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+
+def _view_pose(fit: ViewFit, wires) -> ViewPose:
+    """The view's pose for combination: the silhouette fit's sigma and the wire affine's
+    uncertainty at the model's position, added in quadrature."""
+    s_ang = math.sqrt(fit.cov[2, 2])
+    finite = math.isfinite(s_ang)   # a sphere's angle is not measured: placeholder 0 +- 0
+    s_aff = wires.position_sigma_m(fit.ref_px)
+    return ViewPose(a_m=fit.pose[0], b_m=fit.pose[1], angle_rad=fit.pose[2] if finite else 0.0,
+                    sigma_a_m=math.hypot(math.sqrt(fit.cov[0, 0]), s_aff[0]),
+                    sigma_b_m=math.hypot(math.sqrt(fit.cov[1, 1]), s_aff[1]),
+                    sigma_angle_rad=s_ang if finite else 0.0)
+
+
+def _wire_crossings(fit: ViewFit, template, affine, wires) -> list[str]:
+    """Names of found wires whose image comes within the fit band of the model's outline."""
+    if wires is None or not fit.ok:
+        return []
+    poly = outline_px(template, fit.pose, affine)
+    names = []
+    for w in wires.wires:
+        if not w.found:
+            continue
+        p, t = np.asarray(w.point_px, float), np.asarray(w.direction_px, float)
+        n = np.array([-t[1], t[0]])
+        dist = (poly - p) @ n
+        if dist.min() < WIRE_MASK_HALF_WIDTH_PX and dist.max() > -WIRE_MASK_HALF_WIDTH_PX:
+            names.append(w.name)
+    return names
+
+
+def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
+                  coarse=None):
+    """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
+    ``coarse`` the model's rough location (:func:`locate_model`)."""
+    from cadra.imaging.fiducials import measure_wires, wire_mask
+
+    template = make_template(body, view.name, tilt)
+    if prev is None:
+        if coarse is None:
+            coarse = locate_model(img, template, view.image_to_plane)
+        if not coarse.ok:
+            return None, coarse.reason, None, None, ()
+        H, W = img.shape
+        exclude = np.zeros((H, W), bool)
+        u0, v0, u1, v1 = coarse.bbox
+        m = 12
+        exclude[max(v0 - m, 0):v1 + m + 1, max(u0 - m, 0):u1 + m + 1] = True
+        wires = measure_wires(img, view, exclude=exclude)
+        if not wires.ok:
+            return None, wires.reason, wires, None, ()
+        affine = wires.affine
+        pose0 = pose_from_coarse(coarse, template, affine)
+        mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
+        settings_used = settings
+    else:
+        wires, affine = prev.wires, prev.affine
+        pose0 = prev.fit.pose
+        mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
+        settings_used = settings
+    if prev is not None:   # a refit after a small tilt change: start close, few iterations
+        from dataclasses import replace
+
+        settings_used = replace(settings, max_iter=min(settings.max_iter, 4))
+    fit = fit_silhouette(img, template, affine, pose0, exclude=mask, settings=settings_used,
+                         edge_sigma0=prev.fit.edge_sigma_px if prev is not None else 0.9)
+    if not fit.ok:
+        return fit, fit.reason, wires, affine, ()
+    warn = list(fit.warnings)
+    if wires.reason:
+        warn.append(wires.reason)
+    for w in wires.wires:
+        if not w.found:
+            warn.append(w.reason or f"wire {w.name!r} not found")
+    crossing = _wire_crossings(fit, template, affine, wires)
+    if crossing:
+        warn.append(f"model crosses wire(s) {', '.join(repr(c) for c in crossing)}: "
+                    f"{fit.n_segments} edge segments used, pixels on the wire masked")
+    return fit, "", wires, affine, tuple(warn)
+
+
+def measure_station(station_id: int, image_paths: dict, body_spec: dict, facility_path: str,
+                    settings: FitSettings | None = None, max_rounds: int = 3,
+                    overlays: bool = True) -> StationResult:
+    """Measure one station from its images (see the module docstring).
+
+    ``image_paths``: view name -> image path; ``body_spec``: the shot file's model table
+    (:func:`cadra.body.spec.body_from_spec`); ``facility_path``: the facility reference file.
+    With ``overlays`` each loaded image's overlay (fitted wires and silhouette) comes back as
+    PNG bytes in ``views[name].overlay_png``.
+    """
+    import time
+
+    from cadra.body.spec import body_from_spec
+    from cadra.facility import load_facility
+
+    settings = FitSettings() if settings is None else settings
+    body = body_from_spec(body_spec)
+    facility = load_facility(facility_path)
+    station = facility.station(station_id)
+    images, results = {}, {}
+    sphere = body.kind == "sphere"
+    for name in VIEWS:
+        view = station.views.get(name)
+        path = image_paths.get(name)
+        if view is None:
+            results[name] = ViewResult(name, str(path), False, f"facility has no {name} view")
+            continue
+        if path is None:
+            results[name] = ViewResult(name, "", False, "no image listed in the shot file")
+            continue
+        img = load_station_image(path, view.width_px, view.height_px, view.bit_depth)
+        if not isinstance(img, np.ndarray):
+            results[name] = ViewResult(name, str(path), False, img.reason)
+            continue
+        images[name] = img
+    # first guess of each view's out-of-plane tilt from the other view's rough axis angle
+    coarse = {n: locate_model(img, make_template(body, n, 0.0), station.views[n].image_to_plane)
+              for n, img in images.items()}
+    tilts = {"top": 0.0, "side": 0.0}
+    if not sphere and all(n in coarse and coarse[n].ok for n in VIEWS):
+        phi = {n: pose_from_coarse(coarse[n], make_template(body, n, 0.0),
+                                   station.views[n].image_to_plane)[2] for n in VIEWS}
+        a = axis_from_projected_angles(phi["side"], phi["top"])
+        tilts = {"top": math.asin(a[2]), "side": math.asin(a[1])}
+    fits: dict[str, ViewResult] = {}
+    for _round in range(max_rounds if not sphere else 1):
+        for name, img in images.items():
+            t0 = time.perf_counter()
+            prev = fits.get(name)
+            if prev is not None and not prev.ok:
+                continue
+            try:
+                fit, reason, wires, affine, warn = _measure_view(
+                    img, station.views[name], body, tilts[name], settings, prev, coarse[name])
+            except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
+                fit, reason, wires, affine, warn = (
+                    None, f"measurement error ({type(exc).__name__}: {exc})", None, None, ())
+            ok = fit is not None and fit.ok
+            fits[name] = ViewResult(name, str(image_paths[name]), ok, reason, fit, wires,
+                                    affine, tilts[name], warn,
+                                    time.perf_counter() - t0 + (prev.seconds if prev else 0.0))
+        if sphere or not all(n in fits and fits[n].ok for n in VIEWS):
+            break
+        a = axis_from_projected_angles(fits["side"].fit.pose[2], fits["top"].fit.pose[2])
+        new = {"top": math.asin(a[2]), "side": math.asin(a[1])}
+        change = max(abs(new[n] - tilts[n]) for n in VIEWS)
+        tilts = new
+        if change < 2e-5:
+            break
+    results.update(fits)
+    if overlays:
+        from cadra.imaging.plots import encode_png, view_overlay
+
+        for name, img in images.items():
+            r = results[name]
+            tpl = make_template(body, name, r.tilt_rad) if r.fit is not None and r.fit.ok else None
+            png = encode_png(view_overlay(img, r, tpl, station_id))
+            results[name] = ViewResult(**{**r.__dict__, "overlay_png": png})
+    ok_views = [n for n in VIEWS if n in results and results[n].ok]
+    warnings = tuple(f"{n}: {w}" for n in ok_views for w in results[n].warnings)
+    if len(ok_views) < 2:
+        failed = [n for n in VIEWS if n not in ok_views]
+        reason = "; ".join(f"{n} view: {results[n].reason}" for n in failed if n in results)
+        return StationResult(station_id, "failed", reason or "no usable view", None, results,
+                             warnings)
+    top, side = results["top"].fit, results["side"].fit
+    pose = combine_views(_view_pose(top, results["top"].wires),
+                         _view_pose(side, results["side"].wires))
+    if sphere:
+        pose = StationPose(**{**pose.__dict__, "theta_rad": math.nan, "psi_rad": math.nan,
+                              "sigma_theta_rad": math.nan, "sigma_psi_rad": math.nan})
+    status = "warning" if warnings else "ok"
+    return StationResult(station_id, status, "", pose, results, warnings)

@@ -1,0 +1,143 @@
+"""The trajectory measurement file: stage one's output, stage two's input (docs/stage1.md).
+
+A CSV file, one row per station, units in the column names, preceded by ``# key: value``
+metadata lines (shot id, shot file, facility, producer). Angles are degrees in the file and
+radians inside CADRA; the conversion happens here and nowhere else.
+
+Columns (in this order):
+
+======================  ====================================================================
+``station``             station id (facility file)
+``t_s``                 spark time from the shot file, s
+``status``              ``ok``, ``warning`` (measured; see ``warnings``) or ``failed``
+``x_m, y_m, z_m``       reference point of the body in the facility frame F, m
+``theta_deg, psi_deg``  inclinations of the nose axis to the x-y plane (+ up) and to the
+                        x-z plane (+ port), deg (docs/conventions.md); empty for a sphere
+``sigma_*``             1-sigma of each of the above (same unit)
+``x_top_minus_side_m``  x seen by the top view minus x seen by the side view, m
+``x_consistency``       that difference over its sigma
+``reason``              why a station failed
+``warnings``            what to know about a measured station (``;``-separated)
+======================  ====================================================================
+
+Missing values (a failed station, a sphere's angles) are empty cells (NaN).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cadra.io.atomic import atomic_write_text
+
+FORMAT = "cadra-trajectory-1"
+
+COLUMNS = (
+    "station", "t_s", "status",
+    "x_m", "y_m", "z_m", "theta_deg", "psi_deg",
+    "sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_deg", "sigma_psi_deg",
+    "x_top_minus_side_m", "x_consistency", "reason", "warnings",
+)
+STATUSES = ("ok", "warning", "failed")
+
+
+class TrajectoryFileError(ValueError):
+    """A trajectory file that cannot be right; the message names the column or line."""
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A loaded trajectory measurement: ``table`` (SI: angles converted to rad in columns
+    ``theta_rad``, ``psi_rad``, ``sigma_theta_rad``, ``sigma_psi_rad``) and ``meta``."""
+
+    table: pd.DataFrame
+    meta: dict
+
+    @property
+    def measured(self) -> pd.DataFrame:
+        """Rows with a measurement (status ok or warning)."""
+        return self.table[self.table["status"] != "failed"]
+
+
+def trajectory_to_csv(table: pd.DataFrame, meta: dict) -> str:
+    """CSV text (with the ``#`` metadata header) of a table with :data:`COLUMNS`."""
+    missing = [c for c in COLUMNS if c not in table]
+    if missing:
+        raise TrajectoryFileError(f"trajectory table lacks columns {missing}")
+    head = [f"# format: {FORMAT}"]
+    for k, v in meta.items():
+        text = str(v).replace("\n", " ")
+        head.append(f"# {k}: {text}")
+    body = table.loc[:, list(COLUMNS)].to_csv(index=False, float_format="%.10g",
+                                             lineterminator="\n")
+    return "\n".join(head) + "\n" + body
+
+
+def write_trajectory(path: str | os.PathLike, table: pd.DataFrame, meta: dict,
+                     overwrite: bool = False) -> Path:
+    """Write atomically (refuses to overwrite unless told)."""
+    return atomic_write_text(path, trajectory_to_csv(table, meta), overwrite=overwrite)
+
+
+def load_trajectory(path: str | os.PathLike) -> Trajectory:
+    """Read and validate a trajectory file; angles become radians."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise FileNotFoundError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    meta = {}
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        key, _, value = line[1:].partition(":")
+        meta[key.strip()] = value.strip()
+    if meta.get("format") != FORMAT:
+        raise TrajectoryFileError(f"{path}: not a CADRA trajectory file (format "
+                                  f"{meta.get('format')!r}, expected {FORMAT!r})")
+    import io
+
+    table = pd.read_csv(io.StringIO(text), comment="#", keep_default_na=True,
+                        dtype={"reason": str, "warnings": str, "status": str})
+    missing = [c for c in COLUMNS if c not in table]
+    if missing:
+        raise TrajectoryFileError(f"{path}: missing column(s) {missing}")
+    bad = sorted(set(table["status"]) - set(STATUSES))
+    if bad:
+        raise TrajectoryFileError(f"{path}: column status has unknown value(s) {bad}")
+    if table["station"].duplicated().any():
+        raise TrajectoryFileError(f"{path}: station listed twice")
+    for c in ("reason", "warnings"):
+        table[c] = table[c].fillna("")
+    for name in ("theta", "psi"):
+        table[f"{name}_rad"] = np.radians(table[f"{name}_deg"])
+        table[f"sigma_{name}_rad"] = np.radians(table[f"sigma_{name}_deg"])
+    return Trajectory(table=table, meta=meta)
+
+
+def station_rows(results, times_s: dict) -> pd.DataFrame:
+    """Table rows (:data:`COLUMNS`) from :class:`cadra.imaging.station.StationResult` s."""
+    rows = []
+    for r in results:
+        p = r.pose
+        row = {"station": r.station, "t_s": times_s.get(r.station, math.nan),
+               "status": r.status, "reason": r.reason, "warnings": "; ".join(r.warnings)}
+        if p is not None:
+            row.update(x_m=p.x_m, y_m=p.y_m, z_m=p.z_m,
+                       theta_deg=math.degrees(p.theta_rad), psi_deg=math.degrees(p.psi_rad),
+                       sigma_x_m=p.sigma_x_m, sigma_y_m=p.sigma_y_m, sigma_z_m=p.sigma_z_m,
+                       sigma_theta_deg=math.degrees(p.sigma_theta_rad),
+                       sigma_psi_deg=math.degrees(p.sigma_psi_rad),
+                       x_top_minus_side_m=p.x_top_minus_side_m,
+                       x_consistency=p.x_consistency_sigma)
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    for c in COLUMNS:
+        if c not in table:
+            table[c] = math.nan
+    return table.loc[:, list(COLUMNS)].sort_values("station").reset_index(drop=True)

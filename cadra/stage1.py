@@ -1,0 +1,235 @@
+"""Stage one over a shot: every station's images -> trajectory measurement file and reports.
+
+:func:`measure_shot` is the library call behind ``cadra1`` (docs/stage1.md). Stations are
+measured by :func:`cadra.imaging.station.measure_station` (pure, picklable), in parallel on the
+available cores (a process pool; ``workers=1`` runs in-process), with a progress bar. Outputs go
+to a temporary sibling directory moved into place at the end (:func:`cadra.io.atomic.
+atomic_output_dir`): an interrupted or failed run leaves nothing behind, an existing output
+directory is never overwritten unless asked, and an output directory that holds the inputs is
+refused.
+
+Output directory::
+
+    trajectory.csv        the trajectory measurement file (cadra.io.trajectory)
+    quality.csv           per station and view: wires, affine, silhouette-fit figures, flags
+    trajectory.png        one page: x-z, x-y, theta and psi vs x with error bars
+    overlays/stNN_VIEW.png  every image with the fitted wires and silhouette
+    report.md             what was measured, what failed and why
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cadra.imaging.station import VIEWS, StationResult, measure_station
+from cadra.io.trajectory import station_rows, trajectory_to_csv
+
+
+@dataclass(frozen=True)
+class Stage1Result:
+    """What :func:`measure_shot` measured (tables as written) and where it wrote them."""
+
+    trajectory: pd.DataFrame
+    quality: pd.DataFrame
+    stations: tuple[StationResult, ...]
+    out_dir: Path | None
+    seconds: float
+
+    @property
+    def any_failed(self) -> bool:
+        return bool((self.trajectory["status"] == "failed").any())
+
+
+def _task(args):
+    station_id, paths, body_spec, facility_path, overlays = args
+    return measure_station(station_id, paths, body_spec, facility_path, overlays=overlays)
+
+
+def quality_rows(results) -> pd.DataFrame:
+    """Per station and view: the figures a range engineer checks (docs/stage1.md)."""
+    rows = []
+    for r in results:
+        for name in VIEWS:
+            v = r.views.get(name)
+            row = {"station": r.station, "view": name}
+            if v is None:
+                row.update(status="failed", reason="not measured")
+                rows.append(row)
+                continue
+            row.update(status="ok" if v.ok and not v.warnings else
+                       ("warning" if v.ok else "failed"),
+                       reason=v.reason, warnings="; ".join(v.warnings), image=v.image_path,
+                       seconds=v.seconds)
+            w = v.wires
+            if w is not None:
+                row.update(wires_found=w.n_found, affine_rms_px=w.affine_rms_px,
+                           affine_rms_um=w.affine_rms_m * 1e6,
+                           wire_residuals_px="; ".join(
+                               f"{x.name}={x.residual_px:+.4f}" if x.found else f"{x.name}=missing"
+                               for x in w.wires))
+            f = v.fit
+            if f is not None and f.ok:
+                row.update(
+                    u_ref_px=f.ref_px[0], v_ref_px=f.ref_px[1],
+                    axis_angle_px_deg=math.degrees(f.axis_angle_px_rad),
+                    sigma_u_px=f.sigma_ref_px[0], sigma_v_px=f.sigma_ref_px[1],
+                    sigma_axis_deg=math.degrees(f.sigma_axis_px_rad),
+                    a_m=f.pose[0], b_m=f.pose[1], angle_deg=math.degrees(f.pose[2]),
+                    tilt_deg=math.degrees(v.tilt_rad),
+                    edge_sigma_px=f.edge_sigma_px, curvature_bias_px2=f.curvature_bias_px2,
+                    edge_offset_rms_px=f.offset_rms_px, intensity_resid_rms=f.resid_rms,
+                    n_segments=f.n_segments, n_rejected=f.n_rejected,
+                    iterations=f.iterations, converged=f.converged,
+                    ls_minus_centroid_u_px=f.ref_px[0] - f.centroid_ref_px[0],
+                    ls_minus_centroid_v_px=f.ref_px[1] - f.centroid_ref_px[1],
+                    ls_minus_centroid_axis_deg=math.degrees(
+                        f.axis_angle_px_rad - f.centroid_axis_px_rad),
+                )
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _check_out_dir(out_dir: Path, inputs: list[Path]) -> None:
+    out = out_dir.resolve()
+    for p in inputs:
+        try:
+            p.resolve().relative_to(out)
+        except ValueError:
+            continue
+        raise ValueError(f"output directory {out_dir} would hold the input {p}; "
+                         f"choose another (inputs are never overwritten)")
+
+
+def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
+                 workers: int | None = None, progress: bool = True, overlays: bool = True,
+                 overwrite: bool = False, truth: pd.DataFrame | None = None) -> Stage1Result:
+    """Measure every station of a shot; write the outputs to ``out_dir`` (None: write nothing).
+
+    ``workers``: processes (default: the available cores; 1 = in this process). ``truth``: an
+    optional table (``x_m, y_m, z_m, theta_deg, psi_deg``) drawn on the trajectory plot.
+    Bad stations are flagged in the tables, never raised; bad shot/facility files raise
+    ``ValueError``/``OSError`` before anything is written.
+    """
+    import time
+
+    from cadra.facility import load_facility
+    from cadra.facility.reference import resolve_facility_path
+    from cadra.io.shotfile import load_shot
+
+    t0 = time.perf_counter()
+    shot = load_shot(shot_path)
+    facility_path = str(resolve_facility_path(shot.facility))
+    facility = load_facility(facility_path)
+    known = set(facility.station_ids)
+    tasks, inputs = [], [Path(shot_path)]
+    for rec in shot.stations:
+        if rec.station not in known:
+            raise ValueError(f"shot {shot.shot_id}: station {rec.station} is not in facility "
+                             f"{facility.name!r}")
+        paths = {v: str(shot.image_path(rec.station, v)) for v in rec.images}
+        inputs += [Path(p) for p in paths.values()]
+        tasks.append((rec.station, paths, dict(shot.model), facility_path, overlays))
+    if out_dir is not None:
+        out_dir = Path(out_dir)
+        _check_out_dir(out_dir, inputs)
+        if out_dir.exists() and not overwrite:
+            raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use --overwrite)")
+    workers = (os.cpu_count() or 1) if workers is None else max(int(workers), 1)
+    workers = min(workers, len(tasks)) or 1
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), desc=f"cadra1 {shot.shot_id}", unit="station")
+    results = []
+    try:
+        if workers == 1:
+            for t in tasks:
+                results.append(_task(t))
+                if bar is not None:
+                    bar.update()
+        else:
+            import multiprocessing as mp
+
+            ctx = mp.get_context("spawn" if os.name == "nt" else "forkserver")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+                for res in pool.map(_task, tasks):
+                    results.append(res)
+                    if bar is not None:
+                        bar.update()
+    finally:
+        if bar is not None:
+            bar.close()
+    times = {rec.station: rec.time_s for rec in shot.stations}
+    table = station_rows(results, times)
+    quality = quality_rows(results)
+    meta = {"shot_id": shot.shot_id, "shot_file": str(Path(shot_path).resolve()),
+            "facility": facility.name, "facility_file": facility_path,
+            "body": shot.model.get("name", shot.model.get("kind")),
+            "producer": "cadra1 (silhouette least squares, docs/stage1.md)",
+            "frame": "facility F: x downrange, y port, z up, origin station 1 (m)"}
+    if out_dir is not None:
+        _write_outputs(out_dir, table, quality, results, meta, shot, truth, overwrite)
+    return Stage1Result(table, quality, tuple(results), out_dir, time.perf_counter() - t0)
+
+
+def _write_outputs(out_dir: Path, table, quality, results, meta, shot, truth, overwrite):
+    from cadra.imaging.plots import trajectory_figure
+    from cadra.io.atomic import atomic_output_dir
+
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        (tmp / "trajectory.csv").write_text(trajectory_to_csv(table, meta), encoding="utf-8")
+        quality.to_csv(tmp / "quality.csv", index=False, float_format="%.8g")
+        plot_table = table.assign(ok=table["status"] != "failed")
+        for c in ("theta_deg", "psi_deg", "sigma_theta_deg", "sigma_psi_deg"):
+            plot_table[c] = plot_table[c].astype(float)
+        fig = trajectory_figure(plot_table, truth)
+        fig.suptitle(f"{shot.shot_id}: stage-one trajectory measurement "
+                     f"({int((table['status'] != 'failed').sum())}/{len(table)} stations)")
+        fig.savefig(tmp / "trajectory.png", dpi=110)
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+        (tmp / "overlays").mkdir()
+        for r in results:
+            for name, v in r.views.items():
+                if v.overlay_png:
+                    (tmp / "overlays" / f"st{r.station:02d}_{name}.png").write_bytes(
+                        v.overlay_png)
+        (tmp / "report.md").write_text(_report(table, quality, meta), encoding="utf-8")
+
+
+def _report(table, quality, meta) -> str:
+    n = len(table)
+    failed = table[table["status"] == "failed"]
+    warned = table[table["status"] == "warning"]
+    lines = [f"# Stage one: {meta['shot_id']}", "",
+             f"{n - len(failed)} of {n} stations measured"
+             f" ({len(warned)} with warnings, {len(failed)} failed).", ""]
+    if len(failed):
+        lines += ["## Failed stations", ""]
+        lines += [f"- station {int(r.station)}: {r.reason}" for r in failed.itertuples()]
+        lines.append("")
+    if len(warned):
+        lines += ["## Warnings", ""]
+        lines += [f"- station {int(r.station)}: {r.warnings}" for r in warned.itertuples()]
+        lines.append("")
+    ok = quality[quality["status"] != "failed"]
+    if len(ok) and "sigma_u_px" in ok:
+        lines += ["## Figures", "",
+                  f"- median position sigma: {np.nanmedian(ok['sigma_u_px']):.4f} px (u), "
+                  f"{np.nanmedian(ok['sigma_v_px']):.4f} px (v)",
+                  f"- median wire-affine rms: {np.nanmedian(ok['affine_rms_px']):.4f} px",
+                  f"- median edge-offset rms: {np.nanmedian(ok['edge_offset_rms_px']):.4f} px",
+                  f"- largest |x_top - x_side| / sigma: "
+                  f"{np.nanmax(np.abs(table['x_consistency'])):.2f}", ""]
+    lines += ["Files: trajectory.csv (docs/stage1.md), quality.csv, trajectory.png, "
+              "overlays/.", ""]
+    return "\n".join(lines)
