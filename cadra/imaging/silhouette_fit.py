@@ -485,6 +485,9 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     Jrot = np.array([[0.0, -1.0], [1.0, 0.0]])
     pose = np.array(pose0, float)
     fit_phi = not template.axisymmetric_point
+    # a sphere's curvature is the same all round: the bias term is then only a radius change,
+    # which does not move the centre, and leaving it free makes the iteration wander
+    fit_c = settings.fit_curvature_bias and not template.axisymmetric_point
     nan3 = np.full((3, 3), np.nan)
     H, W = img.shape
     converged = False
@@ -514,7 +517,7 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
         cols = [seg.normal @ A_lin[:, 0], seg.normal @ A_lin[:, 1]]
         if fit_phi:
             cols.append(np.einsum("ij,ij->i", seg.normal, (lever @ Jrot.T) @ A_lin.T))
-        if settings.fit_curvature_bias:
+        if fit_c:
             cols.append(-seg.kappa)
         X = np.column_stack(cols)
         y = seg.delta_px
@@ -530,8 +533,8 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
             e = (y - X @ beta) * np.sqrt(wts)
             mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
             new_keep = keep & (np.abs(e) <= settings.outlier_sigma * max(mad, 1e-12))
-            if new_keep.sum() == keep.sum():
-                break
+            if new_keep.sum() == keep.sum() or new_keep.sum() < 0.5 * keep.sum():
+                break   # nothing more to drop, or a noise-free image (mad ~ 0)
             keep = new_keep
         n_rej = int((~keep).sum())
         npar = X.shape[1]
@@ -548,7 +551,9 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
         dpose[0], dpose[1] = beta[0], beta[1]
         if fit_phi:
             dpose[2] = beta[2]
-        c_bias = float(beta[-1]) if settings.fit_curvature_bias else 0.0
+        if it > 3:   # damp late iterations: re-banding noise can make full steps oscillate
+            dpose *= 0.5
+        c_bias = float(beta[-1]) if fit_c else 0.0
         pose = pose + dpose
         cov = np.full((3, 3), 0.0)
         idx = [0, 1, 2] if fit_phi else [0, 1]
@@ -558,7 +563,10 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
         # convergence: movement at the rim in px
         rim = 0.5 * math.sqrt(template.area_m2 / math.pi) / math.sqrt(abs(np.linalg.det(M[:, :2])))
         move = np.hypot(*(A_lin @ dpose[:2])) + (abs(dpose[2]) * rim if fit_phi else 0.0)
-        if move < settings.tol_px:
+        # converged: the step is below the tolerance or a small fraction of the pose's own
+        # sigma (re-banding at a new pose re-draws the noise; steps below that are jitter)
+        sig_px = math.sqrt(max(np.trace(A_lin @ cov[:2, :2] @ A_lin.T), 0.0))
+        if move < max(settings.tol_px, 0.5 * sig_px):
             converged = True
             break
     ref_px, ang_px = _pose_px(template, pose, M)
@@ -570,7 +578,10 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     Jp[2, 2] = (a_plus - ang_px) / h
     cov_fin = np.where(np.isfinite(cov), cov, 0.0)
     cov_px = Jp @ cov_fin @ Jp.T
-    resid = (seg.delta_px - (-c_bias * seg.kappa))  # offsets about the fitted outline
+    # offsets about the fitted outline (a sphere: about its mean, the radius change)
+    resid = seg.delta_px + c_bias * seg.kappa
+    if not fit_c:
+        resid = resid - np.mean(resid)
     cen = centroid_pose(img, template, M, pose, seg, exclude)
     warnings = []
     if not converged:

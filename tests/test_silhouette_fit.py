@@ -1,0 +1,134 @@
+"""Stage one's per-view measurement against the renderer's exact truth (issue 3).
+
+The full-size statistics (>= 200 renders per body, the Cramer-Rao ratio, the baseline) are in
+``tools/bench_cadra1.py``; these tests use a dozen renders per case so they stay fast, with the
+issue's targets as limits: sphere centre <= 0.01 px rms, capsule reference point <= 0.02 px,
+axis <= 0.005 deg; "no inverse crime" renders within 2x of those.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from cadra.body import capsule, cone, sphere
+from cadra.imaging.baseline import otsu_moments
+from cadra.imaging.render import RenderConfig
+from cadra.imaging.silhouette_fit import fit_silhouette, make_template
+from cadra.imaging.synthetic import measure_case, random_view_case
+
+SPHERE = sphere(0.03556)
+M2 = capsule("M2")
+TARGET = {"sphere": (0.01, None), "capsule": (0.02, 0.005), "cone": (0.02, 0.005)}
+
+
+def _run(body, config, n, seed, size_px=512, need_converged=True):
+    rng = np.random.default_rng(seed)
+    E, S = [], []
+    for _ in range(n):
+        case = random_view_case(body, rng, config, size_px=size_px)
+        fit = measure_case(case, body)
+        assert fit.ok, fit.reason
+        assert fit.converged or not need_converged
+        e = [fit.ref_px[0] - case.u_ref_px, fit.ref_px[1] - case.v_ref_px]
+        s = list(fit.sigma_ref_px)
+        if body.kind != "sphere":
+            e.append(math.degrees(math.remainder(fit.axis_angle_px_rad
+                                                 - case.axis_angle_px_rad, 2 * math.pi)))
+            s.append(math.degrees(fit.sigma_axis_px_rad))
+        E.append(e)
+        S.append(s)
+    return np.array(E), np.array(S)
+
+
+def _rms(a):
+    return np.sqrt(np.mean(np.square(a), axis=0))
+
+
+@pytest.mark.parametrize("body", [SPHERE, M2], ids=["sphere", "M2"])
+def test_default_realism_meets_targets(body):
+    E, S = _run(body, RenderConfig(), 12, seed=101)
+    pos, ang = TARGET[body.kind]
+    rms = _rms(E)
+    assert max(rms[:2]) <= pos
+    if ang is not None:
+        assert rms[2] <= ang
+    # the reported sigma is of the right size (the 200-render check is in the benchmark)
+    ratio = _rms(S) / rms
+    assert np.all((ratio > 0.4) & (ratio < 2.5)), ratio
+
+
+NO_INVERSE_CRIME = {
+    "airy_psf": RenderConfig(psf_shape="airy_like"),
+    "disk_psf": RenderConfig(psf_shape="disk"),
+    "fringe_x2": RenderConfig(diffraction_fringe=0.2),
+    "coarse_grain": RenderConfig(film_grain_sigma=0.02, film_grain_length_px=2.0),
+    "heavy_clutter": RenderConfig(scratches=20, dust=300, bow_shock_contrast=0.2,
+                                  wake_contrast=0.1),
+}
+
+
+@pytest.mark.parametrize("variant", sorted(NO_INVERSE_CRIME))
+@pytest.mark.parametrize("body", [SPHERE, M2], ids=["sphere", "M2"])
+def test_no_inverse_crime_within_twice_the_targets(body, variant):
+    """Renders with a PSF shape, fringe, grain or clutter the measurement does not model."""
+    E, _ = _run(body, NO_INVERSE_CRIME[variant], 6, seed=202, need_converged=False)
+    pos, ang = TARGET[body.kind]
+    rms = _rms(E)
+    assert max(rms[:2]) <= 2 * pos
+    if ang is not None:
+        assert rms[2] <= 2 * ang
+
+
+def test_noise_free_flat_light_is_exact_to_1e4_px():
+    """Without noise and with an even beam the edge model is right: errors ~1e-4 px."""
+    cfg = RenderConfig(read_noise_sigma=0, shot_noise_sigma=0, film_grain_sigma=0, scratches=0,
+                       dust=0, bow_shock=False, wake=False, bit_depth=16,
+                       diffraction_fringe=0.0, illumination_variation=0,
+                       illumination_mottle=0)
+    for body in (SPHERE, M2, capsule("M3")):
+        E, _ = _run(body, cfg, 3, seed=303)
+        assert np.abs(E[:, :2]).max() < 3e-4
+        if body.kind != "sphere":
+            assert np.abs(E[:, 2]).max() < 3e-4
+
+
+def test_cone_with_sharp_corners():
+    """A sharp cone: corners are left out of the fit; the rest still gives the pose."""
+    body = cone(0.02, math.radians(10))
+    E, _ = _run(body, RenderConfig(), 4, seed=404, size_px=800)
+    assert max(_rms(E)[:2]) <= 0.02
+    assert _rms(E)[2] <= 0.005
+
+
+def test_centroid_method_and_baseline():
+    """Method (b) is sub-0.02 px on the sphere; the Otsu + moments baseline is several times
+    worse than (a) on the sphere (about 10x over 200 renders: tools/bench_cadra1.py)."""
+    rng = np.random.default_rng(505)
+    ea, eb, eo = [], [], []
+    for _ in range(8):
+        case = random_view_case(SPHERE, rng)
+        fit = measure_case(case, SPHERE)
+        ea.append(np.subtract(fit.ref_px, (case.u_ref_px, case.v_ref_px)))
+        eb.append(np.subtract(fit.centroid_ref_px, (case.u_ref_px, case.v_ref_px)))
+        b = otsu_moments(case.image_u8)
+        eo.append(np.subtract((b.u_px, b.v_px), (case.u_ref_px, case.v_ref_px)))
+    ra, rb, ro = (float(np.sqrt(np.mean(np.square(x)))) for x in (ea, eb, eo))
+    assert rb < 0.02
+    assert ro > 5 * ra
+
+
+def test_partly_out_of_frame_and_blank():
+    rng = np.random.default_rng(606)
+    case = random_view_case(M2, rng, size_px=512)
+    tpl = make_template(M2, "top", case.tilt_rad)
+    # push the pose so more than half of the outline is outside the frame
+    a, b, phi = case.pose
+    far = (a + 330 * 1.27e-4, b, phi)
+    fit = fit_silhouette(case.image, tpl, case.affine, far)
+    assert not fit.ok and "out of frame" in fit.reason
+    blank = np.full_like(case.image, 0.85)
+    from cadra.imaging.silhouette_fit import locate_model
+
+    coarse = locate_model(blank, tpl, case.affine)
+    assert not coarse.ok and "no model" in coarse.reason
