@@ -222,14 +222,15 @@ def _report(table, quality, meta) -> str:
         lines += [f"- station {int(r.station)}: {r.warnings}" for r in warned.itertuples()]
         lines.append("")
     ok = quality[quality["status"] != "failed"]
-    if len(ok) and "sigma_u_px" in ok:
+    xc = table["x_consistency"].dropna()
+    if len(ok) and "sigma_u_px" in ok and len(xc):
         lines += ["## Figures", "",
                   f"- median position sigma: {np.nanmedian(ok['sigma_u_px']):.4f} px (u), "
                   f"{np.nanmedian(ok['sigma_v_px']):.4f} px (v)",
                   f"- median wire-affine rms: {np.nanmedian(ok['affine_rms_px']):.4f} px",
                   f"- median edge-offset rms: {np.nanmedian(ok['edge_offset_rms_px']):.4f} px",
                   f"- largest |x_top - x_side| / sigma: "
-                  f"{np.nanmax(np.abs(table['x_consistency'])):.2f}", ""]
+                  f"{np.max(np.abs(xc)):.2f}", ""]
     lines += ["Files: trajectory.csv (docs/stage1.md), quality.csv, trajectory.png, "
               "overlays/.", ""]
     return "\n".join(lines)

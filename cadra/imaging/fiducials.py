@@ -29,6 +29,10 @@ from cadra.facility.reference import View, apply_affine
 
 #: Fewest clean profiles for a wire to count as found.
 MIN_PROFILES = 10
+#: A found wire's profile centres scatter less than this about its line (px) ...
+MAX_LINE_RMS_PX = 0.25
+#: ... and agree over at least this fraction of its profiles inside the image.
+MIN_USED_FRACTION = 0.15
 
 
 @dataclass(frozen=True)
@@ -79,6 +83,7 @@ def _fit_dips(P: np.ndarray, s: np.ndarray, c0: np.ndarray, half_width: float,
 
         bg + b1 (s - c) - A [Phi((s - c + h) / w) - Phi((s - c - h) / w)]
 
+    with the bar's half-width h known (the surveyed wire diameter) and the blur w fitted
     (``s`` per row: (n, k) sample positions). Returns c, A, w, bg, rms, ok."""
     from scipy.special import ndtr
 
@@ -101,11 +106,10 @@ def _fit_dips(P: np.ndarray, s: np.ndarray, c0: np.ndarray, half_width: float,
         Aw = A[:, None] / w[:, None]
         J = np.stack([np.ones_like(x), x, -e,
                       -b1[:, None] + Aw * (gp - gm),          # d/dc
-                      Aw * (gp * zp - gm * zm),               # d/dw
-                      -Aw * (gp + gm)], axis=2)               # d/dh
+                      Aw * (gp * zp - gm * zm)], axis=2)      # d/dw
         JtJ = np.einsum("nki,nkj->nij", J, J)
         dg = np.einsum("nii->ni", JtJ)
-        JtJ[:, np.arange(6), np.arange(6)] += 1e-6 * dg + 1e-12   # Levenberg damping
+        JtJ[:, np.arange(5), np.arange(5)] += 1e-6 * dg + 1e-12   # Levenberg damping
         Jtr = np.einsum("nki,nk->ni", J, r)
         step = np.linalg.solve(JtJ, Jtr[..., None])[..., 0]
         bg += step[:, 0]
@@ -113,7 +117,6 @@ def _fit_dips(P: np.ndarray, s: np.ndarray, c0: np.ndarray, half_width: float,
         A += step[:, 2]
         c += np.clip(step[:, 3], -1.0, 1.0)
         w = np.clip(w + step[:, 4], 0.2, 4.0)
-        h = np.clip(h + step[:, 5], 0.2, 6.0)
     x = s - c[:, None]
     e = ndtr((x + h[:, None]) / w[:, None]) - ndtr((x - h[:, None]) / w[:, None])
     model = bg[:, None] + b1[:, None] * x - A[:, None] * e
@@ -226,6 +229,12 @@ def _measure_one(img32, wire_name, seg, shape, exclude, search_px, step_px, half
     m, tt, nn, res = _tls_line(pts[keep])
     k = int(keep.sum())
     rms_px = float(np.sqrt(np.mean(res ** 2)))
+    n_inside = max(int(inside.sum()), 1)
+    if rms_px > MAX_LINE_RMS_PX or k < MIN_USED_FRACTION * n_inside:
+        return WireFit(wire_name, False, f"wire {wire_name!r} not found: no straight dark "
+                                         f"line along its predicted path ({k} of {n_inside} "
+                                         f"profiles agree, scatter {rms_px:.2f} px)",
+                       n_rejected=int(len(use) - k))
     # offset sigma at the mid point: Newey-West over the profiles in order along the wire
     # (lags up to ~60 px), since the illumination's mottle correlates neighbouring profiles
     order = np.argsort((pts[keep] - m) @ tt)

@@ -1,0 +1,141 @@
+"""cadra1 over whole (short) shots: accuracy against truth, bad input, outputs (issue 3)."""
+
+import dataclasses
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+
+from cadra.cli.cadra1 import main as cadra1_main
+from cadra.io.trajectory import load_trajectory
+from cadra.simulate import load_shot_spec, simulate_shot, write_shot
+from cadra.stage1 import measure_shot
+
+SPECS = Path(__file__).resolve().parents[1] / "sample_shots" / "specs"
+
+
+def _make(tmp_path_factory, name, spec_file, **changes):
+    spec = dataclasses.replace(load_shot_spec(SPECS / spec_file), **changes)
+    out = tmp_path_factory.mktemp(name) / "shot"
+    write_shot(simulate_shot(spec), out, images=True, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def m2_shot(tmp_path_factory):
+    return _make(tmp_path_factory, "m2", "m2_2429.toml", n_stations=3)
+
+
+def _copy(shot: Path, tmp_path: Path) -> Path:
+    dst = tmp_path / "shot"
+    shutil.copytree(shot, dst)
+    return dst
+
+
+def test_short_shot_against_truth(m2_shot, tmp_path):
+    out = tmp_path / "out"
+    res = measure_shot(m2_shot / "shot.toml", out, workers=1, progress=False)
+    assert not res.any_failed
+    truth = pd.read_csv(m2_shot / "truth.csv")
+    t = load_trajectory(out / "trajectory.csv").table.merge(truth, on="station",
+                                                              suffixes=("", "_true"))
+    for c in ("x_m", "y_m", "z_m"):
+        err = (t[c] - t[f"{c}_true"]).abs()
+        assert err.max() < 5e-6                       # 5 um = 0.04 px
+        assert (err < 6 * t[f"sigma_{c}"]).all()
+    for c in ("theta_deg", "psi_deg"):
+        err = (t[c] - t[f"{c}_true"]).abs()
+        assert err.max() < 0.01
+        assert (err < 6 * t[f"sigma_{c}"]).all()
+    for f in ("trajectory.csv", "quality.csv", "trajectory.png", "report.md"):
+        assert (out / f).is_file()
+    assert len(list((out / "overlays").glob("*.png"))) == 6
+    q = pd.read_csv(out / "quality.csv")
+    assert (q["wires_found"] == 4).all() and (q["affine_rms_px"] < 0.05).all()
+
+
+def test_bad_images_flag_their_station_only(m2_shot, tmp_path):
+    shot = _copy(m2_shot, tmp_path)
+    (shot / "images" / "st01_top.png").unlink()                       # missing
+    data = (shot / "images" / "st02_side.png").read_bytes()
+    (shot / "images" / "st02_side.png").write_bytes(data[: len(data) // 2])  # truncated
+    img = cv2.imread(str(shot / "images" / "st03_top.png"), cv2.IMREAD_UNCHANGED)
+    cv2.imwrite(str(shot / "images" / "st03_top.png"), img.astype(np.uint16) * 257)  # 16 bit
+    out = tmp_path / "out"
+    code = cadra1_main([str(shot / "shot.toml"), "-o", str(out), "-q", "--workers", "1"])
+    assert code == 1                        # something failed ...
+    t = load_trajectory(out / "trajectory.csv").table.set_index("station")
+    assert (t["status"] == "failed").all()  # ... every station here had one bad view
+    assert "missing image" in t.loc[1, "reason"]
+    assert "truncated" in t.loc[2, "reason"]
+    assert "16-bit" in t.loc[3, "reason"]
+
+
+def test_no_model_and_missing_wire(m2_shot, tmp_path):
+    shot = _copy(m2_shot, tmp_path)
+    p = shot / "images" / "st01_side.png"
+    img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    img[400:800, 600:1000] = img[400:800, 200:600]          # background over the model
+    cv2.imwrite(str(p), img)
+    p = shot / "images" / "st02_top.png"
+    img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    img[20:100, :] = img[120:200, :]                         # wire 'y+' painted out
+    cv2.imwrite(str(p), img)
+    res = measure_shot(shot / "shot.toml", None, workers=1, progress=False, overlays=False)
+    t = res.trajectory.set_index("station")
+    assert t.loc[1, "status"] == "failed" and "no model" in t.loc[1, "reason"]
+    assert t.loc[2, "status"] == "warning" and "'y+' not found" in t.loc[2, "warnings"]
+    assert t.loc[3, "status"] == "ok"
+    truth = pd.read_csv(shot / "truth.csv").set_index("station")
+    # a missing wire costs the scale along y, not the measurement: still within 0.1 mm
+    assert abs(t.loc[2, "y_m"] - truth.loc[2, "y_m"]) < 1e-4
+    assert abs(t.loc[2, "x_m"] - truth.loc[2, "x_m"]) < 5e-6
+
+
+def test_model_crossing_a_wire_and_partly_out_of_frame(tmp_path_factory):
+    # late sparks: the model sits on the x+ wire (80 mm downrange of the station centre)
+    shot = _make(tmp_path_factory, "cross", "m1_2366.toml", n_stations=2,
+                 trigger_offset_mean_m=0.080, trigger_offset_sd_m=0.0)
+    res = measure_shot(shot / "shot.toml", None, workers=1, progress=False, overlays=False)
+    truth = pd.read_csv(shot / "truth.csv").set_index("station")
+    t = res.trajectory.set_index("station")
+    assert (t["status"] == "warning").all()
+    assert t["warnings"].str.contains("crosses wire").all()
+    assert (abs(t["x_m"] - truth["x_m"]) < 2e-5).all()
+    # later still: the model runs off the picture's edge (the frame ends 101.6 mm downrange)
+    shot = _make(tmp_path_factory, "edge", "m1_2366.toml", n_stations=1,
+                 trigger_offset_mean_m=0.100, trigger_offset_sd_m=0.0)
+    res = measure_shot(shot / "shot.toml", None, workers=1, progress=False, overlays=False)
+    row = res.trajectory.iloc[0]
+    assert row["status"] in ("failed", "warning")
+    assert "out of frame" in (row["reason"] + row["warnings"])
+
+
+def test_outputs_are_atomic_and_never_overwrite(m2_shot, tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    out.mkdir()
+    assert cadra1_main([str(m2_shot / "shot.toml"), "-o", str(out), "-q"]) == 2
+    assert list(out.iterdir()) == []
+    # an output directory holding the inputs is refused
+    assert cadra1_main([str(m2_shot / "shot.toml"), "-o", str(m2_shot), "-q"]) == 2
+    # a failure while writing leaves nothing behind
+    import cadra.imaging.plots as plots
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(plots, "trajectory_figure", boom)
+    out2 = tmp_path / "out2"
+    with pytest.raises(RuntimeError):
+        measure_shot(m2_shot / "shot.toml", out2, workers=1, progress=False, overlays=False)
+    assert not out2.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out2")]
+
+
+def test_parallel_equals_serial(m2_shot):
+    a = measure_shot(m2_shot / "shot.toml", None, workers=1, progress=False, overlays=False)
+    b = measure_shot(m2_shot / "shot.toml", None, workers=2, progress=False, overlays=False)
+    pd.testing.assert_frame_equal(a.trajectory, b.trajectory)
