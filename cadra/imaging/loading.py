@@ -27,7 +27,7 @@ class ImageProblem:
 
 def load_station_image(path: str | Path, width_px: int, height_px: int,
                        bit_depth: int) -> np.ndarray | ImageProblem:
-    """The image as float64 in [0, 1] (full scale of its bit depth), or an :class:`ImageProblem`.
+    """The image as float32 in [0, 1] (full scale of its bit depth), or an :class:`ImageProblem`.
 
     PNG truncation is detected by decoding: OpenCV returns nothing for a damaged file.
     """
@@ -50,4 +50,4 @@ def load_station_image(path: str | Path, width_px: int, height_px: int,
     if img.shape != (height_px, width_px):
         return ImageProblem(str(path), f"{img.shape[1]}x{img.shape[0]} px, the view declares "
                                        f"{width_px}x{height_px}")
-    return img.astype(np.float64) / float(2**bits - 1)
+    return img.astype(np.float32) * np.float32(1.0 / (2**bits - 1))

@@ -62,8 +62,8 @@ MAX_EDGE_CURVATURE = 0.25
 class FitSettings:
     """Knobs of the silhouette fit (docs/stage1.md); defaults suit ~1 px blur."""
 
-    band_px: float = 5.0            # half-width of the pixel band about the outline
-    segment_px: float = 6.0         # contour segment length
+    band_px: float = 3.5            # half-width of the pixel band about the outline
+    segment_px: float = 8.0         # contour segment length
     corner_clear_px: float = 3.0    # segments this close to a sharp corner are not used
     min_fill: float = 0.6           # a segment needs this fraction of its expected pixels
     max_iter: int = 8               # pose iterations (band rebuilt each time)
@@ -87,7 +87,7 @@ class Template:
 
 
 def make_template(body: Body, view_name: str, tilt_rad: float = 0.0,
-                  n_points: int = 2048) -> Template:
+                  n_points: int = 1024) -> Template:
     """Outline template of ``body`` for a view (``"top"``/``"side"``) at out-of-plane tilt."""
     axes = VIEW_AXES[view_name]
     P = np.zeros((2, 3))
@@ -316,6 +316,10 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     lin, d, e, t = _band_pixels(geo, settings.band_px, img.shape)
     if len(lin) == 0:
         return None
+    # the true outline bulges beyond each chord of a curved stretch by kappa l^2 t (1 - t) / 2
+    nxt = (e + 1) % len(geo.kv)
+    kap_all = np.where(geo.straight[e], 0.0, (1 - t) * geo.kv[e] + t * geo.kv[nxt])
+    d = d - 0.5 * kap_all * geo.ell[e] ** 2 * t * (1.0 - t)
     fs = geo.s0[e] + t * geo.ell[e]
     bad = np.zeros(len(lin), bool)
     if len(geo.corner_s):
@@ -366,7 +370,7 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     coef = noise_coef
     n_outer = 3 if noise_coef is None else 2
     for outer in range(n_outer):
-        for _ in range(3):
+        for _ in range(2):
             _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
             _ridge(A)
             step = np.linalg.solve(A, b[..., None])[..., 0]
@@ -375,7 +379,9 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
             delta = delta + np.clip(step[:, 2], -1.5, 1.5)
         _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
         if hs > 0.0 and math.isfinite(gs / hs):
-            s = float(np.clip(s + gs / hs, 0.2, 5.0))
+            # damped and bounded: a strong diffraction fringe is nearly the shape of a width
+            # change, and a full step can throw the width (and every offset) far off
+            s = float(np.clip(s + 0.5 * gs / hs, max(0.8 * s, 0.2), min(1.25 * s, 5.0)))
         if outer == 0 or outer == n_outer - 1:
             # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
             z = (delta[k] - d_u) / s
@@ -403,9 +409,7 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     foot = geo.p0[eu] + tu[:, None] * geo.d[eu]
     fx = np.bincount(k, weights=wi * foot[:, 0], minlength=K) / wsum
     fy = np.bincount(k, weights=wi * foot[:, 1], minlength=K) / wsum
-    nxt = (eu + 1) % len(geo.kv)
-    kap_pix = np.where(geo.straight[eu], 0.0, (1 - tu) * geo.kv[eu] + tu * geo.kv[nxt])
-    kap = np.bincount(k, weights=wi * kap_pix, minlength=K) / wsum
+    kap = np.bincount(k, weights=wi * kap_all[use], minlength=K) / wsum
     pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
     return EdgeSegments(delta_px=delta, var_px2=var_delta, normal=np.column_stack([nx / nn,
                                                                                   ny / nn]),
@@ -460,6 +464,7 @@ class ViewFit:
     centroid_axis_px_rad: float
     centroid_pose: tuple[float, float, float]
     warnings: tuple[str, ...] = ()
+    noise_coef: np.ndarray | None = None
 
 
 def _pose_px(template: Template, pose, M) -> tuple[np.ndarray, float]:
@@ -472,11 +477,15 @@ def _pose_px(template: Template, pose, M) -> tuple[np.ndarray, float]:
 
 def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarray,
                    pose0: tuple[float, float, float], *, exclude: np.ndarray | None = None,
-                   settings: FitSettings | None = None, edge_sigma0: float = 0.9) -> ViewFit:
+                   settings: FitSettings | None = None, edge_sigma0: float = 0.9,
+                   noise_coef: np.ndarray | None = None, centroid: bool = True) -> ViewFit:
     """Least-squares silhouette fit (method a) from ``pose0``; see the module docstring.
 
     ``img`` float (H, W) in [0, 1]; ``exclude`` True on pixels not to use (wires, other
-    clutter known in advance). Never raises for bad data: ``ok`` False with a reason.
+    clutter known in advance); ``edge_sigma0`` and ``noise_coef`` (the image's noise model,
+    :attr:`ViewFit.noise_coef`) warm-start a refit; ``centroid=False`` skips method (b)
+    (an intermediate fit). Never raises for bad data: ``ok`` False
+    with a reason.
     """
     settings = FitSettings() if settings is None else settings
     M = np.asarray(image_to_plane, float)
@@ -497,7 +506,6 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     n_rej = 0
     it = 0
     outside = 0.0
-    noise_coef = None
     for it in range(1, settings.max_iter + 1):  # noqa: B007 (it is reported)
         poly = outline_px(template, pose, M)
         inside = ((poly[:, 0] >= settings.band_px) & (poly[:, 0] <= W - 1 - settings.band_px)
@@ -582,7 +590,9 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     resid = seg.delta_px + c_bias * seg.kappa
     if not fit_c:
         resid = resid - np.mean(resid)
-    cen = centroid_pose(img, template, M, pose, seg, exclude)
+    nan2 = (math.nan, math.nan)
+    cen = (centroid_pose(img, template, M, pose, seg, exclude) if centroid
+           else (nan2, math.nan, (math.nan,) * 3))
     warnings = []
     if not converged:
         warnings.append(f"silhouette fit not converged in {settings.max_iter} iterations")
@@ -597,7 +607,7 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
         offset_rms_px=float(np.sqrt(np.mean(resid ** 2))), n_segments=len(seg.delta_px),
         n_rejected=n_rej, iterations=it, converged=converged, outline_outside_frac=outside,
         centroid_ref_px=cen[0], centroid_axis_px_rad=cen[1], centroid_pose=cen[2],
-        warnings=tuple(warnings))
+        warnings=tuple(warnings), noise_coef=seg.noise_coef)
 
 
 def _failed(reason: str, pose, outside: float) -> ViewFit:
@@ -716,8 +726,9 @@ def locate_model(img: np.ndarray, template: Template, image_to_plane: np.ndarray
     small = cv2.resize(img.astype(np.float32), (W // f, H // f), interpolation=cv2.INTER_AREA)
     scale_px = math.sqrt(abs(np.linalg.det(np.asarray(image_to_plane)[:, :2])))
     expect = template.area_m2 / scale_px**2
-    bg = float(np.percentile(small, 75))
-    dark = float(np.percentile(small, 0.2))
+    sample = small[::2, ::2].ravel()      # levels from a quarter of the reduced copy
+    bg = float(np.percentile(sample, 75))
+    dark = float(np.percentile(sample, 0.2))
     if bg - dark < 0.1:
         return CoarsePose(False, f"no model found: image has no dark shadow (background "
                                  f"{bg:.2f}, darkest {dark:.2f} of full scale)")

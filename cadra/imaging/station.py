@@ -20,8 +20,9 @@ Every problem is a reason string on the view or station; nothing raises for bad 
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -74,6 +75,16 @@ class StationResult:
     warnings: tuple[str, ...] = ()
 
 
+@functools.lru_cache(maxsize=64)
+def _template_cached(body_key, body, view_name: str, tilt_rad: float, n_points: int):
+    return make_template(body, view_name, tilt_rad, n_points=n_points)
+
+
+def _template(body, view_name: str, tilt_rad: float, n_points: int = 1024):
+    """Outline template, cached per process (a station asks for the same one repeatedly)."""
+    return _template_cached(id(body), body, view_name, float(tilt_rad), int(n_points))
+
+
 def _view_pose(fit: ViewFit, wires) -> ViewPose:
     """The view's pose for combination: the silhouette fit's sigma and the wire affine's
     uncertainty at the model's position, added in quadrature."""
@@ -104,12 +115,12 @@ def _wire_crossings(fit: ViewFit, template, affine, wires) -> list[str]:
 
 
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
-                  coarse=None):
+                  coarse=None, final: bool = True):
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`)."""
     from cadra.imaging.fiducials import measure_wires, wire_mask
 
-    template = make_template(body, view.name, tilt)
+    template = _template(body, view.name, tilt)
     if prev is None:
         if coarse is None:
             coarse = locate_model(img, template, view.image_to_plane)
@@ -126,18 +137,19 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         affine = wires.affine
         pose0 = pose_from_coarse(coarse, template, affine)
         mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
-        settings_used = settings
+        # a quick first pass when a refit with better tilts follows
+        settings_used = settings if final else replace(settings, max_iter=2)
     else:
         wires, affine = prev.wires, prev.affine
         pose0 = prev.fit.pose
         mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
         settings_used = settings
     if prev is not None:   # a refit after a small tilt change: start close, few iterations
-        from dataclasses import replace
-
         settings_used = replace(settings, max_iter=min(settings.max_iter, 4))
     fit = fit_silhouette(img, template, affine, pose0, exclude=mask, settings=settings_used,
-                         edge_sigma0=prev.fit.edge_sigma_px if prev is not None else 0.9)
+                         edge_sigma0=prev.fit.edge_sigma_px if prev is not None else 0.9,
+                         noise_coef=prev.fit.noise_coef if prev is not None else None,
+                         centroid=final)
     if not fit.ok:
         return fit, fit.reason, wires, affine, ()
     warn = list(fit.warnings)
@@ -189,11 +201,11 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             continue
         images[name] = img
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
-    coarse = {n: locate_model(img, make_template(body, n, 0.0), station.views[n].image_to_plane)
+    coarse = {n: locate_model(img, _template(body, n, 0.0, 256), station.views[n].image_to_plane)
               for n, img in images.items()}
     tilts = {"top": 0.0, "side": 0.0}
     if not sphere and all(n in coarse and coarse[n].ok for n in VIEWS):
-        phi = {n: pose_from_coarse(coarse[n], make_template(body, n, 0.0),
+        phi = {n: pose_from_coarse(coarse[n], _template(body, n, 0.0, 256),
                                    station.views[n].image_to_plane)[2] for n in VIEWS}
         a = axis_from_projected_angles(phi["side"], phi["top"])
         tilts = {"top": math.asin(a[2]), "side": math.asin(a[1])}
@@ -206,7 +218,8 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
                 continue
             try:
                 fit, reason, wires, affine, warn = _measure_view(
-                    img, station.views[name], body, tilts[name], settings, prev, coarse[name])
+                    img, station.views[name], body, tilts[name], settings, prev, coarse[name],
+                    final=sphere or _round > 0)
             except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                 fit, reason, wires, affine, warn = (
                     None, f"measurement error ({type(exc).__name__}: {exc})", None, None, ())
@@ -220,7 +233,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
         new = {"top": math.asin(a[2]), "side": math.asin(a[1])}
         change = max(abs(new[n] - tilts[n]) for n in VIEWS)
         tilts = new
-        if change < 2e-5:
+        if change < 2e-5 and _round > 0:   # round 0 is a quick pass; round 1 always follows
             break
     results.update(fits)
     if overlays:
@@ -228,7 +241,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
 
         for name, img in images.items():
             r = results[name]
-            tpl = make_template(body, name, r.tilt_rad) if r.fit is not None and r.fit.ok else None
+            tpl = _template(body, name, r.tilt_rad) if r.fit is not None and r.fit.ok else None
             png = encode_png(view_overlay(img, r, tpl, station_id))
             results[name] = ViewResult(**{**r.__dict__, "overlay_png": png})
     ok_views = [n for n in VIEWS if n in results and results[n].ok]
