@@ -167,57 +167,65 @@ class WireMeasurement:
 
 def _centroids(P: np.ndarray, S: np.ndarray, c0: np.ndarray, half_core: float,
                n_iter: int = 4):
-    """Darkness-weighted centroid of the dip in each row of ``P``, with a linear background.
+    """Darkness-weighted centroid of the dip in each row of ``P``, on a linear background.
 
-    ``P`` (n, k) intensities at integer positions ``S`` (n, k), ``c0`` (n,) start values. Each
-    iteration fits a straight background to the samples farther than ``half_core + 1/2``
-    from the current centre ``c``, forms the darkness ``d = 1 - I / bg`` and moves ``c`` to
-    the centroid of ``d`` in a window of half-width ``half_core`` about ``c`` (its two end
-    samples weighted by their fractional overlap), so window and background region stay
-    symmetric about the line. Any normalized symmetric blur, continuous or discrete, leaves
-    the centroid of the absorbed light unchanged. Returns c, area (sum of d in the window,
-    px: ~ depth x wire width), width (rms half-width of d, px), bg (at c) and the rms of the
-    background samples about their line (relative).
+    ``P`` (n, k) intensities at integer positions ``S`` (n, k); ``c0`` (n,) start values
+    (within ~1/2 px). A straight background is fitted to the samples farther than
+    ``half_core + 1`` from ``c0``; the darkness is ``d = 1 - I / bg``. Then, iteratively, ``c``
+    moves to the centroid of ``d`` in a window of half-width ``half_core`` about ``c`` (its
+    end samples weighted by their fractional overlap, so the window stays symmetric about the
+    line). Any normalized symmetric blur, continuous or discrete, leaves the centroid of the
+    absorbed light unchanged, so the estimate needs no model of the line's profile.
+
+    Returns
+    -------
+    c : centres (n,).
+    area : sum of ``d`` in the window (px; about depth x the wire's section width).
+    width : rms half-width of ``d`` about ``c`` (px).
+    bg : background at ``c0`` (n,).
+    bg_rms : rms of the background samples about their line, relative to it (n,).
     """
-    c = np.asarray(c0, dtype=np.float64).copy()
     P = P.astype(np.float64)
-    for _ in range(n_iter):
-        x = S - c[:, None]
-        ax_ = np.abs(x)
-        wb = (ax_ > half_core + 0.5).astype(np.float64)
-        sw = wb.sum(axis=1)
-        sx = (wb * x).sum(axis=1)
-        sxx = (wb * x * x).sum(axis=1)
-        sy = (wb * P).sum(axis=1)
-        sxy = (wb * x * P).sum(axis=1)
-        det = sw * sxx - sx * sx
-        with np.errstate(divide="ignore", invalid="ignore"):
-            b1 = (sw * sxy - sx * sy) / det
-            b0 = (sy - b1 * sx) / sw
-            bg = b0[:, None] + b1[:, None] * x
-            d = 1.0 - P / bg
-            wt = np.clip(half_core + 0.5 - ax_, 0.0, 1.0)
-            area = (wt * d).sum(axis=1)
-            step = (x * wt * d).sum(axis=1) / area
-        c = c + np.clip(np.nan_to_num(step, nan=0.0), -1.0, 1.0)
+    x = S - c0[:, None]
+    wb = (np.abs(x) >= half_core + 1.0).astype(np.float64)
+    sw = wb.sum(axis=1)
+    xw = wb * x
+    sx = xw.sum(axis=1)
+    sxx = (xw * x).sum(axis=1)
+    sy = (wb * P).sum(axis=1)
+    sxy = (xw * P).sum(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        width = np.sqrt(np.abs((x * x * wt * d).sum(axis=1) / area))
-        resid = (P - bg) / bg
-        bg_rms = np.sqrt((wb * resid * resid).sum(axis=1) / np.maximum(sw - 2.0, 1.0))
+        b1 = (sw * sxy - sx * sy) / (sw * sxx - sx * sx)
+        b0 = (sy - b1 * sx) / sw
+        bgx = b0[:, None] + b1[:, None] * x
+        d = 1.0 - P / bgx
+        bg_rms = np.sqrt((wb * d * d).sum(axis=1) / np.maximum(sw - 2.0, 1.0))
+        c = c0.astype(np.float64).copy()
+        for _ in range(n_iter):
+            x = S - c[:, None]
+            wd = np.clip(half_core + 0.5 - np.abs(x), 0.0, 1.0) * d
+            area = wd.sum(axis=1)
+            c += np.clip(np.nan_to_num((x * wd).sum(axis=1) / area), -1.0, 1.0)
+        x = S - c[:, None]
+        wd = np.clip(half_core + 0.5 - np.abs(x), 0.0, 1.0) * d
+        area = wd.sum(axis=1)
+        width = np.sqrt(np.abs((x * x * wd).sum(axis=1) / area))
     return c, area, width, b0, bg_rms
 
 
 def _tls_line(pts: np.ndarray):
     """Total least-squares line: centroid, unit direction, unit normal, signed residuals."""
     m = pts.mean(axis=0)
-    _, _, vt = np.linalg.svd(pts - m, full_matrices=False)
-    t = vt[0]
-    if abs(t[0]) >= abs(t[1]):  # a stable sign: +u, or +v for a line running up the image
+    q = pts - m
+    suu, svv, suv = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
+    ang = 0.5 * math.atan2(2.0 * suv, suu - svv)  # direction of largest spread
+    t = np.array([math.cos(ang), math.sin(ang)])
+    if abs(t[0]) >= abs(t[1]):  # a stable sign: +u, or +v for a line running down the image
         t = t if t[0] > 0 else -t
     else:
         t = t if t[1] > 0 else -t
     n = np.array([-t[1], t[0]])
-    return m, t, n, (pts - m) @ n
+    return m, t, n, q @ n
 
 
 def _not_found(name: str, why: str, n_rejected: int = 0) -> WireFit:
@@ -269,8 +277,9 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
     j = np.argmax(resp, axis=1)
     strength = resp[np.arange(len(j)), j]
     coarse = (base + offs[a + j]).astype(float)  # ax coordinate of the dip
-    bgl = np.percentile(prof, 75, axis=1)
-    strong = strength > 0.5 * MIN_DEPTH_REL * np.maximum(bgl, 1e-3)
+    rows = np.arange(len(j))
+    sides = np.minimum(sm[rows, j], sm[rows, j + 2 * a])  # the local background
+    strong = strength > 0.5 * MIN_DEPTH_REL * np.maximum(sides, 1e-3)
     n_strong = int(strong.sum())
     if n_strong < MIN_PROFILES:
         frac = 1.0 - n_strong / len(fixed)
@@ -310,8 +319,9 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
         touched = (exclude[fi[:, None], wide] if ax == 0 else exclude[wide, fi[:, None]])
         use &= ~touched.any(axis=1)
     if use.sum() >= MIN_PROFILES:  # unlike the wire's typical profile: clutter, an edge
-        wm = np.median(width[use])
-        use &= (np.abs(width - wm) < 0.25 * wm) & (bg_rms < 3.0 * np.median(bg_rms[use]) + 0.01)
+        dm, wm = np.median(depth[use]), np.median(width[use])
+        use &= ((np.abs(depth - dm) < 0.2 * dm) & (np.abs(width - wm) < 0.6 * wm)
+                & (bg_rms < 3.0 * np.median(bg_rms[use]) + 0.01))
     n_use = int(use.sum())
     n_cand = len(use)
     if n_use < max(MIN_PROFILES, MIN_USED_FRACTION * n_cand):
@@ -327,8 +337,7 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
     for _ in range(8):
         m, t, nrm, _ = _tls_line(pts[keep])
         res_all = (pts - m) @ nrm
-        r = res_all[keep]
-        sig = 1.4826 * np.median(np.abs(r - np.median(r)))
+        sig = 1.4826 * float(np.median(np.abs(res_all[keep])))
         new = use & (np.abs(res_all) <= max(3.0 * sig, 1e-3))
         if new.sum() < MIN_PROFILES or np.array_equal(new, keep):
             break

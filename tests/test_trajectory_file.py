@@ -1,0 +1,56 @@
+"""The trajectory measurement file: round trip, units, refusals."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cadra.io.trajectory import (
+    COLUMNS,
+    TrajectoryFileError,
+    load_trajectory,
+    trajectory_to_csv,
+    write_trajectory,
+)
+
+
+def _table():
+    rows = []
+    for k in (1, 2, 3):
+        rows.append({"station": k, "t_s": 0.0064 * (k - 1), "status": "ok",
+                     "x_m": 1.524 * (k - 1), "y_m": 1e-3, "z_m": -2e-3, "theta_deg": 10.0 + k,
+                     "psi_deg": -1.5, "sigma_x_m": 3e-7, "sigma_y_m": 3e-7, "sigma_z_m": 4e-7,
+                     "sigma_theta_deg": 0.0015, "sigma_psi_deg": 0.0015,
+                     "x_top_minus_side_m": 1e-7, "x_consistency": 0.3, "reason": "",
+                     "warnings": ""})
+    rows[1].update(status="failed", reason="top view: missing image file", x_m=math.nan)
+    return pd.DataFrame(rows)
+
+
+def test_round_trip_converts_angles_once(tmp_path):
+    p = write_trajectory(tmp_path / "t.csv", _table(), {"shot_id": "X-1"})
+    tr = load_trajectory(p)
+    assert tr.meta["shot_id"] == "X-1"
+    t = tr.table
+    assert list(t.columns[: len(COLUMNS)]) == list(COLUMNS)
+    assert t.loc[0, "theta_rad"] == pytest.approx(math.radians(11.0), rel=1e-12)
+    assert t.loc[2, "sigma_psi_rad"] == pytest.approx(math.radians(0.0015), rel=1e-9)
+    assert t.loc[1, "status"] == "failed" and "missing image" in t.loc[1, "reason"]
+    assert np.isnan(t.loc[1, "x_m"]) and len(tr.measured) == 2
+    with pytest.raises(FileExistsError):
+        write_trajectory(p, _table(), {})
+
+
+def test_refusals(tmp_path):
+    text = trajectory_to_csv(_table(), {})
+    bad = tmp_path / "bad.csv"
+    bad.write_text(text.replace("# format: cadra-trajectory-1", "# format: other"))
+    with pytest.raises(TrajectoryFileError, match="not a CADRA trajectory"):
+        load_trajectory(bad)
+    bad.write_text(text.replace(",ok,", ",maybe,", 1))
+    with pytest.raises(TrajectoryFileError, match="status"):
+        load_trajectory(bad)
+    bad.write_text(text.replace("sigma_z_m", "sigma_z"))
+    with pytest.raises(TrajectoryFileError, match="sigma_z_m"):
+        load_trajectory(bad)
