@@ -293,6 +293,116 @@ def _ridge(A: np.ndarray) -> None:
     A[:, idx, idx] += 1e-9 * tr + 1e-15
 
 
+@numba.njit(cache=True)
+def _solve3_ridge(A, b):
+    """Solve a symmetric 3x3 system (Cramer's rule) with a tiny relative ridge: a one-sided
+    segment keeps its unseen level instead of making the system singular."""
+    r = 1e-9 * (A[0, 0] + A[1, 1] + A[2, 2]) + 1e-15
+    a00, a11, a22 = A[0, 0] + r, A[1, 1] + r, A[2, 2] + r
+    a01, a02, a12 = A[0, 1], A[0, 2], A[1, 2]
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    out = np.empty(3)
+    out[0] = (c00 * b[0] + c01 * b[1] + c02 * b[2]) / det
+    out[1] = (c01 * b[0] + c11 * b[1] + c12 * b[2]) / det
+    out[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det
+    return out
+
+
+@numba.njit(cache=True)
+def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
+    """Stage A's iterations in one compiled loop (see :func:`_stage_a`): per-segment levels
+    and offsets by Gauss-Newton, the damped global edge width, the noise model, and each
+    offset's formal variance."""
+    n = I.shape[0]
+    L = np.full(K, L0)
+    D = np.full(K, D0)
+    cntL = np.zeros(K)
+    cntD = np.zeros(K)
+    sumL = np.zeros(K)
+    sumD = np.zeros(K)
+    for j in range(n):
+        if d[j] > 2.0:
+            sumL[k[j]] += I[j]
+            cntL[k[j]] += 1.0
+        elif d[j] < -2.0:
+            sumD[k[j]] += I[j]
+            cntD[k[j]] += 1.0
+    for q in range(K):
+        if cntL[q] > 0:
+            L[q] = sumL[q] / cntL[q]
+        if cntD[q] > 0:
+            D[q] = sumD[q] / cntD[q]
+    delta = np.zeros(K)
+    s = s0
+    w = np.ones(n)
+    coef = coef_in.copy()
+    if has_coef:
+        for j in range(n):
+            m0 = min(max(I[j], 0.0), 1.0)
+            w[j] = 1.0 / max(coef[0] + coef[1] * m0 + coef[2] * m0 * m0, 1e-10)
+    A = np.empty((K, 3, 3))
+    b = np.empty((K, 3))
+    chi2 = 0.0
+    for outer in range(n_outer):
+        for _ in range(2):
+            _gn_accumulate(I, d, k, w, L, D, delta, s, A, b)
+            for q in range(K):
+                st = _solve3_ridge(A[q], b[q])
+                L[q] += st[0]
+                D[q] += st[1]
+                delta[q] += min(max(st[2], -1.5), 1.5)
+        _, gs, hs = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b)
+        if hs > 0.0 and math.isfinite(gs / hs):
+            # damped and bounded: a strong diffraction fringe is nearly the shape of a width
+            # change, and a full step can throw the width (and every offset) far off
+            s = min(max(s + 0.5 * gs / hs, max(0.8 * s, 0.2)), min(1.25 * s, 5.0))
+        if outer == 0 or outer == n_outer - 1:
+            # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
+            N = np.zeros((3, 3))
+            rhs = np.zeros(3)
+            mean_r2 = 0.0
+            for j in range(n):
+                z = (delta[k[j]] - d[j]) / s
+                g = 0.5 * math.erfc(-z / math.sqrt(2.0))
+                m = L[k[j]] * (1.0 - g) + D[k[j]] * g
+                r2 = (I[j] - m) ** 2
+                mean_r2 += r2
+                x0, x1, x2 = 1.0, m, m * m
+                N[0, 0] += x0 * x0
+                N[0, 1] += x0 * x1
+                N[0, 2] += x0 * x2
+                N[1, 1] += x1 * x1
+                N[1, 2] += x1 * x2
+                N[2, 2] += x2 * x2
+                rhs[0] += x0 * r2
+                rhs[1] += x1 * r2
+                rhs[2] += x2 * r2
+            N[1, 0] = N[0, 1]
+            N[2, 0] = N[0, 2]
+            N[2, 1] = N[1, 2]
+            coef = _solve3_ridge(N, rhs)
+            floor = max(0.05 * mean_r2 / n, 1e-12)
+            for j in range(n):
+                z = (delta[k[j]] - d[j]) / s
+                g = 0.5 * math.erfc(-z / math.sqrt(2.0))
+                m = L[k[j]] * (1.0 - g) + D[k[j]] * g
+                w[j] = 1.0 / max(coef[0] + coef[1] * m + coef[2] * m * m, floor)
+    chi2, _, _ = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b)
+    scale = chi2 / max(n - 3 * K, 1)
+    var_delta = np.empty(K)
+    e3 = np.zeros(3)
+    e3[2] = 1.0
+    for q in range(K):
+        var_delta[q] = _solve3_ridge(A[q], e3)[2] * scale
+    return L, D, delta, var_delta, s, coef, w, chi2
+
+
 @dataclass(frozen=True, eq=False)
 class EdgeSegments:
     """Per-segment edge offsets of one pose iteration (stage A)."""
@@ -349,54 +459,15 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     d_u, I_u = d[use], I[use]
     k = remap[seg[use]]
 
-    def mean_where(mask, default):
-        num = np.bincount(k[mask], weights=I_u[mask], minlength=K)
-        den = np.bincount(k[mask], minlength=K)
-        return np.where(den > 0, num / np.maximum(den, 1), default)
-
     out_m, in_m = d_u > 2.0, d_u < -2.0
-    L = mean_where(out_m, np.median(I_u[out_m]) if out_m.any() else 1.0)
-    D = mean_where(in_m, np.median(I_u[in_m]) if in_m.any() else 0.0)
-    delta = np.zeros(K)
-    s = float(edge_sigma0)
-    A = np.empty((K, 3, 3))
-    b = np.empty((K, 3))
-    if noise_coef is None:
-        w = np.ones_like(I_u)
-    else:
-        m0 = np.clip(I_u, 0.0, 1.0)
-        w = 1.0 / np.maximum(noise_coef[0] + noise_coef[1] * m0 + noise_coef[2] * m0 * m0,
-                             1e-10)
-    coef = noise_coef
-    n_outer = 3 if noise_coef is None else 2
-    for outer in range(n_outer):
-        for _ in range(2):
-            _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
-            _ridge(A)
-            step = np.linalg.solve(A, b[..., None])[..., 0]
-            L = L + step[:, 0]
-            D = D + step[:, 1]
-            delta = delta + np.clip(step[:, 2], -1.5, 1.5)
-        _, gs, hs = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
-        if hs > 0.0 and math.isfinite(gs / hs):
-            # damped and bounded: a strong diffraction fringe is nearly the shape of a width
-            # change, and a full step can throw the width (and every offset) far off
-            s = float(np.clip(s + 0.5 * gs / hs, max(0.8 * s, 0.2), min(1.25 * s, 5.0)))
-        if outer == 0 or outer == n_outer - 1:
-            # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
-            z = (delta[k] - d_u) / s
-            g = ndtr(z)
-            m = L[k] * (1 - g) + D[k] * g
-            r = I_u - m
-            X = np.column_stack([np.ones_like(m), m, m * m])
-            coef, *_ = np.linalg.lstsq(X, r * r, rcond=None)
-            var = X @ coef
-            w = 1.0 / np.maximum(var, max(0.05 * np.mean(r * r), 1e-12))
-    chi2, _, _ = _gn_accumulate(I_u, d_u, k, w, L, D, delta, s, A, b)
-    _ridge(A)
+    L0 = float(np.median(I_u[out_m])) if out_m.any() else 1.0
+    D0 = float(np.median(I_u[in_m])) if in_m.any() else 0.0
+    has = noise_coef is not None
+    coef_in = np.asarray(noise_coef, float) if has else np.zeros(3)
+    L, D, delta, var_delta, s, coef, w, chi2 = _segment_fit(
+        np.ascontiguousarray(I_u, dtype=np.float64), np.ascontiguousarray(d_u), k, K,
+        float(edge_sigma0), coef_in, has, 2 if has else 3, L0, D0)
     npix = len(I_u)
-    scale = chi2 / max(npix - 3 * K, 1)
-    var_delta = np.linalg.inv(A)[:, 2, 2] * scale
     # segment geometry, weighted by the pixels' information about delta
     z = (delta[k] - d_u) / s
     p = np.exp(-0.5 * z * z) / SQRT2PI

@@ -118,7 +118,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
                   coarse=None, final: bool = True):
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`)."""
-    from cadra.imaging.fiducials import measure_wires, wire_mask
+    from cadra.imaging.wires import measure_wires, wire_mask
 
     template = _template(body, view.name, tilt)
     if prev is None:

@@ -1,0 +1,597 @@
+"""Find and fit the fiducial wires in one shadowgraph; solve the image->plane affine from them.
+
+Method (all lengths in pixels unless a name ends in ``_m``):
+
+1. **Prediction.** Each wire of the view is predicted in the image with the view's nominal
+   affine (:meth:`View.wire_lines_px`). The film placement moves it by a few pixels at most.
+2. **Profiles.** Intensity profiles across the wire are taken every ``step_px`` along it, *along
+   the image axis closest to the wire's normal* (rows for a wire running up the image, columns
+   for one running across) and through pixel centres, so no interpolation is needed. This is a
+   deliberate choice over bilinear sampling on the exact normal: interpolating a ~2 px wide
+   line at a fractional offset reshapes it with the sub-pixel phase (a phase-dependent
+   bias), whereas the row (column) section of a straight band through pixel centres is
+   exactly symmetric about the point where the band's centre line crosses that row (the band
+   and the pixel square are both point-symmetric), whatever the band's tilt; so is any
+   point-symmetric blur of it.
+3. **Coarse line.** In each profile (``+-search_px`` about the prediction) a "darker than both
+   sides" detector ``min(I(s - 4), I(s + 4)) - I_smooth(s)`` marks the wire (a body's edge or a
+   broad shadow does not respond). The strongest responses are fitted robustly by a straight
+   line (median offset, then iterated 2 px clipping).
+4. **Sub-pixel centre.** In a window of ``+-half_window`` samples centred on the coarse line, a
+   straight background is fitted to the samples beyond ``h + 3`` px (``h`` the wire's
+   half-width along the profile) and the darkness ``1 - I / bg`` is centroided in a window of
+   half-width ``h + 2`` re-centred on the estimate (fractional end weights) until it settles,
+   all profiles at once (vectorized). Any normalized symmetric blur, continuous or discrete,
+   and the diffraction fringe (a Laplacian) leave this centroid unchanged, so no model of the
+   line's profile is needed. (A least-squares fit of a blurred-bar model was tried: ~4x less
+   noisy, but biased by up to +-0.03 px depending on the sub-pixel phase, because the
+   renderer's wires are not band-limited. The centroid's own phase bias, from the
+   pixel-centre weighting of the wire's two partly covered pixels, is <= ~0.0075 px for the
+   1.97 px HFFAF wire and averages out along any wire that drifts across the pixel grid.)
+5. **Rejection.** A profile is dropped when its window touches ``exclude`` (the model), another
+   wire's predicted crossing or the scanner reference mark; when its depth is not that of an
+   opaque wire (gaps, dust, a missing wire); when its centroid does not settle near the coarse
+   line, or its depth, width or background scatter are unlike the wire's typical profile
+   (clutter, an edge); and
+   by iterative 3-sigma clipping (robust MAD scale) of the perpendicular residuals of a total
+   least-squares line through the centres. The surviving centres give the wire's line.
+6. **Affine.** Each found wire contributes two points on its fitted line, at the centroid of
+   its centres +- their rms spread along the line. For a least-squares line these two
+   "Gauss points" have uncorrelated errors of equal variance ``2 sigma^2 / n``, and they carry
+   the same first and second moments along the line as the n centres; with weights
+   ``1 / sigma_offset^2`` the affine from :func:`fit_affine_to_wires` is therefore the
+   generalized least-squares solution from all centres, and its residuals measure how well
+   the measured lines agree with the survey (not the profile noise). When the found wires
+   leave a direction poorly determined (three wires: two parallel ones give one scale, the
+   third only an offset), the affine is solved with a prior that the image differs from the
+   nominal map by a similarity (film placed with a shift, rotation and uniform scale, no
+   shear or anisotropy); ``reason`` then says so (a warning, ``ok`` stays True).
+
+:func:`measure_wires` is a pure function of plain arrays; its results are frozen dataclasses of
+floats, tuples and numpy arrays (picklable, for a process pool). :func:`wire_mask` marks the
+pixels near the wires for later fits to ignore.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from cadra.facility.reference import View, fit_affine_to_wires
+
+__all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_mask"]
+
+#: Fewest clean profiles for a wire to count as found.
+MIN_PROFILES = 10
+#: ... and at least this fraction of its usable profiles (inside the image, not excluded).
+MIN_USED_FRACTION = 0.2
+#: A found wire's centres scatter about its line by less than this (px).
+MAX_LINE_RMS_PX = 0.3
+#: Depth of a wire's dip relative to the local background: accepted range (an opaque wire
+#: of the default facility gives ~0.9; dust, scratches, gaps and noise far less).
+MIN_DEPTH_REL, MAX_DEPTH_REL = 0.35, 1.4
+#: Coarse detector: half-distance (samples) to the two comparison points either side.
+_DETECT_ARM = 4
+#: Profiles within this distance (px) of another wire's predicted line are not used.
+CROSSING_CLEARANCE_PX = 18.0
+#: Extra clearance (px) around the scanner reference mark.
+MARK_CLEARANCE_PX = 6.0
+#: Prior 1-sigma of the non-similarity part (anisotropy, shear; relative) of the map from
+#: the nominal image to this image, used only when the wires leave a direction undetermined.
+SIMILARITY_PRIOR_REL = 2e-5
+#: A wire-only solution is "poorly determined" when the propagated 1-sigma position error at
+#: an image corner exceeds this (px).
+MAX_CORNER_SIGMA_PX = 0.02
+
+
+@dataclass(frozen=True, eq=False)
+class WireFit:
+    """One wire of one image: found or not (with the reason) and its fitted image line.
+
+    Attributes
+    ----------
+    name : the wire's name (facility file).
+    found : whether a straight dark line was found along the predicted path.
+    reason : why not (empty if found).
+    point_px : (u, v) of a point on the fitted line: the centroid of the centres used.
+    direction_px : unit direction (du, dv) of the line.
+    ends_px : the line's points at the first and last centre used ((u0, v0), (u1, v1)).
+    centres_px : (N, 2) the profile centres used (u, v).
+    n_used, n_rejected : profiles used / rejected (inside the image; excluded ones count as
+        rejected).
+    rms_px : rms of the centres' perpendicular residuals about the line.
+    sigma_offset_px : estimated 1-sigma of the line's perpendicular offset at ``point_px``.
+    residual_m, residual_px : mean signed distance of the line's mapped points from the
+        surveyed wire line (view plane, m; and in px at the image scale), after the affine.
+    """
+
+    name: str
+    found: bool
+    reason: str = ""
+    point_px: tuple[float, float] = (math.nan, math.nan)
+    direction_px: tuple[float, float] = (math.nan, math.nan)
+    ends_px: tuple = ()
+    centres_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    n_used: int = 0
+    n_rejected: int = 0
+    rms_px: float = math.nan
+    sigma_offset_px: float = math.nan
+    residual_m: float = math.nan
+    residual_px: float = math.nan
+
+    def distance_px(self, uv) -> np.ndarray:
+        """Signed perpendicular distance (px) of points ``(N, 2)`` from the fitted line."""
+        p = np.asarray(self.point_px, float)
+        t = np.asarray(self.direction_px, float)
+        n = np.array([-t[1], t[0]])
+        return (np.atleast_2d(np.asarray(uv, float)) - p) @ n
+
+
+@dataclass(frozen=True, eq=False)
+class WireMeasurement:
+    """The wires of one image and the image->plane affine solved from them.
+
+    Attributes
+    ----------
+    ok : an affine was solved.
+    reason : why not (``ok`` False); if ``ok``, a non-empty reason is a warning (e.g. a scale
+        taken from the similarity prior because a wire is missing).
+    affine : (2, 3) image->plane map ``[a, b] = M @ [u, v, 1]`` (m), or None.
+    affine_cov : (6, 6) covariance of the affine's entries (row-major), from the lines' offset
+        sigmas, or None.
+    wires : one :class:`WireFit` per wire of the view, in the view's order.
+    affine_rms_m, affine_rms_px : rms distance of the found lines' points from their
+        surveyed lines after the fit (m; px at the image scale).
+    n_found : number of wires found.
+    """
+
+    ok: bool
+    reason: str
+    affine: np.ndarray | None
+    affine_cov: np.ndarray | None
+    wires: tuple[WireFit, ...]
+    affine_rms_m: float
+    affine_rms_px: float
+    n_found: int
+
+    def position_sigma_m(self, uv) -> np.ndarray:
+        """1-sigma (a, b) (m) of the view-plane image of pixel ``uv`` from the affine's
+        uncertainty (NaN if no affine)."""
+        if self.affine_cov is None:
+            return np.full(2, np.nan)
+        u, v = float(uv[0]), float(uv[1])
+        J = np.zeros((2, 6))
+        J[0, :3] = (u, v, 1.0)
+        J[1, 3:] = (u, v, 1.0)
+        return np.sqrt(np.diag(J @ self.affine_cov @ J.T))
+
+
+# --------------------------------------------------------------------------- profile fits
+
+
+def _centroids(P: np.ndarray, S: np.ndarray, c0: np.ndarray, half_core: float,
+               n_iter: int = 4):
+    """Darkness-weighted centroid of the dip in each row of ``P``, on a linear background.
+
+    ``P`` (n, k) intensities at integer positions ``S`` (n, k); ``c0`` (n,) start values
+    (within ~1/2 px). A straight background is fitted to the samples farther than
+    ``half_core + 1`` from ``c0``; the darkness is ``d = 1 - I / bg``. Then, iteratively, ``c``
+    moves to the centroid of ``d`` in a window of half-width ``half_core`` about ``c`` (its
+    end samples weighted by their fractional overlap, so the window stays symmetric about the
+    line). Any normalized symmetric blur, continuous or discrete, leaves the centroid of the
+    absorbed light unchanged, so the estimate needs no model of the line's profile.
+
+    Returns
+    -------
+    c : centres (n,).
+    area : sum of ``d`` in the window (px; about depth x the wire's section width).
+    width : rms half-width of ``d`` about ``c`` (px).
+    bg : background at ``c0`` (n,).
+    bg_rms : rms of the background samples about their line, relative to it (n,).
+    """
+    P = P.astype(np.float64)
+    x = S - c0[:, None]
+    wb = (np.abs(x) >= half_core + 1.0).astype(np.float64)
+    sw = wb.sum(axis=1)
+    xw = wb * x
+    sx = xw.sum(axis=1)
+    sxx = (xw * x).sum(axis=1)
+    sy = (wb * P).sum(axis=1)
+    sxy = (xw * P).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        b1 = (sw * sxy - sx * sy) / (sw * sxx - sx * sx)
+        b0 = (sy - b1 * sx) / sw
+        bgx = b0[:, None] + b1[:, None] * x
+        d = 1.0 - P / bgx
+        bg_rms = np.sqrt((wb * d * d).sum(axis=1) / np.maximum(sw - 2.0, 1.0))
+        c = c0.astype(np.float64).copy()
+        for _ in range(n_iter):
+            x = S - c[:, None]
+            wd = np.clip(half_core + 0.5 - np.abs(x), 0.0, 1.0) * d
+            area = wd.sum(axis=1)
+            c += np.clip(np.nan_to_num((x * wd).sum(axis=1) / area), -1.0, 1.0)
+        x = S - c[:, None]
+        wd = np.clip(half_core + 0.5 - np.abs(x), 0.0, 1.0) * d
+        area = wd.sum(axis=1)
+        width = np.sqrt(np.abs((x * x * wd).sum(axis=1) / area))
+    return c, area, width, b0, bg_rms
+
+
+def _tls_line(pts: np.ndarray):
+    """Total least-squares line: centroid, unit direction, unit normal, signed residuals."""
+    m = pts.mean(axis=0)
+    q = pts - m
+    suu, svv, suv = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
+    ang = 0.5 * math.atan2(2.0 * suv, suu - svv)  # direction of largest spread
+    t = np.array([math.cos(ang), math.sin(ang)])
+    if abs(t[0]) >= abs(t[1]):  # a stable sign: +u, or +v for a line running down the image
+        t = t if t[0] > 0 else -t
+    else:
+        t = t if t[1] > 0 else -t
+    n = np.array([-t[1], t[0]])
+    return m, t, n, q @ n
+
+
+def _not_found(name: str, why: str, n_rejected: int = 0) -> WireFit:
+    return WireFit(name, False, f"wire {name!r} not found: {why}", n_rejected=n_rejected)
+
+
+def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
+                 exclude, search_px: float, step_px: float, half_window: int) -> WireFit:
+    """Find one wire near its predicted segment ``seg``; see the module docstring."""
+    H, W = img.shape
+    p0, p1 = np.asarray(seg[0], float), np.asarray(seg[1], float)
+    d = p1 - p0
+    # ax: image axis the profiles run along (0: rows, sampling u; 1: columns, sampling v)
+    ax = 0 if abs(d[1]) >= abs(d[0]) else 1
+    other = 1 - ax
+    slope = d[ax] / d[other]  # d(ax coordinate) / d(other coordinate) along the wire
+    cos_t = abs(d[other]) / math.hypot(*d)
+    n_lim = (W, H)
+    lo = max(min(p0[other], p1[other]), 0.0)
+    hi = min(max(p0[other], p1[other]), n_lim[other] - 1.0)
+    fixed = np.arange(math.ceil(lo + 2.0), math.floor(hi - 2.0) + 1, step_px).astype(float)
+    if len(fixed) < MIN_PROFILES:
+        return _not_found(name, f"its predicted path crosses only {hi - lo:.0f} px of the image")
+    pred = p0[ax] + (fixed - p0[other]) * slope
+    S = int(round(search_px)) + _DETECT_ARM + 1
+    offs = np.arange(-S, S + 1)
+    base = np.rint(pred).astype(int)
+    lim = n_lim[ax] - 1
+    # every sample of the search window in the image
+    inside = (base - S >= 0) & (base + S <= lim)
+    # other wires' crossings and the reference mark
+    pts_pred = np.empty((len(fixed), 2))
+    pts_pred[:, ax] = pred
+    pts_pred[:, other] = fixed
+    usable = inside & ~blocked(pts_pred, ax, search_px)
+    n_usable = int(usable.sum())
+    if n_usable < MIN_PROFILES:
+        return _not_found(name, f"only {n_usable} usable profiles along its predicted path "
+                                f"(< {MIN_PROFILES})", n_rejected=int(inside.sum()))
+    fixed, pred, base = fixed[usable], pred[usable], base[usable]
+    fi = fixed.astype(int)
+    idx = np.clip(base[:, None] + offs[None, :], 0, lim)
+    prof = img[fi[:, None], idx] if ax == 0 else img[idx, fi[:, None]]
+    # coarse: "darker than both sides" response on the lightly smoothed profile
+    sm = prof.copy()
+    sm[:, 1:-1] = 0.25 * prof[:, :-2] + 0.5 * prof[:, 1:-1] + 0.25 * prof[:, 2:]
+    a = _DETECT_ARM
+    resp = np.minimum(sm[:, :-2 * a], sm[:, 2 * a:]) - sm[:, a:-a]
+    j = np.argmax(resp, axis=1)
+    strength = resp[np.arange(len(j)), j]
+    coarse = (base + offs[a + j]).astype(float)  # ax coordinate of the dip
+    rows = np.arange(len(j))
+    sides = np.minimum(sm[rows, j], sm[rows, j + 2 * a])  # the local background
+    strong = strength > 0.5 * MIN_DEPTH_REL * np.maximum(sides, 1e-3)
+    n_strong = int(strong.sum())
+    if n_strong < MIN_PROFILES:
+        frac = 1.0 - n_strong / len(fixed)
+        return _not_found(name, f"contrast below threshold along {frac:.0%} of its predicted "
+                                f"path ({n_strong} < {MIN_PROFILES} profiles with a dark line)",
+                          n_rejected=int(inside.sum()))
+    # robust coarse line: ax coordinate = q0 + q1 * other coordinate
+    dev = coarse - pred
+    keep = strong & (np.abs(dev - np.median(dev[strong])) < 3.0)
+    q = np.array([slope, float(np.median(dev[strong]))])
+    for _ in range(4):
+        if keep.sum() < 3:
+            break
+        qq = np.polyfit(fixed[keep], dev[keep], 1)
+        new = strong & (np.abs(dev - np.polyval(qq, fixed)) < 2.0)
+        q = qq
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    c_coarse = pred + np.polyval(q, fixed)
+    # fine: window of +-half_window samples centred on the coarse line
+    k0 = np.rint(c_coarse).astype(int)
+    k0 = np.clip(k0, half_window, lim - half_window)
+    widx = k0[:, None] + np.arange(-half_window, half_window + 1)[None, :]
+    P = img[fi[:, None], widx] if ax == 0 else img[widx, fi[:, None]]
+    h = half_width_px / cos_t  # half-width of the wire's section along the profile
+    half_core = h + 2.0
+    c, area, width, bg, bg_rms = _centroids(P, widx, c_coarse, half_core)
+    depth = area / (2.0 * h)
+    ok = (np.isfinite(c) & np.isfinite(area) & np.isfinite(width) & (bg > 0)
+          & (np.abs(c - c_coarse) < 2.0))
+    depth_ok = ok & (depth > MIN_DEPTH_REL) & (depth < MAX_DEPTH_REL)
+    use = depth_ok.copy()
+    if exclude is not None:
+        wide = np.clip(k0[:, None] + np.arange(-half_window - 2, half_window + 3)[None, :], 0,
+                       lim)
+        touched = (exclude[fi[:, None], wide] if ax == 0 else exclude[wide, fi[:, None]])
+        use &= ~touched.any(axis=1)
+    if use.sum() >= MIN_PROFILES:  # unlike the wire's typical profile: clutter, an edge
+        dm, wm = np.median(depth[use]), np.median(width[use])
+        use &= ((np.abs(depth - dm) < 0.2 * dm) & (np.abs(width - wm) < 0.6 * wm)
+                & (bg_rms < 3.0 * np.median(bg_rms[use]) + 0.01))
+    n_use = int(use.sum())
+    n_cand = len(use)
+    if n_use < max(MIN_PROFILES, MIN_USED_FRACTION * n_cand):
+        frac = 1.0 - float(depth_ok.sum()) / n_cand
+        return _not_found(name, f"too few clean profiles ({n_use} < "
+                                f"{max(MIN_PROFILES, math.ceil(MIN_USED_FRACTION * n_cand))}; "
+                                f"no wire-like dark line along {frac:.0%} of its predicted "
+                                f"path)", n_rejected=int(inside.sum()) - n_use)
+    pts = np.empty((len(c), 2))
+    pts[:, ax] = c
+    pts[:, other] = fixed
+    keep = use.copy()
+    for _ in range(8):
+        m, t, nrm, _ = _tls_line(pts[keep])
+        res_all = (pts - m) @ nrm
+        sig = 1.4826 * float(np.median(np.abs(res_all[keep])))
+        new = use & (np.abs(res_all) <= max(3.0 * sig, 1e-3))
+        if new.sum() < MIN_PROFILES or np.array_equal(new, keep):
+            break
+        keep = new
+    m, t, nrm, res = _tls_line(pts[keep])
+    n_used = int(keep.sum())
+    rms_px = float(np.sqrt(np.sum(res ** 2) / max(n_used - 2, 1)))
+    if rms_px > MAX_LINE_RMS_PX:
+        return _not_found(name, f"no straight dark line along its predicted path (centres "
+                                f"scatter {rms_px:.2f} px > {MAX_LINE_RMS_PX} px)",
+                          n_rejected=int(inside.sum()) - n_used)
+    along = (pts[keep] - m) @ t
+    ends = (tuple(map(float, m + along.min() * t)), tuple(map(float, m + along.max() * t)))
+    sigma_off = rms_px / math.sqrt(n_used)
+    return WireFit(name=name, found=True, reason="", point_px=(float(m[0]), float(m[1])),
+                   direction_px=(float(t[0]), float(t[1])), ends_px=ends,
+                   centres_px=pts[keep].copy(), n_used=n_used,
+                   n_rejected=int(inside.sum()) - n_used, rms_px=rms_px,
+                   sigma_offset_px=sigma_off)
+
+
+# --------------------------------------------------------------------------- affine
+
+
+def _gauss_points(f: WireFit) -> np.ndarray:
+    """Two points on ``f``'s line at its centres' centroid +- their rms spread along it."""
+    m = np.asarray(f.point_px, float)
+    t = np.asarray(f.direction_px, float)
+    spread = math.sqrt(float(np.mean(((f.centres_px - m) @ t) ** 2)))
+    return np.array([m - spread * t, m + spread * t])
+
+
+def _design(view: View, lines) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Equations ``n . (M [u, v, 1]) = n . a0`` as in :func:`fit_affine_to_wires`."""
+    rows, rhs, wire_of = [], [], []
+    for i, ((a0, a1), pts) in enumerate(zip(view.wire_lines_plane(), lines, strict=True)):
+        if pts is None:
+            continue
+        d = a1 - a0
+        n = np.array([-d[1], d[0]]) / math.hypot(d[0], d[1])
+        for u, v in pts:
+            rows.append([n[0] * u, n[0] * v, n[0], n[1] * u, n[1] * v, n[1]])
+            rhs.append(float(n @ a0))
+            wire_of.append(i)
+    return np.array(rows).reshape(-1, 6), np.array(rhs), wire_of
+
+
+def _similarity_prior(view: View) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``R`` (2, 6), rhs: ``M = M0 @ A``, A's linear part a similarity: A00 = A11 and
+    A01 = -A10, expressed linearly in M's entries (``A = M0_lin^-1 M_lin``)."""
+    M0 = np.asarray(view.image_to_plane, float)
+    Li = np.linalg.inv(M0[:, :2])  # A_lin = Li @ M_lin, M_lin = [[m0, m1], [m3, m4]]
+
+    def coeff(r, col):  # row vector over m (6,) giving A_lin[r, col]
+        out = np.zeros(6)
+        out[col] = Li[r, 0]       # M_lin[0, col] = m[col]
+        out[3 + col] = Li[r, 1]   # M_lin[1, col] = m[3 + col]
+        return out
+
+    R = np.array([coeff(0, 0) - coeff(1, 1), coeff(0, 1) + coeff(1, 0)])
+    return R, np.zeros(2)
+
+
+def _solve(view: View, lines, sig_m: np.ndarray, prior: bool):
+    """Weighted least squares of the affine (with the similarity prior if ``prior``).
+
+    Returns (M, cov, residuals per equation (m), wire index per equation) or None.
+    """
+    X, y, wire_of = _design(view, lines)
+    wt = 1.0 / sig_m[wire_of] ** 2
+    col = np.array([1e-3, 1e-3, 1.0, 1e-3, 1e-3, 1.0])  # u, v are ~1e3 px
+    Xs = X * col
+    info = Xs.T @ (Xs * wt[:, None])
+    vec = Xs.T @ (wt * y)
+    if prior:
+        R, r0 = _similarity_prior(view)
+        Rs = R * col
+        wp = (1.0 / SIMILARITY_PRIOR_REL) ** 2
+        info = info + wp * Rs.T @ Rs
+        vec = vec + wp * Rs.T @ r0
+    ev = np.linalg.eigvalsh(info)
+    if not np.all(np.isfinite(ev)) or ev[0] <= 1e-12 * ev[-1]:
+        return None
+    cov_s = np.linalg.inv(info)
+    m = (cov_s @ vec) * col
+    cov = cov_s * np.outer(col, col)
+    return m.reshape(2, 3), cov, X @ m - y, wire_of
+
+
+def _corner_sigma_px(view: View, cov: np.ndarray, scale_m: float) -> float:
+    """Largest propagated 1-sigma position error (px) at the image corners."""
+    W, H = view.width_px - 1.0, view.height_px - 1.0
+    worst = 0.0
+    for u, v in ((0, 0), (W, 0), (0, H), (W, H)):
+        J = np.zeros((2, 6))
+        J[0, :3] = (u, v, 1.0)
+        J[1, 3:] = (u, v, 1.0)
+        worst = max(worst, float(np.sqrt(np.max(np.diag(J @ cov @ J.T)))))
+    return worst / scale_m
+
+
+def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
+                  search_px: float = 30.0, step_px: float = 4.0,
+                  half_window: int = 8) -> WireMeasurement:
+    """Find every wire of ``view`` in ``image`` and solve the image->plane affine.
+
+    Parameters
+    ----------
+    image : float (H, W) in [0, 1], indexed ``image[v, u]``.
+    view : the view (facility reference file) the image belongs to.
+    exclude : optional bool (H, W), True where pixels must not be used (the model's
+        silhouette plus margin).
+    search_px : half-width of the search about each wire's nominal prediction (px).
+    step_px : spacing of the profiles along each wire (px; an integer number of rows or
+        columns).
+    half_window : half-width (samples) of the window each profile's centre is fitted in.
+
+    Returns
+    -------
+    WireMeasurement
+        Never raises for bad data: a wire not found carries its reason; fewer than three
+        wires found, or wires that cannot determine the map, give ``ok = False`` and a reason.
+
+    Notes
+    -----
+    See the module docstring for the method. About 9 ms for a 1600 x 1200 image (4 wires,
+    ~1300 profiles). Profiles touching ``exclude``, another wire's crossing or the reference
+    mark count in ``n_rejected``.
+    """
+    img = np.asarray(image)
+    if img.ndim != 2:
+        raise ValueError(f"image must be 2-D, got shape {img.shape}")
+    if img.dtype not in (np.float32, np.float64):
+        img = img.astype(np.float32)
+    H, W = img.shape
+    if exclude is not None:
+        exclude = np.asarray(exclude, bool)
+        if exclude.shape != img.shape:
+            raise ValueError(f"exclude has shape {exclude.shape}, image {img.shape}")
+    segs = view.wire_lines_px()
+    mark = view.reference_mark
+    mark_r = mark.arm_px + MARK_CLEARANCE_PX
+
+    fits = []
+    for i, (w, seg) in enumerate(zip(view.wires, segs, strict=True)):
+        if seg is None:
+            fits.append(_not_found(w.name, "its predicted path misses the image"))
+            continue
+        others = []
+        for j, sj in enumerate(segs):
+            if j == i or sj is None:
+                continue
+            q0, q1 = np.asarray(sj[0], float), np.asarray(sj[1], float)
+            tq = (q1 - q0) / math.hypot(*(q1 - q0))
+            others.append((q0, np.array([-tq[1], tq[0]])))
+
+        def blocked(pts, ax, search, others=others):
+            """Profiles (through ``pts``, +-search along image axis ``ax``) near another
+            wire's predicted line or the reference mark."""
+            out = np.zeros(len(pts), bool)
+            for q0, nq in others:
+                out |= np.abs((pts - q0) @ nq) < CROSSING_CLEARANCE_PX
+            d = np.abs(pts - np.array([mark.u_px, mark.v_px]))
+            out |= (d[:, ax] < mark_r + search) & (d[:, 1 - ax] < mark_r)
+            return out
+
+        fits.append(_measure_one(img, w.name, seg, 0.5 * w.diameter_m / view.scale_m_per_px,
+                                 blocked, exclude, search_px, step_px, half_window))
+    return _solve_affine(view, fits)
+
+
+def _solve_affine(view: View, fits: list[WireFit]) -> WireMeasurement:
+    found = [f for f in fits if f.found]
+    n_found = len(found)
+
+    def fail(reason):
+        return WireMeasurement(False, reason, None, None, tuple(fits), math.nan, math.nan,
+                               n_found)
+
+    if n_found < 3:
+        missing = ", ".join(repr(f.name) for f in fits if not f.found)
+        return fail(f"only {n_found} of {len(fits)} wires found (missing {missing}); at least 3 "
+                    f"are needed for the image->plane map")
+    scale = view.scale_m_per_px
+    lines = [_gauss_points(f) if f.found else None for f in fits]
+    # each Gauss point's perpendicular error: sqrt(2) x the line's offset sigma (floored)
+    sig_px = np.array([math.sqrt(2.0) * max(f.sigma_offset_px, 1e-4) if f.found else 1.0
+                       for f in fits])
+    sig_m = sig_px * scale
+    reason = ""
+    sol = _solve(view, lines, sig_m, prior=False)
+    if sol is not None and _corner_sigma_px(view, sol[1], scale) <= MAX_CORNER_SIGMA_PX:
+        # well determined by the wires alone: the facility's solver (same equations)
+        try:
+            af = fit_affine_to_wires(view, lines, weights=1.0 / sig_m ** 2)
+        except ValueError as exc:
+            return fail(str(exc))
+        M, cov, res = af.affine, sol[1], af.residuals_m
+        wire_of = sol[3]
+    else:
+        sol = _solve(view, lines, sig_m, prior=True)
+        if sol is None:
+            return fail(f"wires {[f.name for f in found]} cannot determine the image->plane map")
+        M, cov, res, wire_of = sol
+        if _corner_sigma_px(view, cov, scale) > 10 * MAX_CORNER_SIGMA_PX:
+            return fail(f"wires {[f.name for f in found]} leave the image->plane map "
+                        f"undetermined even with the similarity prior")
+        missing = ", ".join(repr(f.name) for f in fits if not f.found)
+        reason = (f"wire(s) {missing} not found: the image->plane map uses the prior that the "
+                  f"film differs from the nominal map by a similarity (no shear/anisotropy)")
+    px = math.sqrt(abs(np.linalg.det(M[:, :2])))
+    wire_of = np.asarray(wire_of)
+    out = []
+    for i, f in enumerate(fits):
+        if f.found:
+            r = float(np.mean(res[wire_of == i]))
+            f = WireFit(**{**f.__dict__, "residual_m": r, "residual_px": r / px})
+        out.append(f)
+    rms_m = float(np.sqrt(np.mean(res ** 2)))
+    return WireMeasurement(True, reason, np.array(M, float), cov, tuple(out), rms_m, rms_m / px,
+                           n_found)
+
+
+def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
+              half_width_px: float = 4.0) -> np.ndarray:
+    """True on pixels within ``half_width_px`` of any wire's image edge.
+
+    Parameters
+    ----------
+    view : the view whose wires to draw.
+    affine : image->plane map (2x3) to place them with (e.g. ``WireMeasurement.affine``);
+        None for the nominal one.
+    shape : (H, W) of the mask.
+    half_width_px : distance (px) beyond each wire's edge (its half-diameter) to mark.
+    """
+    H, W = shape
+    mask = np.zeros((H, W), np.uint8)
+    for seg, w in zip(view.wire_lines_px(affine=affine, margin_px=10.0), view.wires,
+                      strict=True):
+        if seg is None:
+            continue
+        half = half_width_px + 0.5 * w.diameter_m / view.scale_m_per_px
+        p0, p1 = np.array(seg[0]), np.array(seg[1])
+        t = (p1 - p0) / math.hypot(*(p1 - p0))
+        n = np.array([-t[1], t[0]]) * half
+        poly = np.array([p0 + n, p1 + n, p1 - n, p0 - n])
+        # sub-pixel vertices (4 fractional bits); pixel centres inside are marked
+        cv2.fillConvexPoly(mask, np.rint(poly * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+    return mask.astype(bool)
+
