@@ -101,7 +101,7 @@ def encode_png(rgb: np.ndarray, compression: int = 1) -> bytes:
 def view_overlay(image, result, template, station_id: int, crop_half_px: int = 200):
     """Overlay of one view's measurement: the full frame at 1/3 scale (fitted wires green,
     silhouette red) beside a 1:1 crop around the model with the outline, reference point and
-    axis, and the figures or the failure reason as text."""
+    axis; below, the figures or the failure reason as text."""
     import cv2
 
     from cadra.imaging.silhouette_fit import outline_px
@@ -150,11 +150,12 @@ def view_overlay(image, result, template, station_id: int, crop_half_px: int = 2
             centroid_px=(cen[0] - max(u0, 0), cen[1] - max(v0, 0))
             if cen is not None and all(map(math.isfinite, cen)) else None)
         crop[:sub.shape[0], :sub.shape[1]] = sub
-    panel = np.full((H, half.shape[1] + c, 3), 255, np.uint8)
-    panel[:, :half.shape[1]] = half
-    panel[:min(c, H), half.shape[1]:] = crop[:min(c, H)]
+    text_h = 12 + 20 * len(labels)
+    panel = np.full((max(H, c) + text_h, half.shape[1] + c, 3), 255, np.uint8)
+    panel[:H, :half.shape[1]] = half
+    panel[:c, half.shape[1]:] = crop
     for i, text in enumerate(labels):
-        cv2.putText(panel, text[:110], (half.shape[1] + 6, c + 22 + 20 * i),
+        cv2.putText(panel, text[:150], (6, max(H, c) + 18 + 20 * i),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 200) if "FAIL" in text else (0, 0, 0),
                     1, cv2.LINE_AA)
     return panel

@@ -56,6 +56,8 @@ CORNER_TURN_RAD = 0.3
 #: Outline curvature (1/px) above which the edge model's linear curvature bias no longer
 #: holds (radius < 4 px, a few blur widths): such stretches are treated like corners.
 MAX_EDGE_CURVATURE = 0.25
+#: After two iterations a converging fit moves far less than this (px at the rim).
+MAX_LATE_STEP_PX = 0.3
 
 
 @dataclass(frozen=True)
@@ -345,7 +347,8 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
     if has_coef:
         for j in range(n):
             m0 = min(max(I[j], 0.0), 1.0)
-            w[j] = 1.0 / max(coef[0] + coef[1] * m0 + coef[2] * m0 * m0, 1e-10)
+            w[j] = 1.0 / max(coef[0] + coef[1] * m0 + coef[2] * m0 * m0,
+                             0.2 * max(coef[0] + 0.5 * coef[1] + 0.25 * coef[2], 1e-12))
     A = np.empty((K, 3, 3))
     b = np.empty((K, 3))
     chi2 = 0.0
@@ -387,7 +390,7 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
             N[2, 0] = N[0, 2]
             N[2, 1] = N[1, 2]
             coef = _solve3_ridge(N, rhs)
-            floor = max(0.05 * mean_r2 / n, 1e-12)
+            floor = max(0.2 * mean_r2 / n, 1e-12)   # no pixel weighs > 5x the average
             for j in range(n):
                 z = (delta[k[j]] - d[j]) / s
                 g = 0.5 * math.erfc(-z / math.sqrt(2.0))
@@ -398,8 +401,13 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
     var_delta = np.empty(K)
     e3 = np.zeros(3)
     e3[2] = 1.0
+    contrast = np.abs(L - D)
+    typical = np.median(contrast)
     for q in range(K):
         var_delta[q] = _solve3_ridge(A[q], e3)[2] * scale
+        # a segment whose edge ran off or lost its contrast carries no information
+        if abs(delta[q]) > 2.0 or contrast[q] < 0.3 * typical or not var_delta[q] > 0.0:
+            var_delta[q] = np.inf
     return L, D, delta, var_delta, s, coef, w, chi2
 
 
@@ -565,9 +573,10 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     Jrot = np.array([[0.0, -1.0], [1.0, 0.0]])
     pose = np.array(pose0, float)
     fit_phi = not template.axisymmetric_point
-    # a sphere's curvature is the same all round: the bias term is then only a radius change,
-    # which does not move the centre, and leaving it free makes the iteration wander
-    fit_c = settings.fit_curvature_bias and not template.axisymmetric_point
+    # (for a sphere the curvature is the same all round and the term is a radius change: it
+    # does not move the centre, but leaving it out lets an uneven set of rejected segments
+    # turn the edges' common offset into a centre shift)
+    fit_c = settings.fit_curvature_bias
     nan3 = np.full((3, 3), np.nan)
     H, W = img.shape
     converged = False
@@ -577,6 +586,7 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     n_rej = 0
     it = 0
     outside = 0.0
+    diverged = False
     for it in range(1, settings.max_iter + 1):  # noqa: B007 (it is reported)
         poly = outline_px(template, pose, M)
         inside = ((poly[:, 0] >= settings.band_px) & (poly[:, 0] <= W - 1 - settings.band_px)
@@ -632,6 +642,13 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
             dpose[2] = beta[2]
         if it > 3:   # damp late iterations: re-banding noise can make full steps oscillate
             dpose *= 0.5
+        rim = 0.5 * math.sqrt(template.area_m2 / math.pi) / math.sqrt(abs(np.linalg.det(M[:, :2])))
+        move = np.hypot(*(A_lin @ dpose[:2])) + (abs(dpose[2]) * rim if fit_phi else 0.0)
+        if it > 2 and move > MAX_LATE_STEP_PX:
+            # a converging fit does not jump late: a stage-A failure (a strong fringe, a
+            # clutter feature) produced this step; keep the last pose and say so
+            diverged = True
+            break
         c_bias = float(beta[-1]) if fit_c else 0.0
         pose = pose + dpose
         cov = np.full((3, 3), 0.0)
@@ -639,9 +656,6 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
         cov[np.ix_(idx, idx)] = cov_b[: len(idx), : len(idx)]
         if not fit_phi:
             cov[2, 2] = np.inf
-        # convergence: movement at the rim in px
-        rim = 0.5 * math.sqrt(template.area_m2 / math.pi) / math.sqrt(abs(np.linalg.det(M[:, :2])))
-        move = np.hypot(*(A_lin @ dpose[:2])) + (abs(dpose[2]) * rim if fit_phi else 0.0)
         # converged: the step is below the tolerance or a small fraction of the pose's own
         # sigma (re-banding at a new pose re-draws the noise; steps below that are jitter)
         sig_px = math.sqrt(max(np.trace(A_lin @ cov[:2, :2] @ A_lin.T), 0.0))
@@ -659,13 +673,14 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     cov_px = Jp @ cov_fin @ Jp.T
     # offsets about the fitted outline (a sphere: about its mean, the radius change)
     resid = seg.delta_px + c_bias * seg.kappa
-    if not fit_c:
-        resid = resid - np.mean(resid)
     nan2 = (math.nan, math.nan)
     cen = (centroid_pose(img, template, M, pose, seg, exclude) if centroid
            else (nan2, math.nan, (math.nan,) * 3))
     warnings = []
-    if not converged:
+    if diverged:
+        warnings.append(f"silhouette fit: a late step of > {MAX_LATE_STEP_PX} px was rejected "
+                        f"(edge model failing in part of the outline); last pose kept")
+    elif not converged:
         warnings.append(f"silhouette fit not converged in {settings.max_iter} iterations")
     if outside > 0.0:
         warnings.append(f"model partly out of frame ({outside:.0%} of its outline)")
