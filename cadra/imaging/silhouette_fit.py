@@ -474,7 +474,7 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     coef_in = np.asarray(noise_coef, float) if has else np.zeros(3)
     L, D, delta, var_delta, s, coef, w, chi2 = _segment_fit(
         np.ascontiguousarray(I_u, dtype=np.float64), np.ascontiguousarray(d_u), k, K,
-        float(edge_sigma0), coef_in, has, 2 if has else 3, L0, D0)
+        float(edge_sigma0), coef_in, has, 2, L0, D0)
     npix = len(I_u)
     # segment geometry, weighted by the pixels' information about delta
     z = (delta[k] - d_u) / s
@@ -809,7 +809,8 @@ def locate_model(img: np.ndarray, template: Template, image_to_plane: np.ndarray
     """
     H, W = img.shape
     f = 4
-    small = cv2.resize(img.astype(np.float32), (W // f, H // f), interpolation=cv2.INTER_AREA)
+    small = np.ascontiguousarray(img[f // 2::f, f // 2::f], dtype=np.float32)  # no filtering
+    small = small[: H // f, : W // f]
     scale_px = math.sqrt(abs(np.linalg.det(np.asarray(image_to_plane)[:, :2])))
     expect = template.area_m2 / scale_px**2
     sample = small[::2, ::2].ravel()      # levels from a quarter of the reduced copy
