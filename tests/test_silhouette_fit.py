@@ -15,7 +15,7 @@ from cadra.body import capsule, cone, sphere
 from cadra.imaging.baseline import otsu_moments
 from cadra.imaging.render import RenderConfig
 from cadra.imaging.silhouette_fit import fit_silhouette, make_template
-from cadra.imaging.synthetic import measure_case, random_view_case
+from cadra.imaging.synthetic import case_errors, measure_case, random_view_case
 
 SPHERE = sphere(0.03556)
 M2 = capsule("M2")
@@ -30,12 +30,7 @@ def _run(body, config, n, seed, size_px=512, need_converged=True):
         fit = measure_case(case, body)
         assert fit.ok, fit.reason
         assert fit.converged or not need_converged
-        e = [fit.ref_px[0] - case.u_ref_px, fit.ref_px[1] - case.v_ref_px]
-        s = list(fit.sigma_ref_px)
-        if body.kind != "sphere":
-            e.append(math.degrees(math.remainder(fit.axis_angle_px_rad
-                                                 - case.axis_angle_px_rad, 2 * math.pi)))
-            s.append(math.degrees(fit.sigma_axis_px_rad))
+        e, s = case_errors(case, fit, body)
         E.append(e)
         S.append(s)
     return np.array(E), np.array(S)

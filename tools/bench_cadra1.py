@@ -55,14 +55,11 @@ def _cases(body, n, config, seed):
 
 def _errors(body, results):
     """(errors, sigmas) arrays: u, v px (and axis angle deg for a non-sphere)."""
+    from cadra.imaging.synthetic import case_errors
+
     E, S = [], []
     for case, fit, _ in results:
-        e = [fit.ref_px[0] - case.u_ref_px, fit.ref_px[1] - case.v_ref_px]
-        s = list(fit.sigma_ref_px)
-        if body.kind != "sphere":
-            e.append(math.degrees(math.remainder(fit.axis_angle_px_rad
-                                                 - case.axis_angle_px_rad, 2 * math.pi)))
-            s.append(math.degrees(fit.sigma_axis_px_rad))
+        e, s = case_errors(case, fit, body)
         E.append(e)
         S.append(s)
     return np.array(E), np.array(S)

@@ -110,3 +110,15 @@ def measure_case(case: ViewCase, body: Body, settings=None, tilt_rad: float | No
         raise RuntimeError(coarse.reason)
     pose0 = pose_from_coarse(coarse, tpl, case.affine)
     return fit_silhouette(case.image, tpl, case.affine, pose0, settings=settings)
+
+
+def case_errors(case: ViewCase, fit, body: Body) -> tuple[list[float], list[float]]:
+    """A fit's errors against the case's truth and its reported sigmas, per channel:
+    reference point u, v (px) and, for a non-sphere, the image axis angle (deg)."""
+    e = [fit.ref_px[0] - case.u_ref_px, fit.ref_px[1] - case.v_ref_px]
+    s = list(fit.sigma_ref_px)
+    if body.kind != "sphere":
+        e.append(math.degrees(math.remainder(fit.axis_angle_px_rad - case.axis_angle_px_rad,
+                                             2 * math.pi)))
+        s.append(math.degrees(fit.sigma_axis_px_rad))
+    return e, s
