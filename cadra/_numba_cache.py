@@ -3,7 +3,7 @@
 numba (``cache=True``) invalidates a cached function only when *its own* source file changes;
 a caller in another module keeps a stale copy of an inlined callee (e.g. the integrator in
 ``cadra/dynamics`` of the aero evaluator in ``cadra/aero/program.py``). This guard hashes the
-sources of every package that holds jitted code and, when the hash changes, deletes the
+sources of every module that uses numba (in the packages listed below) and, when the hash changes, deletes the
 package's cache files before anything is compiled or loaded. Runs once per process, at import
 of :mod:`cadra`; a read-only install simply skips it.
 """
@@ -21,8 +21,11 @@ def ensure_fresh_cache() -> None:
     digest = hashlib.sha256()
     for pkg in _JIT_PACKAGES:
         for path in sorted((_ROOT / pkg).glob("*.py")):
+            source = path.read_bytes()
+            if b"numba" not in source:
+                continue  # no compiled code here: editing it must not drop the caches
             digest.update(path.name.encode())
-            digest.update(path.read_bytes())
+            digest.update(source)
     stamp = _ROOT / "__pycache__" / "numba_sources.sha256"
     current = digest.hexdigest()
     try:

@@ -23,9 +23,15 @@ import pandas as pd
 from cadra.aero import AeroModel, load_model
 from cadra.atmosphere import Atmosphere
 from cadra.body import Body, body_from_spec, silhouette
-from cadra.conventions import body_to_facility_matrix, model_to_body_inertia, model_to_body_vector
+from cadra.conventions import body_to_facility_matrix
 from cadra.dynamics.effects import Effects
-from cadra.dynamics.setup import DT_MAX_DEFAULT, DT_MAX_TRUTH, RigidBody, propagate_states
+from cadra.dynamics.setup import (
+    DT_MAX_DEFAULT,
+    DT_MAX_TRUTH,
+    RigidBody,
+    propagate_states,
+    rigid_body_from_mass,
+)
 from cadra.dynamics.trajectory import Launch, crossing_times, truth_table
 from cadra.facility import Facility, load_facility
 from cadra.io import units
@@ -278,16 +284,11 @@ def aim_launch(launch: Launch, rigid: RigidBody, program, params, x_first: float
 
 def rigid_body(spec: ShotSpec, body: Body | None = None) -> RigidBody:
     """The dynamics' view of the shot: mass properties in body axes, air, effects."""
-    atm = Atmosphere.from_pt(spec.pressure_pa, spec.temperature_k)
     body = body or body_from_spec(spec.model)
-    return RigidBody(
-        mass_kg=spec.mass_kg,
-        inertia_body_kg_m2=model_to_body_inertia(np.asarray(spec.inertia_model_kg_m2)),
-        d_m=body.diameter_m,
-        cg_from_ref_body_m=model_to_body_vector(np.asarray(spec.cg_model_m)),
-        density_kg_m3=atm.density, speed_of_sound_m_s=atm.speed_of_sound,
-        viscosity_pa_s=atm.viscosity, effects=spec.effects,
-    )
+    return rigid_body_from_mass(spec.mass_kg, spec.cg_model_m, spec.inertia_model_kg_m2,
+                                body.diameter_m,
+                                Atmosphere.from_pt(spec.pressure_pa, spec.temperature_k),
+                                spec.effects)
 
 
 @dataclass(frozen=True)

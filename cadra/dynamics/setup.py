@@ -125,6 +125,22 @@ class RigidBody:
         return -(self.cg_from_ref_body_m + np.asarray(self.effects.cg_offset_body_m))
 
 
+def rigid_body_from_mass(mass_kg: float, cg_model_m, inertia_model_kg_m2, d_m: float,
+                         atmosphere, effects: Effects | None = None) -> RigidBody:
+    """A :class:`RigidBody` from mass properties in MODEL axes (as shot files and specs give
+    them; docs/conventions.md) and a :class:`cadra.atmosphere.Atmosphere`."""
+    from cadra.conventions import model_to_body_inertia, model_to_body_vector
+
+    return RigidBody(
+        mass_kg=float(mass_kg),
+        inertia_body_kg_m2=model_to_body_inertia(np.asarray(inertia_model_kg_m2, dtype=float)),
+        d_m=float(d_m),
+        cg_from_ref_body_m=model_to_body_vector(np.asarray(cg_model_m, dtype=float)),
+        density_kg_m3=atmosphere.density, speed_of_sound_m_s=atmosphere.speed_of_sound,
+        viscosity_pa_s=atmosphere.viscosity, effects=effects or Effects(),
+    )
+
+
 def state_from_reference(r_ref_F, v_F, q, rates_body, ref_from_cg_body_m) -> np.ndarray:
     """13-state from the reference-point position (what images show), cg velocity, attitude
     quaternion (B->E) and body rates: ``r_cg = r_ref - R_FB @ ref_from_cg``."""

@@ -1,0 +1,213 @@
+"""Stage two's input: one shot's measurements and physics as plain data.
+
+:class:`ShotData` holds what the fit needs of a shot and nothing else: the rigid body and air
+(:class:`cadra.dynamics.setup.RigidBody`), the spark times and the measured reference point and
+nose-axis inclinations with their sigmas, SI. It is a frozen dataclass of numpy arrays, so a
+scheduler can ship it. :func:`load_shot_data` builds it from a shot file and a trajectory
+measurement file (stage one's output) and refuses pairs that do not belong together;
+:func:`shot_data_from_truth` builds it from a simulated shot's exact truth plus seeded noise
+(tests, benchmarks, Monte Carlo).
+
+Channels (columns of ``meas`` and ``sigma``), in this order: :data:`CHANNELS`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cadra.atmosphere import Atmosphere
+from cadra.body import body_from_spec
+from cadra.dynamics.effects import Effects
+from cadra.dynamics.setup import RigidBody, rigid_body_from_mass
+
+#: measured channels, SI (m, m, m, rad, rad)
+CHANNELS = ("x", "y", "z", "theta", "psi")
+CHANNEL_UNITS = ("m", "m", "m", "rad", "rad")
+N_CHANNELS = len(CHANNELS)
+#: typical film-range measurement noise (seed 004 era): 0.1 mm, 0.1 deg, 10 ns
+FILM_SIGMAS = {"position_m": 1e-4, "angle_rad": math.radians(0.1), "time_s": 1e-8}
+
+
+class FitDataError(ValueError):
+    """Stage-two input that cannot be right; the message names the file and what is wrong."""
+
+
+@dataclass(frozen=True, eq=False)
+class ShotData:
+    """One shot's measurements for stage two (SI).
+
+    Attributes
+    ----------
+    shot_id : e.g. ``"M2-2429"``.
+    rigid : mass properties, air and effects of the shot (the dynamics' view).
+    body_kind : ``"sphere"``, ``"capsule"`` or ``"cone"``.
+    stations : (n,) station ids of the measured stations.
+    t_s : (n,) spark times, s.
+    meas : (n, 5) measured x, y, z (m, reference point, facility frame) and theta, psi (rad);
+        NaN where not measured (a sphere's angles, a failed channel).
+    sigma : (n, 5) 1-sigma of ``meas`` (same units), timing included (see ``sigma_t_s``).
+    sigma_t_s : timing sigma, s, already folded into ``sigma`` (x as V sigma_t).
+    source : where the data came from (paths or "simulated").
+    """
+
+    shot_id: str
+    rigid: RigidBody
+    body_kind: str
+    stations: np.ndarray
+    t_s: np.ndarray
+    meas: np.ndarray
+    sigma: np.ndarray
+    sigma_t_s: float = 0.0
+    source: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        n = len(self.t_s)
+        for name, shape in (("stations", (n,)), ("meas", (n, N_CHANNELS)),
+                            ("sigma", (n, N_CHANNELS))):
+            if np.shape(getattr(self, name)) != shape:
+                raise FitDataError(f"{self.shot_id}: {name} must have shape {shape}, "
+                                   f"got {np.shape(getattr(self, name))}")
+        if not np.all(np.isfinite(self.t_s)) or np.any(np.diff(self.t_s) <= 0):
+            raise FitDataError(f"{self.shot_id}: spark times must be finite and increasing")
+        bad = np.isfinite(self.meas) & ~(np.isfinite(self.sigma) & (self.sigma > 0))
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise FitDataError(f"{self.shot_id}: station {self.stations[i]} channel "
+                               f"{CHANNELS[j]}: a measurement without a positive sigma")
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(n, 5) True where a channel was measured."""
+        return np.isfinite(self.meas)
+
+    @property
+    def n_observations(self) -> int:
+        return int(self.mask.sum())
+
+    @property
+    def epoch_index(self) -> int:
+        """Index of the station whose time is the fit's epoch (the middle one)."""
+        return len(self.t_s) // 2
+
+    @property
+    def has_angles(self) -> bool:
+        return bool(self.mask[:, 3:].any())
+
+    def with_effects(self, effects: Effects) -> ShotData:
+        return replace(self, rigid=self.rigid.with_effects(effects))
+
+
+def rigid_body_from_shot(shot, effects: Effects | None = None) -> RigidBody:
+    """The dynamics' view of a :class:`cadra.io.shotfile.ShotFile` (mass properties, air)."""
+    body = body_from_spec(shot.model)
+    return rigid_body_from_mass(shot.mass.mass_kg, shot.mass.cg_model_m,
+                                shot.mass.inertia_model_kg_m2, body.diameter_m,
+                                Atmosphere.from_pt(shot.pressure_pa, shot.temperature_k),
+                                effects)
+
+
+def _fold_timing(t_s, meas, sigma, sigma_t_s):
+    """x sigma with the timing error V sigma_t added in quadrature (V from the data)."""
+    if sigma_t_s <= 0:
+        return sigma
+    sigma = sigma.copy()
+    ok = np.isfinite(meas[:, 0])
+    if ok.sum() >= 2:
+        V = abs(np.polyfit(t_s[ok], meas[ok, 0], 1)[0])
+        sigma[:, 0] = np.hypot(sigma[:, 0], V * sigma_t_s)
+    return sigma
+
+
+def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathLike, *,
+                   sigma_t_s: float = 0.0, min_sigma: dict | None = None,
+                   effects: Effects | None = None) -> ShotData:
+    """A shot's measurements from its shot file and a trajectory measurement file.
+
+    Stations whose status is ``failed`` are left out; a NaN value or sigma masks that channel.
+    ``min_sigma`` (``{"position_m": .., "angle_rad": ..}``) floors the stage-one sigmas (for
+    an analyst who does not trust them below some level). Raises :class:`FitDataError` when
+    the files do not belong together: another shot id, a station the shot does not have, or a
+    spark time that differs from the shot file's.
+    """
+    from cadra.io.shotfile import ShotFileError, load_shot
+    from cadra.io.trajectory import TrajectoryFileError, load_trajectory
+
+    try:
+        shot = load_shot(shot_path)
+    except (ShotFileError, OSError) as exc:
+        raise FitDataError(f"{shot_path}: {exc}") from None
+    try:
+        traj = load_trajectory(trajectory_path)
+    except (TrajectoryFileError, FileNotFoundError) as exc:
+        raise FitDataError(str(exc)) from None
+    tid = traj.meta.get("shot_id")
+    if tid is not None and tid != shot.shot_id:
+        raise FitDataError(f"{trajectory_path}: measurements of shot {tid!r}, but the shot file "
+                           f"{shot_path} is shot {shot.shot_id!r}: they do not belong together")
+    table = traj.measured
+    shot_times = {rec.station: rec.time_s for rec in shot.stations}
+    unknown = sorted(set(table["station"]) - set(shot_times))
+    if unknown:
+        raise FitDataError(f"{trajectory_path}: station(s) {unknown} are not in the shot file "
+                           f"{shot_path} (stations {sorted(shot_times)})")
+    for st, t in zip(table["station"], table["t_s"], strict=True):
+        if not math.isclose(t, shot_times[st], rel_tol=0, abs_tol=1e-9):
+            raise FitDataError(f"{trajectory_path}: station {st} time {t} s differs from the "
+                               f"shot file's {shot_times[st]} s: the files do not belong together")
+    table = table.sort_values("t_s")
+    meas = table[["x_m", "y_m", "z_m", "theta_rad", "psi_rad"]].to_numpy(float)
+    sigma = table[["sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_rad",
+                   "sigma_psi_rad"]].to_numpy(float)
+    if min_sigma:
+        sigma[:, :3] = np.fmax(sigma[:, :3], min_sigma.get("position_m", 0.0))
+        sigma[:, 3:] = np.fmax(sigma[:, 3:], min_sigma.get("angle_rad", 0.0))
+    bad = ~np.isfinite(sigma) | ~(sigma > 0)
+    meas = np.where(bad, np.nan, meas)
+    t_s = table["t_s"].to_numpy(float)
+    kind = body_from_spec(shot.model).kind
+    return ShotData(
+        shot_id=shot.shot_id, rigid=rigid_body_from_shot(shot, effects), body_kind=kind,
+        stations=table["station"].to_numpy(int), t_s=t_s, meas=meas,
+        sigma=_fold_timing(t_s, meas, sigma, sigma_t_s), sigma_t_s=float(sigma_t_s),
+        source={"shot_file": str(Path(shot_path)), "trajectory_file": str(trajectory_path)})
+
+
+def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, body_kind: str, *,
+                         sigma_position_m: float, sigma_angle_rad: float,
+                         sigma_t_s: float = 0.0, rng: np.random.Generator | None = None,
+                         angles: bool | None = None) -> ShotData:
+    """Measurements made from a simulated shot's exact truth (``truth.csv`` columns).
+
+    With ``rng`` the measurements get Gaussian noise of the given sigmas, and the spark times
+    a timing error of ``sigma_t_s`` (the data then carry times that are off, as real ones are);
+    without it they are exact (noise-free tests) but still carry the sigmas as weights.
+    ``angles=False`` drops theta and psi (a sphere shows none); default: not for a sphere.
+    """
+    n = len(truth)
+    meas = truth[["x_m", "y_m", "z_m", "theta_deg", "psi_deg"]].to_numpy(float).copy()
+    meas[:, 3:] = np.radians(meas[:, 3:])
+    t_s = truth["t_s"].to_numpy(float).copy()
+    sigma = np.empty((n, N_CHANNELS))
+    sigma[:, :3] = sigma_position_m
+    sigma[:, 3:] = sigma_angle_rad
+    if angles is None:
+        angles = body_kind != "sphere"
+    if not angles:
+        meas[:, 3:] = np.nan
+    stations = truth["station"].to_numpy(int)
+    if rng is not None:
+        meas = meas + rng.standard_normal(meas.shape) * sigma
+        if sigma_t_s > 0:
+            t_s = t_s + rng.standard_normal(n) * sigma_t_s
+            order = np.argsort(t_s)
+            t_s, meas, stations = t_s[order], meas[order], stations[order]
+    return ShotData(shot_id=shot_id, rigid=rigid, body_kind=body_kind,
+                    stations=stations, t_s=t_s, meas=meas,
+                    sigma=_fold_timing(t_s, meas, sigma, sigma_t_s), sigma_t_s=sigma_t_s,
+                    source={"origin": "simulated truth" + (" + noise" if rng else "")})

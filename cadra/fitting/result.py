@@ -1,0 +1,334 @@
+"""The result of a stage-two fit: values, uncertainties, identifiability, residuals.
+
+:class:`FitResult` is a frozen dataclass. Its ``status`` says whether it is a result at all
+(``converged``) or the best point a failed fit reached (``max_iterations``, ``stalled``,
+``failed``); ``bool(result)`` is True only for a converged fit, so a failed estimate cannot be
+mistaken for one.
+
+Uncertainties (docs/fitting.md, "Uncertainties"):
+
+- ``covariance``: ``(J^T W J)^-1`` with W the measurement weights 1/sigma^2 -- honest when
+  the sigmas are (stage one's are, within 0.87-0.99; film-era sigmas are the analyst's).
+- ``covariance_coloured``: the sandwich estimate of Morelli & Klein (AIAA 95-3499) for
+  coloured residuals, ``N^-1 (sum_ij J_i^T R(i-j) J_j) N^-1`` with the residual
+  autocorrelation R estimated per shot and channel over station lags, Bartlett-tapered
+  (Newey-West) so it stays positive semi-definite.
+- ``sigma_scaled``: the plain sigmas times sqrt(chi^2 / dof) when that exceeds 1.
+
+Identifiability: the normal matrix in correlation form is eigen-decomposed; each direction
+whose eigenvalue is below ``IDENT_RCOND`` of the largest is reported with the parameters it
+mixes and a suggestion of which to hold.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from cadra.aero import AeroModel
+from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.sensitivity import LOCAL_NAMES
+
+#: eigenvalue ratio (correlation form of the normal matrix) below which a direction is reported
+#: as not determined by the data
+IDENT_RCOND = 1e-8
+#: |correlation| above which a pair of parameters is reported
+CORRELATION_REPORT = 0.95
+
+
+@dataclass(frozen=True, eq=False)
+class ShotFit:
+    """One shot's fitted initial state (at its epoch ``t0_s``) and fit statistics."""
+
+    shot_id: str
+    t0_s: float
+    state: np.ndarray                # (13,) cg position, velocity, quaternion, body rates
+    local_free: tuple[str, ...]
+    local_sigma: np.ndarray          # (12,) sigma of LOCAL_NAMES (NaN where held)
+    chi2: float
+    n_observations: int
+    rms: dict                        # channel -> rms residual (SI)
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """Outcome of :func:`cadra.fitting.solver.fit` (see module doc)."""
+
+    status: str
+    message: str
+    model: AeroModel                 # the model with fitted values (vary/bounds as given)
+    aero_names: tuple[str, ...]      # free aerodynamic parameters
+    aero_values: np.ndarray
+    aero_sigma: np.ndarray
+    shots: tuple[ShotFit, ...]
+    param_names: tuple[str, ...]     # order of the covariance matrices
+    covariance: np.ndarray
+    covariance_coloured: np.ndarray
+    chi2: float
+    n_observations: int
+    n_free: int
+    iterations: int
+    history: tuple[float, ...]
+    residuals: pd.DataFrame
+    near_singular: tuple[dict, ...]
+    warnings: tuple[str, ...]
+    elapsed_s: float
+    options: dict = field(default_factory=dict)
+
+    def __bool__(self) -> bool:
+        return self.status == "converged"
+
+    @property
+    def converged(self) -> bool:
+        return self.status == "converged"
+
+    @property
+    def dof(self) -> int:
+        return self.n_observations - self.n_free
+
+    @property
+    def reduced_chi2(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else math.nan
+
+    @property
+    def aero_sigma_coloured(self) -> np.ndarray:
+        na = len(self.aero_names)
+        return np.sqrt(np.maximum(np.diag(self.covariance_coloured)[:na], 0.0))
+
+    @property
+    def aero_sigma_scaled(self) -> np.ndarray:
+        return self.aero_sigma * math.sqrt(max(1.0, self.reduced_chi2 if self.dof > 0 else 1))
+
+    def correlation(self, coloured: bool = False) -> np.ndarray:
+        C = self.covariance_coloured if coloured else self.covariance
+        d = np.sqrt(np.maximum(np.diag(C), 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            R = C / np.outer(d, d)
+        R[~np.isfinite(R)] = 0.0
+        return R
+
+    def value(self, name: str) -> float:
+        return self.model.parameter(name).value
+
+    def sigma(self, name: str) -> float:
+        return float(self.aero_sigma[self.aero_names.index(name)])
+
+    def rms(self) -> dict:
+        """Residual rms per channel over all shots (SI)."""
+        out = {}
+        for ch in CHANNELS:
+            r = self.residuals.loc[self.residuals["channel"] == ch, "residual"]
+            out[ch] = float(np.sqrt(np.mean(r**2))) if len(r) else math.nan
+        return out
+
+    def coefficient_table(self) -> pd.DataFrame:
+        """Seed 004 Table 4 layout: one row per coefficient, its form, A1..A6 with sigma."""
+        return coefficient_table(self.model, dict(zip(self.aero_names, self.aero_sigma,
+                                                      strict=True)))
+
+    def high_correlations(self, threshold: float = CORRELATION_REPORT) -> list[tuple]:
+        R = self.correlation()
+        out = []
+        for i in range(len(self.param_names)):
+            for j in range(i + 1, len(self.param_names)):
+                if abs(R[i, j]) >= threshold:
+                    out.append((self.param_names[i], self.param_names[j], float(R[i, j])))
+        return out
+
+
+_AK = re.compile(r"^(?P<coef>[A-Za-z]+)_A(?P<k>\d+)$")
+
+
+def coefficient_table(model: AeroModel, sigmas: dict | None = None) -> pd.DataFrame:
+    """Table 4 layout of a model: coefficient, form, A1..A6 (value, sigma, held).
+
+    Parameters named ``<coef>_A<k>`` fill the A columns; the others (``M_ref``,
+    ``alpha_ref``) are listed in column ``other``.
+    """
+    sigmas = sigmas or {}
+    rows = []
+    for coef, form in model.coefficients.items():
+        row = {"coefficient": coef, "form": " ".join(form.split())}
+        other = []
+        for name in model.parameters_in(coef):
+            p = model.parameter(name)
+            m = _AK.match(name)
+            if m and m.group("coef") == coef and 1 <= int(m.group("k")) <= 9:
+                k = int(m.group("k"))
+                row[f"A{k}"] = p.value
+                row[f"A{k}_sigma"] = sigmas.get(name, math.nan)
+                row[f"A{k}_held"] = not p.vary
+            else:
+                v = p.file_value
+                other.append(f"{name} = {v:g}{' ' + p.unit if p.unit else ''}"
+                             f"{' (held)' if not p.vary else ''}")
+        row["other"] = "; ".join(other)
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    cols = ["coefficient", "form"]
+    for k in range(1, 10):
+        if f"A{k}" in table:
+            cols += [f"A{k}", f"A{k}_sigma", f"A{k}_held"]
+    cols.append("other")
+    return table.loc[:, cols]
+
+
+def _coloured_middle(per_shot_blocks) -> np.ndarray:
+    """Sum over shots and channels of J^T R(i-j) J (Bartlett-tapered residual autocovariance)."""
+    total = None
+    for J, r, chan in per_shot_blocks:
+        P = J.shape[1]
+        M = np.zeros((P, P))
+        for c in np.unique(chan):
+            sel = chan == c
+            Jc, rc = J[sel], r[sel]
+            n = rc.size
+            L = max(2, n // 4)
+            Z = Jc * rc[:, None]                 # score contributions
+            M += Z.T @ Z
+            for lag in range(1, min(L, n - 1) + 1):
+                w = 1.0 - lag / (L + 1.0)
+                G = Z[lag:].T @ Z[:-lag]
+                M += w * (G + G.T)
+        total = M if total is None else total + M
+    return total
+
+
+def _pinv_sym(N: np.ndarray, rcond: float) -> np.ndarray:
+    d = np.sqrt(np.maximum(np.diag(N), 0.0))
+    d[d == 0] = 1.0
+    Ns = N / np.outer(d, d)
+    w, V = np.linalg.eigh(0.5 * (Ns + Ns.T))
+    top = max(float(w[-1]), 0.0) if w.size else 0.0
+    keep = w > rcond * top if top > 0 else np.zeros_like(w, dtype=bool)
+    inv = np.zeros_like(w)
+    inv[keep] = 1.0 / w[keep]
+    return (V * inv) @ V.T / np.outer(d, d)
+
+
+def _near_singular(N: np.ndarray, names: list[str], n_aero: int) -> list[dict]:
+    d = np.sqrt(np.maximum(np.diag(N), 0.0))
+    out = []
+    zero = np.flatnonzero(d == 0)
+    for i in zero:
+        out.append({"ratio": 0.0, "parameters": {names[i]: 1.0},
+                    "hold": names[i],
+                    "text": f"{names[i]} has no effect on any measurement: hold it"})
+    d[d == 0] = 1.0
+    Ns = N / np.outer(d, d)
+    w, V = np.linalg.eigh(0.5 * (Ns + Ns.T))
+    top = max(float(w[-1]), 1e-300)
+    for k in range(len(w)):
+        if w[k] >= IDENT_RCOND * top:
+            break
+        v = V[:, k]
+        if np.any(np.abs(v[zero]) > 0.99):
+            continue
+        order = np.argsort(-np.abs(v))
+        parts = {names[i]: float(v[i]) for i in order if abs(v[i]) >= 0.2}
+        aero_parts = [i for i in order if i < n_aero and abs(v[i]) >= 0.2]
+        hold = names[aero_parts[0]] if aero_parts else names[order[0]]
+        mix = " + ".join(f"{v[i]:+.2f} {names[i]}" for i in order[:4] if abs(v[i]) >= 0.2)
+        out.append({"ratio": float(w[k] / top), "parameters": parts, "hold": hold,
+                    "text": (f"the data do not separate {mix} (eigenvalue ratio "
+                             f"{w[k] / top:.1e}): hold {hold} (or add shots that excite it)")})
+    return out
+
+
+def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, states,
+                 aero_idx: np.ndarray, status: str, message: str, history, warnings,
+                 iterations: int, t_start: float, options, lam) -> FitResult:
+    """Assemble the :class:`FitResult` at the solver's final point (see module doc)."""
+    na = aero_idx.size
+    names_aero = [model.parameters[i].name for i in aero_idx]
+    fitted = model.with_values({n: float(params[i]) for n, i in zip(names_aero, aero_idx,
+                                                                    strict=True)})
+    names = list(names_aero)
+    offsets = []
+    for st in states:
+        offsets.append(len(names))
+        names += [f"{st.data.shot_id}:{LOCAL_NAMES[k]}" for k in st.local_free]
+    P = len(names)
+    N = np.zeros((P, P))
+    blocks = []
+    rows = []
+    shot_fits = []
+    chi2_total = 0.0
+    n_obs = 0
+    have_jac = all(st.jac is not None for st in states)
+    for st, off in zip(states, offsets, strict=True):
+        sd = st.data
+        pred = st.pred if st.pred is not None else np.full(sd.meas.shape, np.nan)
+        res = sd.meas - pred
+        nl = st.local_free.size
+        if have_jac:
+            Jfull = np.zeros((int(st.mask.sum()), P))
+            Jw = st.jac[st.mask] / sd.sigma[st.mask][:, None]
+            Jfull[:, :na] = Jw[:, nl:nl + na]
+            Jfull[:, off:off + nl] = Jw[:, :nl]
+            N += Jfull.T @ Jfull
+            chan = np.nonzero(st.mask)[1]
+            blocks.append((Jfull, (res / sd.sigma)[st.mask], chan))
+        chi2_shot = float(np.nansum(((res / sd.sigma)[st.mask]) ** 2))
+        chi2_total += chi2_shot
+        n_obs += int(st.mask.sum())
+        rms = {}
+        for j, ch in enumerate(CHANNELS):
+            sel = st.mask[:, j]
+            rms[ch] = float(np.sqrt(np.mean(res[sel, j] ** 2))) if sel.any() else math.nan
+        for i in range(len(sd.t_s)):
+            for j, ch in enumerate(CHANNELS):
+                if st.mask[i, j]:
+                    rows.append({"shot_id": sd.shot_id, "station": int(sd.stations[i]),
+                                 "t_s": float(sd.t_s[i]), "channel": ch,
+                                 "measured": float(sd.meas[i, j]), "fitted": float(pred[i, j]),
+                                 "sigma": float(sd.sigma[i, j]), "residual": float(res[i, j]),
+                                 "normalized": float(res[i, j] / sd.sigma[i, j])})
+        shot_fits.append((st, off, chi2_shot, rms))
+    n_free = P
+    if have_jac and P:
+        cov = _pinv_sym(N, options.rcond)
+        middle = _coloured_middle(blocks)
+        cov_c = cov @ middle @ cov
+        near = _near_singular(N, names, na)
+    else:
+        cov = np.full((P, P), np.nan)
+        cov_c = cov.copy()
+        near = []
+    sig = np.sqrt(np.maximum(np.diag(cov), 0.0)) if P else np.zeros(0)
+    undetermined = {d["hold"] for d in near}
+    for i, name in enumerate(names):
+        if name in undetermined:
+            sig[i] = math.inf
+    fits = []
+    for st, off, chi2_shot, rms in shot_fits:
+        ls = np.full(len(LOCAL_NAMES), np.nan)
+        ls[st.local_free] = sig[off:off + st.local_free.size]
+        fits.append(ShotFit(shot_id=st.data.shot_id, t0_s=st.t0, state=st.y_nom.copy(),
+                            local_free=tuple(LOCAL_NAMES[k] for k in st.local_free),
+                            local_sigma=ls, chi2=chi2_shot, n_observations=int(st.mask.sum()),
+                            rms=rms))
+    warnings = list(warnings)
+    for i, n in zip(aero_idx, names_aero, strict=True):
+        p = model.parameters[i]
+        v = params[i]
+        if v <= p.min or v >= p.max:
+            warnings.append(f"{n} = {v:g} is at a bound [{p.min:g}, {p.max:g}]")
+    for d in near:
+        warnings.append(d["text"])
+    return FitResult(
+        status=status, message=message, model=fitted, aero_names=tuple(names_aero),
+        aero_values=np.array([params[i] for i in aero_idx], dtype=float),
+        aero_sigma=sig[:na].copy(), shots=tuple(fits), param_names=tuple(names),
+        covariance=cov, covariance_coloured=cov_c, chi2=chi2_total, n_observations=n_obs,
+        n_free=n_free, iterations=iterations, history=tuple(history),
+        residuals=pd.DataFrame(rows), near_singular=tuple(near), warnings=tuple(warnings),
+        elapsed_s=time.perf_counter() - t_start,
+        options={"max_iterations": options.max_iterations,
+                 "step_tol_sigma": options.step_tol_sigma,
+                 "integration": options.integration.__dict__, "final_lambda": lam})

@@ -1,0 +1,176 @@
+"""Predicted measurements and their exact sensitivities (complex step) for stage two.
+
+The fitter predicts what stage one measured with the simulator's own code: the 6-DOF
+equations and aero-model evaluator (:mod:`cadra.dynamics`, :mod:`cadra.aero`) integrated by
+:func:`cadra.dynamics.integrate.propagate_adaptive`, and the observation model
+:func:`cadra.dynamics.observe.observe` (reference point seen from the cg, axis inclinations).
+
+Sensitivities are complex-step derivatives: each free unknown gets one complex propagation
+with ``i * EPS`` added to it; ``Im(prediction) / EPS`` is its Jacobian column, exact to
+rounding (no step-size trade-off), and the real part of any run is the prediction itself.
+The runs are shared out over threads (the compiled integrator releases the GIL).
+
+Per-shot unknowns (the *local* parameters, :data:`LOCAL_NAMES`) are corrections to a nominal
+state at the shot's epoch: cg position and velocity (facility frame F), a small rotation of the
+attitude about the body axes (rotation vector, rad; applied multiplicatively), and body rates.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from cadra.dynamics.integrate import propagate_batch
+from cadra.dynamics.layout import N_STATE
+from cadra.dynamics.observe import observe
+from cadra.dynamics.setup import plane_code
+
+#: the 12 per-shot unknowns, in order
+LOCAL_NAMES = ("x_cg_m", "y_cg_m", "z_cg_m", "vx_m_s", "vy_m_s", "vz_m_s",
+               "rot_x_rad", "rot_y_rad", "rot_z_rad", "p_rad_s", "q_rad_s", "r_rad_s")
+N_LOCAL = len(LOCAL_NAMES)
+#: complex-step size (any tiny value gives the same derivative to rounding)
+EPS = 1e-20
+
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=max(1, os.cpu_count() or 1),
+                                   thread_name_prefix="cadra-propagate")
+    return _POOL
+
+
+@dataclass(frozen=True)
+class Integration:
+    """Integrator settings of the fit (docs/fitting.md, "Integration").
+
+    ``tol_position_m`` and ``tol_angle_rad`` bound the local error of each step; 1e-8 keeps the
+    whole-shot error below ~0.002 um and 1e-6 deg on seed 004's shots, Table 4's kinks
+    included (docs/dynamics.md), far below what stage one measures.
+    """
+
+    h_max_s: float = 2e-3
+    tol_position_m: float = 1e-8
+    tol_angle_rad: float = 1e-8
+    threads: int = 0        # 0: all cores
+
+    def __post_init__(self):
+        for k in ("h_max_s", "tol_position_m", "tol_angle_rad"):
+            if not getattr(self, k) > 0:
+                raise ValueError(f"integration.{k} must be positive")
+
+
+def quat_mul(a, b):
+    """Hamilton product of quaternions (w, x, y, z); complex-safe."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw])
+
+
+def rotvec_quat(v) -> np.ndarray:
+    """Unit quaternion of the rotation vector ``v`` (rad)."""
+    v = np.asarray(v, dtype=float)
+    a = float(np.linalg.norm(v))
+    if a < 1e-300:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate([[np.cos(a / 2)], np.sin(a / 2) * v / a])
+
+
+def apply_local(y_nom: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The state ``y_nom`` corrected by the 12 local unknowns ``u`` (real)."""
+    y = np.array(y_nom, dtype=float)
+    y[0:6] += u[0:6]
+    q = quat_mul(y_nom[6:10], rotvec_quat(u[6:9]))
+    y[6:10] = q / np.linalg.norm(q)
+    y[10:13] += u[9:12]
+    return y
+
+
+def observables(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> np.ndarray:
+    """(..., 5) predicted x, y, z, theta, psi from (..., 13) states."""
+    shape = states.shape[:-1]
+    o = observe(states.reshape(-1, N_STATE), ref_from_cg_body_m)
+    out = np.stack([o["x_m"], o["y_m"], o["z_m"], o["theta_rad"], o["psi_rad"]], axis=-1)
+    return out.reshape(*shape, 5)
+
+
+def _run(Y0, t0, times, PHYS, program, PARAMS, integ: Integration) -> np.ndarray:
+    """States (m, n, 13) of m runs, shared out over the thread pool."""
+    m = Y0.shape[0]
+    OUT = np.empty((m, len(times), N_STATE), dtype=Y0.dtype)
+    plane = plane_code(program.angle_plane)
+    workers = integ.threads or (os.cpu_count() or 1)
+    chunks = [c for c in np.array_split(np.arange(m), min(workers, m)) if c.size]
+
+    def job(idx):
+        sl = slice(int(idx[0]), int(idx[-1]) + 1)
+        out = np.empty((idx.size, len(times), N_STATE), dtype=Y0.dtype)
+        propagate_batch(Y0[sl], float(t0), times, integ.h_max_s, integ.tol_position_m,
+                        integ.tol_angle_rad, PHYS[sl], program.ops, program.args,
+                        program.starts, PARAMS[sl], plane, int(program.stack_size), out)
+        OUT[sl] = out
+
+    if len(chunks) == 1:
+        job(chunks[0])
+    else:
+        for f in [_pool().submit(job, c) for c in chunks]:
+            f.result()
+    return OUT
+
+
+def predict(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray, program,
+            params: np.ndarray, ref_from_cg_body_m: np.ndarray,
+            integ: Integration = Integration()) -> np.ndarray:
+    """Predicted (n, 5) measurements at ``times`` from state ``y0`` at epoch ``t0``."""
+    times = np.ascontiguousarray(times, dtype=float)
+    states = _run(np.asarray(y0, float)[None, :], t0, times, np.asarray(phys, float)[None, :],
+                  program, np.asarray(params, float)[None, :], integ)[0]
+    return observables(states, ref_from_cg_body_m)
+
+
+def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,
+                          program, params: np.ndarray, ref_from_cg_body_m: np.ndarray,
+                          local_free: np.ndarray, aero_free: np.ndarray,
+                          integ: Integration = Integration()) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction (n, 5) and Jacobian (n, 5, n_local + n_aero) by complex step.
+
+    ``local_free`` are indices into :data:`LOCAL_NAMES` (corrections at ``y0``),
+    ``aero_free`` indices into ``params``. Columns: local ones first, then aero ones.
+    """
+    local_free = np.asarray(local_free, dtype=int)
+    aero_free = np.asarray(aero_free, dtype=int)
+    m = local_free.size + aero_free.size
+    if m == 0:
+        return predict(y0, t0, times, phys, program, params, ref_from_cg_body_m, integ), \
+            np.zeros((len(times), 5, 0))
+    times = np.ascontiguousarray(times, dtype=float)
+    Y0 = np.tile(np.asarray(y0, dtype=np.complex128), (m, 1))
+    PARAMS = np.tile(np.asarray(params, dtype=np.complex128), (m, 1))
+    PHYS = np.tile(np.asarray(phys, dtype=np.complex128), (m, 1))
+    q = np.asarray(y0[6:10], dtype=float)
+    for row, k in enumerate(local_free):
+        if k < 6:
+            Y0[row, k] += 1j * EPS
+        elif k < 9:
+            e = np.zeros(4, dtype=np.complex128)
+            e[0] = 1.0
+            e[1 + k - 6] = 0.5j * EPS
+            Y0[row, 6:10] = quat_mul(q, e)
+        else:
+            Y0[row, 10 + k - 9] += 1j * EPS
+    for row, j in enumerate(aero_free, start=local_free.size):
+        PARAMS[row, j] += 1j * EPS
+    states = _run(Y0, t0, times, PHYS, program, PARAMS, integ)
+    obs = observables(states, ref_from_cg_body_m)          # (m, n, 5) complex
+    pred = obs[0].real.copy()
+    jac = np.moveaxis(obs.imag / EPS, 0, -1)                # (n, 5, m)
+    return pred, np.ascontiguousarray(jac)

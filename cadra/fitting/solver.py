@@ -1,0 +1,325 @@
+"""Least-squares differential correction: Levenberg-Marquardt on the block-arrow normal equations.
+
+Unknowns: the free aerodynamic parameters (shared by every shot of a multi-fit) and each shot's
+free local unknowns (corrections to its state at the epoch; :mod:`cadra.fitting.sensitivity`).
+The Jacobian of a multi-shot fit is block-arrow shaped (seed 003's global fit): shot k's
+residuals depend on its own local unknowns and on the shared ones only, so the normal matrix is
+
+    [ A_1           B_1 ]     A_k = J_k^T J_k      (local x local, 12 x 12)
+    [      A_2      B_2 ]     B_k = J_k^T G_k      (local x shared)
+    [           ... ... ]     C   = sum G_k^T G_k  (shared x shared)
+    [ B_1^T B_2^T ... C ]
+
+and each step is solved through the Schur complement ``S = C - sum B_k^T A_k^-1 B_k`` (cost
+linear in the number of shots). Columns are scaled to unit norm (Marquardt's scaling) and the
+damping is ``lambda I`` in scaled space. Every solve goes through an eigen-decomposition with
+a relative cut-off, so a singular matrix (parameters the data cannot separate) never raises:
+the step leaves those directions alone and the result names them
+(:mod:`cadra.fitting.result`).
+
+Pure function over plain data: :func:`fit` takes :class:`cadra.fitting.data.ShotData` s and an
+:class:`cadra.aero.AeroModel` and returns a :class:`cadra.fitting.result.FitResult`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cadra.aero import AeroModel
+from cadra.fitting.data import ShotData
+from cadra.fitting.sensitivity import (
+    LOCAL_NAMES,
+    N_LOCAL,
+    Integration,
+    apply_local,
+    predict,
+    predict_with_jacobian,
+)
+
+#: statuses of a fit; only the first counts as a result
+STATUSES = ("converged", "max_iterations", "stalled", "failed")
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Convergence control of :func:`fit`.
+
+    A fit has converged when the Gauss-Newton step it would still take changes the parameters
+    by less than ``step_tol_sigma`` of their standard deviations (that is, chi^2 by less than
+    ``step_tol_sigma**2``, scaled by the reduced chi^2 when that exceeds 1).
+    """
+
+    max_iterations: int = 60
+    step_tol_sigma: float = 1e-2
+    noise_tol_sigma: float = 0.1         # see the "stalled" rule in :func:`fit`
+    lambda_start: float = 1e-3
+    lambda_max: float = 1e12
+    rcond: float = 1e-12                 # eigenvalue cut-off of every solve (relative)
+    integration: Integration = field(default_factory=Integration)
+    progress: bool = False
+
+
+@dataclass
+class _ShotState:
+    data: ShotData
+    y_nom: np.ndarray            # (13,) state at the epoch
+    local_free: np.ndarray       # indices into LOCAL_NAMES
+    t0: float
+    phys: np.ndarray
+    ref: np.ndarray
+    mask: np.ndarray             # (n, 5)
+    pred: np.ndarray | None = None
+    jac: np.ndarray | None = None
+
+
+def default_local_free(data: ShotData) -> np.ndarray:
+    """Free local unknowns of a shot: all 12, or position and velocity only for a shot with
+    no angle measurements (a sphere: its attitude and rates are not observed)."""
+    return np.arange(N_LOCAL) if data.has_angles else np.arange(6)
+
+
+def _weighted(st: _ShotState, pred: np.ndarray) -> np.ndarray:
+    r = (st.data.meas - pred) / st.data.sigma
+    return r[st.mask]
+
+
+def _chi2(states: list[_ShotState], preds: list[np.ndarray]) -> float:
+    total = 0.0
+    for st, p in zip(states, preds, strict=True):
+        r = _weighted(st, p)
+        if not np.all(np.isfinite(r)):
+            return math.inf
+        total += float(r @ r)
+    return total
+
+
+def _psolve(M: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
+    """Solve the symmetric system M x = b by eigen-decomposition, dropping directions whose
+    eigenvalue is below ``rcond`` times the largest (never raises on a singular matrix)."""
+    if M.size == 0:
+        return np.zeros_like(b)
+    w, V = np.linalg.eigh(0.5 * (M + M.T))
+    top = max(float(w[-1]), 0.0)
+    keep = w > rcond * top if top > 0 else np.zeros_like(w, dtype=bool)
+    inv = np.zeros_like(w)
+    inv[keep] = 1.0 / w[keep]
+    return V @ ((V.T @ b) * inv[:, None] if b.ndim == 2 else (V.T @ b) * inv)
+
+
+def _blocks(states, aero_free_count):
+    """Scaled weighted Jacobian blocks and residuals of every shot."""
+    out = []
+    for st in states:
+        w = 1.0 / st.data.sigma[st.mask]                          # (m,)
+        J = st.jac[st.mask] * w[:, None]                          # (m, nl + na)
+        r = _weighted(st, st.pred)
+        nl = st.local_free.size
+        out.append((J[:, :nl], J[:, nl:nl + aero_free_count], r))
+    return out
+
+
+def _normal_equations(blocks, na):
+    """Per-shot (A_k, B_k, g_k), the shared C and g_a, and the column scales."""
+    Ca = np.zeros((na, na))
+    ga = np.zeros(na)
+    per = []
+    for Js, Ja, r in blocks:
+        per.append((Js.T @ Js, Js.T @ Ja, Js.T @ r))
+        Ca += Ja.T @ Ja
+        ga += Ja.T @ r
+    return per, Ca, ga
+
+
+def _scales(per, Ca):
+    da = np.sqrt(np.maximum(np.diag(Ca), 0.0))
+    da[da == 0] = 1.0
+    ds = []
+    for A, _, _ in per:
+        d = np.sqrt(np.maximum(np.diag(A), 0.0))
+        d[d == 0] = 1.0
+        ds.append(d)
+    return ds, da
+
+
+def _step(per, Ca, ga, ds, da, lam, rcond):
+    """Damped Gauss-Newton step through the Schur complement (scaled space).
+
+    Returns (local steps per shot, shared step, predicted chi^2 decrease)."""
+    na = Ca.shape[0]
+    S = Ca / np.outer(da, da) + lam * np.eye(na)
+    rhs = ga / da
+    solves = []
+    for (A, B, g), d in zip(per, ds, strict=True):
+        As = A / np.outer(d, d) + lam * np.eye(d.size)
+        Bs = B / np.outer(d, da)
+        gs = g / d
+        X = _psolve(As, np.column_stack([Bs, gs]), rcond) if d.size else np.zeros((0, na + 1))
+        S -= Bs.T @ X[:, :na]
+        rhs -= Bs.T @ X[:, na]
+        solves.append((X, Bs))
+    delta_a_s = _psolve(S, rhs, rcond) if na else np.zeros(0)
+    local_steps = []
+    decrease = 0.0
+    for (X, _), (_, _, g), d in zip(solves, per, ds, strict=True):
+        dls = X[:, na] - X[:, :na] @ delta_a_s
+        local_steps.append(dls / d)
+        decrease += float((g / d) @ dls)
+    decrease += float((ga / da) @ delta_a_s)
+    return local_steps, delta_a_s / da, decrease
+
+
+def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np.ndarray], *,
+        options: FitOptions = FitOptions(), local_free: Sequence[np.ndarray] | None = None):
+    """Fit the free parameters of ``model`` and each shot's initial state to the measurements.
+
+    Parameters
+    ----------
+    shots : the shots (one for a single fit, several for a multi-fit).
+    model : the aerodynamic model; its values are the starting point, ``vary`` says which are
+        free, ``min``/``max`` bound them.
+    initial_states : per shot, the (13,) starting state at the shot's epoch
+        (``shot.t_s[shot.epoch_index]``), e.g. from :func:`cadra.fitting.start.initial_state`.
+    options : convergence control and integration settings.
+    local_free : per shot, indices into :data:`LOCAL_NAMES` to fit (default
+        :func:`default_local_free`).
+
+    Returns
+    -------
+    :class:`cadra.fitting.result.FitResult` -- also when the fit did not converge (its
+    ``status`` says so and it holds the best point reached).
+    """
+    from cadra.fitting.result import build_result
+
+    t_start = time.perf_counter()
+    if len(shots) == 0:
+        raise ValueError("fit: no shots")
+    if len(initial_states) != len(shots):
+        raise ValueError("fit: one initial state per shot is needed")
+    if len({s.shot_id for s in shots}) != len(shots):
+        raise ValueError("fit: a shot is listed twice")
+    program = model.compile()
+    params = model.values()
+    aero_idx = model.free_indices()
+    na = aero_idx.size
+    lo = np.array([model.parameters[i].min for i in aero_idx])
+    hi = np.array([model.parameters[i].max for i in aero_idx])
+    integ = options.integration
+    states = []
+    for k, (sd, y0) in enumerate(zip(shots, initial_states, strict=True)):
+        y0 = np.asarray(y0, dtype=float)
+        if y0.shape != (13,) or not np.all(np.isfinite(y0)):
+            raise ValueError(f"fit: initial state of shot {sd.shot_id} must be 13 finite "
+                             "numbers")
+        lf = np.asarray(local_free[k] if local_free is not None else default_local_free(sd),
+                        dtype=int)
+        states.append(_ShotState(sd, y0.copy(), lf, float(sd.t_s[sd.epoch_index]),
+                                 sd.rigid.phys(), sd.rigid.ref_from_cg_body_m(), sd.mask))
+    n_obs = sum(st.mask.sum() for st in states)
+    n_free = na + sum(st.local_free.size for st in states)
+    warnings: list[str] = []
+    if n_obs < n_free:
+        warnings.append(f"{n_obs} measurements for {n_free} free unknowns: too few stations "
+                        "for the free parameters; the fit cannot determine them all")
+
+    def evaluate_jac(p):
+        for st in states:
+            st.pred, st.jac = predict_with_jacobian(
+                st.y_nom, st.t0, st.data.t_s, st.phys, program, p, st.ref, st.local_free,
+                aero_idx, integ)
+        return _chi2(states, [st.pred for st in states])
+
+    def evaluate(p, ys):
+        return [predict(y, st.t0, st.data.t_s, st.phys, program, p, st.ref, integ)
+                for st, y in zip(states, ys, strict=True)]
+
+    history = []
+    status, message = "failed", ""
+    lam = options.lambda_start
+    iterations = 0
+    bar = None
+    if options.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=options.max_iterations, desc="cadra2 fit", unit="it", leave=False)
+    try:
+        chi2 = evaluate_jac(params)
+        if not math.isfinite(chi2):
+            message = ("the starting point gives a non-finite prediction (the trajectory "
+                       "diverges or tumbles); better starting values are needed")
+            return build_result(shots, model, params, states, aero_idx, status, message,
+                                history, warnings, iterations, t_start, options, lam)
+        history.append(chi2)
+        while True:
+            if iterations >= options.max_iterations:
+                status = "max_iterations"
+                message = (f"not converged after {iterations} iterations (chi^2 = {chi2:.6g})"
+                           "; the best point reached is reported")
+                break
+            iterations += 1
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(chi2=f"{chi2:.4g}", lam=f"{lam:.1e}")
+            blocks = _blocks(states, na)
+            per, Ca, ga = _normal_equations(blocks, na)
+            ds, da = _scales(per, Ca)
+            # Gauss-Newton step size (lambda ~ 0): the convergence test
+            _, _, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
+            dof = max(n_obs - n_free, 1)
+            scale = max(1.0, chi2 / dof)
+            if gn_decrease <= options.step_tol_sigma**2 * scale:
+                status = "converged"
+                message = (f"converged: the remaining Gauss-Newton step is "
+                           f"{math.sqrt(max(gn_decrease / scale, 0.0)):.1e} sigma")
+                break
+            accepted = False
+            while lam <= options.lambda_max:
+                dls, dap, _ = _step(per, Ca, ga, ds, da, lam, options.rcond)
+                p_try = params.copy()
+                p_try[aero_idx] = np.clip(params[aero_idx] + dap, lo, hi)
+                ys = []
+                for st, dl in zip(states, dls, strict=True):
+                    u = np.zeros(N_LOCAL)
+                    u[st.local_free] = dl
+                    ys.append(apply_local(st.y_nom, u))
+                try:
+                    chi2_try = _chi2(states, evaluate(p_try, ys))
+                except (FloatingPointError, ZeroDivisionError):
+                    chi2_try = math.inf
+                if chi2_try < chi2:
+                    params = p_try
+                    for st, y in zip(states, ys, strict=True):
+                        st.y_nom = y
+                    chi2 = evaluate_jac(params)
+                    history.append(chi2)
+                    lam = max(lam / 10.0, 1e-12)
+                    accepted = True
+                    break
+                lam *= 10.0
+            if not accepted and gn_decrease <= options.noise_tol_sigma**2 * scale:
+                # the objective's own noise (the adaptive integrator's step choices, ~1e-6 in
+                # chi^2) hides a remaining step this small: that is convergence
+                status = "converged"
+                message = (f"converged to the integration noise floor: the remaining "
+                           f"Gauss-Newton step, {math.sqrt(max(gn_decrease / scale, 0.0)):.1e} "
+                           "sigma, reduces chi^2 by less than its numerical noise")
+                break
+            if not accepted:
+                status = "stalled"
+                message = (f"stalled at chi^2 = {chi2:.6g}: no step reduces it (the remaining "
+                           f"Gauss-Newton step is {math.sqrt(max(gn_decrease, 0)):.2e} in chi "
+                           "units); the model may not describe the data")
+                lam = options.lambda_start
+                break
+    finally:
+        if bar is not None:
+            bar.close()
+    return build_result(shots, model, params, states, aero_idx, status, message, history,
+                        warnings, iterations, t_start, options, lam)
+
+
+__all__ = ["STATUSES", "FitOptions", "LOCAL_NAMES", "default_local_free", "fit"]
