@@ -77,10 +77,22 @@ class _ShotState:
     jac: np.ndarray | None = None
 
 
-def default_local_free(data: ShotData) -> np.ndarray:
-    """Free local unknowns of a shot: all 12, or position and velocity only for a shot with
-    no angle measurements (a sphere: its attitude and rates are not observed)."""
-    return np.arange(N_LOCAL) if data.has_angles else np.arange(6)
+def default_local_free(data: ShotData, model: AeroModel | None = None) -> np.ndarray:
+    """Free local unknowns of a shot (indices into :data:`LOCAL_NAMES`).
+
+    All 12, except what the data cannot see: a shot with no angle measurements (a sphere)
+    fits position and velocity only; a symmetric body (total-angle model, transverse inertia
+    equal within 1e-3, no products of inertia) does not fit its roll angle about the axis --
+    turning such a body about its axis changes no measurement.
+    """
+    if not data.has_angles:
+        return np.arange(6)
+    if model is not None and model.angle_plane == "sigma":
+        I = data.rigid.phys()[1:10].reshape(3, 3)
+        off = np.abs(I - np.diag(np.diag(I))).max()
+        if abs(I[1, 1] - I[2, 2]) <= 1e-3 * I[1, 1] and off <= 1e-3 * I[1, 1]:
+            return np.array([k for k in range(N_LOCAL) if LOCAL_NAMES[k] != "rot_x_rad"])
+    return np.arange(N_LOCAL)
 
 
 def _weighted(st: _ShotState, pred: np.ndarray) -> np.ndarray:
@@ -215,7 +227,8 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         if y0.shape != (13,) or not np.all(np.isfinite(y0)):
             raise ValueError(f"fit: initial state of shot {sd.shot_id} must be 13 finite "
                              "numbers")
-        lf = np.asarray(local_free[k] if local_free is not None else default_local_free(sd),
+        lf = np.asarray(local_free[k] if local_free is not None
+                        else default_local_free(sd, model),
                         dtype=int)
         states.append(_ShotState(sd, y0.copy(), lf, float(sd.t_s[sd.epoch_index]),
                                  sd.rigid.phys(), sd.rigid.ref_from_cg_body_m(), sd.mask))

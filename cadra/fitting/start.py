@@ -1,0 +1,335 @@
+"""Starting values from linear theory, estimated from the measurements themselves.
+
+No guru needed: before the 6-DOF fit, each shot's measurements give
+
+- the initial position and velocity at the epoch (quadratic fits of x, y, z against time);
+- the attitude and the transverse angular velocity at the epoch (local quadratic fits of the
+  measured axis direction; the roll about the axis is not seen in the images and is chosen
+  from a grid by the chi^2 of the starting trajectory);
+- the drag coefficient, from the deceleration (drag-only closed form
+  ``x = x0 + ln(1 + k V0 t) / k`` with ``k = rho S C_D / 2m``);
+- the pitch (and yaw) frequency and the amplitude trend, from a damped-sinusoid fit of theta and
+  psi with a quadratic trend (variable projection over omega and lambda), which linear theory
+  turns into ``C_m_alpha = -omega^2 I / (q S d)`` and ``C_mq = 8 I lambda / (rho V S d^2)``.
+
+:func:`starting_model` maps these *targets* onto whatever parameters the model file has: it
+finds the smallest change of the free parameters (relative to the file's values) for which the
+model reproduces the targets at the shots' mean flight condition (C_D, slope of C_m, C_m = 0 at
+the mean angle for a trimmed lifting body, C_mq, and the yaw slope of C_n for alpha-beta
+models). Parameters the targets do not touch keep the file's values.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares, minimize
+
+from cadra.aero import AeroModel
+from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
+from cadra.dynamics.setup import state_from_reference
+from cadra.fitting.data import ShotData
+from cadra.fitting.sensitivity import Integration, predict
+
+#: roll angles (deg) tried for a shot whose roll the images do not show
+ROLL_GRID_DEG = tuple(range(0, 360, 30))
+
+
+@dataclass(frozen=True)
+class MotionEstimate:
+    """Linear-theory estimates of one shot (SI)."""
+
+    shot_id: str
+    speed_m_s: float
+    mach: float
+    dynamic_pressure_pa: float
+    cd: float
+    omega_pitch_rad_s: float      # NaN if no angles / no oscillation found
+    lambda_pitch_1_s: float
+    omega_yaw_rad_s: float
+    lambda_yaw_1_s: float
+    sigma_mean_rad: float         # mean angle between the measured axis and the velocity
+    sigma_rms_rad: float
+
+
+def _polyfit(t, v, deg, w=None):
+    ok = np.isfinite(v)
+    deg = min(deg, max(int(ok.sum()) - 1, 0))
+    return np.polyfit(t[ok], v[ok], deg, w=None if w is None else w[ok])
+
+
+def _kinematics(shot: ShotData):
+    """Reference-point position and velocity at the epoch, and the deceleration fit."""
+    t = shot.t_s
+    t0 = t[shot.epoch_index]
+    tt = t - t0
+    if np.isfinite(shot.meas[:, 0]).sum() < 3:
+        raise ValueError(f"{shot.shot_id}: fewer than 3 stations with a position: no starting "
+                         "values can be estimated")
+    pos = np.zeros(3)
+    vel = np.zeros(3)
+    for j in range(3):
+        c = _polyfit(tt, shot.meas[:, j], 2)
+        pos[j] = np.polyval(c, 0.0)
+        vel[j] = np.polyval(np.polyder(c), 0.0)
+    return pos, vel
+
+
+def _drag_k(shot: ShotData) -> tuple[float, float]:
+    """k = rho S C_D / 2m from x(t) (drag-only closed form); returns (k, V at first station)."""
+    t = shot.t_s - shot.t_s[0]
+    x = shot.meas[:, 0]
+    ok = np.isfinite(x)
+    t, x = t[ok], x[ok]
+    c = np.polyfit(t, x, 2)
+    V0 = c[1]
+    k0 = max(-2 * c[0] / V0**2, 1e-6)
+
+    def res(p):
+        x0, v0, k = p
+        return x0 + np.log1p(k * v0 * t) / k - x
+
+    sol = least_squares(res, [c[2], V0, k0], x_scale=[1e-3, 1.0, k0])
+    return float(sol.x[2]), float(sol.x[1])
+
+
+def _damped_sine(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
+    """(omega, lambda, relative residual) of ``v(t) = poly2 + e^(lambda t)(A cos + B sin)``.
+
+    Variable projection: the linear coefficients are solved for each (omega, lambda); omega is
+    first found on a grid up to the sampling's Nyquist frequency.
+    """
+    ok = np.isfinite(v)
+    t, v = t[ok], v[ok]
+    if t.size < 7 or np.ptp(v) == 0:
+        return math.nan, math.nan, math.nan
+    t = t - t.mean()
+    dt = np.median(np.diff(t))
+    w_max = 0.95 * math.pi / dt
+
+    def design(w, lam):
+        e = np.exp(lam * t)
+        return np.column_stack([np.ones_like(t), t, t * t, e * np.cos(w * t), e * np.sin(w * t)])
+
+    def cost(p):
+        X = design(*p)
+        c, *_ = np.linalg.lstsq(X, v, rcond=None)
+        r = v - X @ c
+        return float(r @ r)
+
+    span = t[-1] - t[0]
+    grid = np.linspace(2 * math.pi / span, w_max, 400)
+    costs = [cost((w, 0.0)) for w in grid]
+    w0 = grid[int(np.argmin(costs))]
+    sol = minimize(cost, [w0, 0.0], method="Nelder-Mead",
+                   options={"xatol": 1e-4, "fatol": 1e-14, "maxiter": 400})
+    w, lam = sol.x
+    base = np.column_stack([np.ones_like(t), t, t * t])
+    c, *_ = np.linalg.lstsq(base, v, rcond=None)
+    r0 = v - base @ c
+    rel = math.sqrt(sol.fun / max(float(r0 @ r0), 1e-300))
+    if rel > 0.7 or not (0 < w < w_max):
+        return math.nan, math.nan, rel
+    return abs(float(w)), float(lam), rel
+
+
+def estimate_motion(shot: ShotData) -> MotionEstimate:
+    """Linear-theory estimates of one shot (see module doc)."""
+    rig = shot.rigid
+    k, V0 = _drag_k(shot)
+    pos, vel = _kinematics(shot)
+    V = float(np.linalg.norm(vel))
+    qdyn = 0.5 * rig.density_kg_m3 * V * V
+    cd = 2 * rig.mass_kg * k / (rig.density_kg_m3 * rig.area_m2)
+    wp = lp = wy = ly = math.nan
+    sig_mean = sig_rms = 0.0
+    if shot.has_angles:
+        t = shot.t_s
+        wp, lp, _ = _damped_sine(t, shot.meas[:, 3])
+        wy, ly, _ = _damped_sine(t, shot.meas[:, 4])
+        # total angle: between the measured axis and the local flight direction
+        sig = []
+        for i in range(len(t)):
+            th, ps = shot.meas[i, 3], shot.meas[i, 4]
+            if not (np.isfinite(th) and np.isfinite(ps)):
+                continue
+            a = axis_from_inclinations(th, ps)
+            c = [_polyfit(t - t[shot.epoch_index], shot.meas[:, j], 2) for j in range(3)]
+            v = np.array([np.polyval(np.polyder(cj), t[i] - t[shot.epoch_index]) for cj in c])
+            sig.append(math.acos(np.clip(a @ v / np.linalg.norm(v), -1, 1)))
+        sig = np.array(sig)
+        if sig.size:
+            sig_mean = float(sig.mean())
+            sig_rms = float(np.sqrt(np.mean(sig**2)))
+    return MotionEstimate(shot.shot_id, V, V / rig.speed_of_sound_m_s, qdyn, float(cd), wp, lp,
+                          wy, ly, sig_mean, sig_rms)
+
+
+def _slope(model: AeroModel, coef: str, var: str, point: dict, params: np.ndarray) -> float:
+    """d coef / d var at ``point`` by complex step (var: alpha, beta or sigma)."""
+    h = 1e-20
+    pt = dict(point)
+    pt[var] = pt[var] + 1j * h
+    if model.angle_plane == "sigma" and var == "sigma":
+        pt["alpha"] = pt["sigma"]
+    return float(np.imag(model.evaluate(**pt, params=params.astype(complex))[coef]) / h)
+
+
+def starting_model(shots: Sequence[ShotData], model: AeroModel,
+                   estimates: Sequence[MotionEstimate] | None = None) -> AeroModel:
+    """``model`` with its free parameters moved to match the linear-theory targets.
+
+    The targets (see module doc) are averaged over the shots; the change of the free
+    parameters is the smallest (relative to a scale of max(|value|, 0.1)) that meets them, found
+    by a regularised least-squares solve. Parameters the targets cannot move keep their values.
+    """
+    est = list(estimates) if estimates is not None else [estimate_motion(s) for s in shots]
+    free = model.free_indices()
+    if free.size == 0:
+        return model
+    p0 = model.values()
+    rig = shots[0].rigid
+    I_yy = float(rig.inertia_body_kg_m2[1, 1])
+    I_zz = float(rig.inertia_body_kg_m2[2, 2])
+    S, d, rho = rig.area_m2, rig.d_m, rig.density_kg_m3
+    V = float(np.mean([e.speed_m_s for e in est]))
+    qdyn = 0.5 * rho * V * V
+    mach = float(np.mean([e.mach for e in est]))
+    sig = float(np.mean([e.sigma_mean_rad for e in est]))
+    sig_rms = float(np.mean([e.sigma_rms_rad for e in est]))
+    sigma_plane = model.angle_plane == "sigma"
+    angle = max(sig_rms, math.radians(0.5)) if sigma_plane else sig
+    point = {"alpha": angle, "beta": 0.0, "sigma": angle, "mach": mach}
+    targets = []   # (function of params, target value, tolerance)
+    cd = float(np.mean([e.cd for e in est]))
+    targets.append((lambda p: float(model.evaluate(**point, params=p)["CD"]), cd, 0.02))
+
+    def mean_finite(vals):
+        vals = [v for v in vals if np.isfinite(v)]
+        return float(np.mean(vals)) if vals else math.nan
+
+    # pitch plane: the theta channel for a lifting body rolled near 0/180 deg; for a symmetric
+    # body both channels see the same frequency
+    wp = mean_finite([e.omega_pitch_rad_s for e in est] + (
+        [e.omega_yaw_rad_s for e in est] if sigma_plane else []))
+    lp = mean_finite([e.lambda_pitch_1_s for e in est] + (
+        [e.lambda_yaw_1_s for e in est] if sigma_plane else []))
+    var = "sigma" if sigma_plane else "alpha"
+    if "Cm" in model.coefficients and np.isfinite(wp):
+        cma = -wp * wp * I_yy / (qdyn * S * d)
+        if sigma_plane:
+            # effective (secant) slope over the motion: Cm(sigma) / sigma at the rms angle
+            targets.append((lambda p: float(model.evaluate(**point, params=p)["Cm"]) / angle,
+                            cma, 0.2 * abs(cma) + 1e-3))
+        else:
+            targets.append((lambda p: _slope(model, "Cm", var, point, p), cma,
+                            0.2 * abs(cma) + 1e-3))
+            targets.append((lambda p: float(model.evaluate(**point, params=p)["Cm"]), 0.0,
+                            0.05 * abs(cma) + 1e-4))
+    if "Cmq" in model.coefficients and np.isfinite(lp):
+        cmq = float(np.clip(8 * I_yy * lp / (rho * V * S * d * d), -20, 20))
+        targets.append((lambda p: float(model.evaluate(**point, params=p)["Cmq"]), cmq,
+                        0.5 * abs(cmq) + 0.5))
+    if not sigma_plane and "Cn" in model.coefficients:
+        wy = mean_finite([e.omega_yaw_rad_s for e in est])
+        if np.isfinite(wy):
+            cnb = -wy * wy * I_zz / (qdyn * S * d)
+            targets.append((lambda p: _slope(model, "Cn", "beta", point, p), cnb,
+                            0.2 * abs(cnb) + 1e-3))
+    scale = np.maximum(np.abs(p0[free]), 0.1)
+
+    def residuals(x):
+        p = p0.copy()
+        p[free] = p0[free] + x * scale
+        r = [(f(p) - target) / tol for f, target, tol in targets]
+        return np.concatenate([np.array(r), 0.1 * x])
+
+    lo = np.array([(model.parameters[i].min - p0[i]) / s for i, s in zip(free, scale,
+                                                                          strict=True)])
+    hi = np.array([(model.parameters[i].max - p0[i]) / s for i, s in zip(free, scale,
+                                                                          strict=True)])
+    try:
+        sol = least_squares(residuals, np.zeros(free.size), bounds=(lo, hi), max_nfev=200)
+        x = sol.x
+    except (ValueError, FloatingPointError):
+        return model
+    values = {model.parameters[i].name: float(p0[i] + xi * s)
+              for i, xi, s in zip(free, x, scale, strict=True)}
+    return model.with_values(values)
+
+
+def _axis_and_rate(shot: ShotData):
+    """Measured nose axis and its time derivative at the epoch (local quadratic fits)."""
+    t = shot.t_s
+    k = shot.epoch_index
+    lo, hi = max(0, k - 3), min(len(t), k + 4)
+    tt = t[lo:hi] - t[k]
+    axes = []
+    for i in range(lo, hi):
+        th, ps = shot.meas[i, 3], shot.meas[i, 4]
+        axes.append(axis_from_inclinations(th, ps) if np.isfinite(th) and np.isfinite(ps)
+                    else np.full(3, np.nan))
+    axes = np.array(axes)
+    a = np.zeros(3)
+    adot = np.zeros(3)
+    for j in range(3):
+        c = _polyfit(tt, axes[:, j], 2)
+        a[j] = np.polyval(c, 0.0)
+        adot[j] = np.polyval(np.polyder(c), 0.0) if len(c) > 1 else 0.0
+    a /= np.linalg.norm(a)
+    return a, adot
+
+
+def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG) -> list[np.ndarray]:
+    """Starting states at the epoch for each roll angle of the grid (one if no angles)."""
+    pos, vel = _kinematics(shot)
+    ref = shot.rigid.ref_from_cg_body_m()
+    if not shot.has_angles:
+        a = vel / np.linalg.norm(vel)
+        q = quat_from_axis_roll(a, 0.0)
+        return [state_from_reference(pos, vel, q, np.zeros(3), ref)]
+    a, adot = _axis_and_rate(shot)
+    w_F = np.cross(a, adot)                # transverse angular velocity, facility frame
+    out = []
+    for roll in roll_grid_deg:
+        q = quat_from_axis_roll(a, math.radians(roll))
+        R = body_to_facility_matrix(q)
+        out.append(state_from_reference(pos, vel, q, R.T @ w_F, ref))
+    return out
+
+
+def initial_state(shot: ShotData, model: AeroModel,
+                  integ: Integration | None = None) -> np.ndarray:
+    """The best starting state of ``shot`` under ``model``: the roll-grid candidate whose
+    predicted trajectory is closest to the measurements (chi^2)."""
+    integ = integ or Integration()
+    cands = state_candidates(shot)
+    if len(cands) == 1:
+        return cands[0]
+    program = model.compile()
+    params = model.values()
+    phys = shot.rigid.phys()
+    ref = shot.rigid.ref_from_cg_body_m()
+    t0 = shot.t_s[shot.epoch_index]
+    best, best_chi2 = cands[0], math.inf
+    mask = shot.mask
+    for y in cands:
+        pred = predict(y, t0, shot.t_s, phys, program, params, ref, integ)
+        r = ((shot.meas - pred) / shot.sigma)[mask]
+        chi2 = float(r @ r) if np.all(np.isfinite(r)) else math.inf
+        if chi2 < best_chi2:
+            best, best_chi2 = y, chi2
+    return best
+
+
+def initial_states(shots: Sequence[ShotData], model: AeroModel,
+                   integ: Integration | None = None) -> list[np.ndarray]:
+    """:func:`initial_state` of every shot."""
+    return [initial_state(s, model, integ) for s in shots]
+
+
+__all__ = ["MotionEstimate", "estimate_motion", "initial_state", "initial_states",
+           "starting_model", "state_candidates"]
