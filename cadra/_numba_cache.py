@@ -3,9 +3,9 @@
 numba (``cache=True``) invalidates a cached function only when *its own* source file changes;
 a caller in another module keeps a stale copy of an inlined callee (e.g. the integrator in
 ``cadra/dynamics`` of the aero evaluator in ``cadra/aero/program.py``). This guard hashes the
-sources of every module that uses numba (in the packages listed below) and, when the hash changes, deletes the
-package's cache files before anything is compiled or loaded. Runs once per process, at import
-of :mod:`cadra`; a read-only install simply skips it.
+sources of every module that uses numba (in the packages listed below) and, when the hash
+changes, deletes the packages' cache files before anything is compiled or loaded. Runs once
+per process, at import of :mod:`cadra`; a read-only install simply skips it.
 """
 
 from __future__ import annotations

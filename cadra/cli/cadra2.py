@@ -1,11 +1,16 @@
 """``cadra2``: stage two of the pipeline (6-DOF dynamics).
 
-Subcommands available now:
+Subcommands:
 
+* ``cadra2 fit TRAJECTORY [TRAJECTORY ...] --model MODEL -o OUT_DIR`` — least-squares
+  differential correction of the model's free parameters and each shot's initial state to stage
+  one's measurements (one trajectory file: a single fit; several: a multi-fit); writes the
+  coefficient table, covariances, residuals, report and plots (docs/fitting.md).
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 
-Exit status: 0 success, 1 the input was refused (message names the key), 2 usage error.
+Exit status: 0 success, 1 the input was refused (message names the key) or the fit did not
+converge (its best point is still written, marked as not converged), 2 usage error.
 """
 
 from __future__ import annotations
@@ -41,9 +46,152 @@ def _simulate(args) -> int:
     return 0
 
 
+def _trajectory_and_shot(item: str, shot: str | None) -> tuple[Path, Path]:
+    from cadra.fitting import FitDataError
+    from cadra.io.trajectory import TrajectoryFileError, load_trajectory
+
+    traj = Path(item)
+    if traj.is_dir():
+        traj = traj / "trajectory.csv"
+    if not traj.is_file():
+        raise FitDataError(f"{item}: no trajectory file (give stage one's trajectory.csv or "
+                           "its output directory)")
+    if shot is not None:
+        return traj, Path(shot)
+    try:
+        meta = load_trajectory(traj).meta
+    except TrajectoryFileError as exc:
+        raise FitDataError(str(exc)) from None
+    if not meta.get("shot_file"):
+        raise FitDataError(f"{traj}: names no shot file; pass it with --shot")
+    return traj, Path(meta["shot_file"])
+
+
+def _parse_assignments(items, what: str) -> dict:
+    out = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        out[name.strip()] = value.strip() if sep else None
+    return out
+
+
+def _apply_holds(model, args):
+    """--hold NAME[=VALUE] / --free NAME / --bound NAME=LO:HI, values in the file's unit."""
+    import math
+
+    def si(name, text):
+        p = model.parameter(name)
+        v = float(text)
+        return math.radians(v) if p.unit == "deg" else v
+
+    for name, value in _parse_assignments(args.hold, "hold").items():
+        model = model.with_vary({name: False})
+        if value is not None:
+            model = model.with_values({name: si(name, value)})
+    for name in args.free or []:
+        model = model.with_vary({name: True})
+    for name, value in _parse_assignments(args.bound, "bound").items():
+        lo, sep, hi = (value or "").partition(":")
+        if not sep:
+            raise ValueError(f"--bound {name}: expected NAME=LO:HI")
+        model = model.with_bounds({name: (si(name, lo) if lo else -math.inf,
+                                          si(name, hi) if hi else math.inf)})
+    return model
+
+
+def _fit(args) -> int:
+    import math
+
+    import tomli_w
+
+    from cadra.fitting import FitDataError, FitOptions, fit_shots, load_shot_data
+    from cadra.fitting.report import write_fit_outputs
+    from cadra.simulate import SpecError, resolve_model
+
+    out = Path(args.output)
+    if out.exists() and not args.overwrite:
+        print(f"cadra2 fit: {out} exists; refusing to overwrite (use --overwrite)",
+              file=sys.stderr)
+        return 1
+    if args.shot and len(args.shot) != len(args.trajectories):
+        print("cadra2 fit: give one --shot per trajectory file (same order), or none",
+              file=sys.stderr)
+        return 2
+    try:
+        model = _apply_holds(resolve_model(args.model), args)
+        shots = []
+        for k, item in enumerate(args.trajectories):
+            traj, shot_path = _trajectory_and_shot(item, args.shot[k] if args.shot else None)
+            shots.append(load_shot_data(
+                shot_path, traj, sigma_t_s=args.sigma_time_s,
+                min_sigma={"position_m": args.min_sigma_position_m,
+                           "angle_rad": math.radians(args.min_sigma_angle_deg)}))
+        options = FitOptions(max_iterations=args.max_iterations, progress=not args.quiet)
+        result, start = fit_shots(shots, model, options=options,
+                                  auto_start=not args.no_auto_start)
+    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"cadra2 fit: {msg}", file=sys.stderr)
+        return 1
+    config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
+    extra = {"model_fitted.toml": "# CADRA aerodynamic model (docs/aero_models.md): the fitted "
+                                  "values, written by cadra2 fit\n"
+                                  + tomli_w.dumps(result.model.to_dict()),
+             "config.toml": "# cadra2 fit: the command's settings\n" + tomli_w.dumps(config)}
+    write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
+                      start_model=start, extra_files=extra)
+    _print_summary(result)
+    print(f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
+    if not result.converged:
+        print(f"cadra2 fit: NOT CONVERGED: {result.message}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _print_summary(result) -> None:
+    print(f"{result.status}: {result.message}")
+    print(f"chi^2/dof = {result.chi2:.1f}/{result.dof} = {result.reduced_chi2:.3f}, "
+          f"{result.iterations} iterations, {result.elapsed_s:.2f} s")
+    print(f"{'parameter':12s} {'value':>12s} {'sigma':>10s}")
+    for name, v, s in zip(result.aero_names, result.aero_values, result.aero_sigma,
+                          strict=True):
+        print(f"{name:12s} {v:12.5g} {s:10.2g}")
+    for w in result.warnings:
+        print(f"warning: {w}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cadra2", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
+    fit = sub.add_parser("fit", help="fit aerodynamic coefficients to measured trajectories")
+    fit.add_argument("trajectories", nargs="+",
+                     help="stage one's trajectory.csv files (or their directories); several "
+                          "make a multi-fit")
+    fit.add_argument("--model", required=True,
+                     help="aero model: a bundled name (m2_m070, linear_template_alpha_beta, "
+                          "...) or a model file (docs/aero_models.md)")
+    fit.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
+    fit.add_argument("--shot", action="append",
+                     help="shot file of each trajectory, same order (default: the one the "
+                          "trajectory file names)")
+    fit.add_argument("--hold", action="append", metavar="NAME[=VALUE]",
+                     help="hold a parameter (at VALUE, in the model file's unit)")
+    fit.add_argument("--free", action="append", metavar="NAME", help="free a held parameter")
+    fit.add_argument("--bound", action="append", metavar="NAME=LO:HI",
+                     help="bounds of a parameter (file unit; either side may be empty)")
+    fit.add_argument("--no-auto-start", action="store_true",
+                     help="start from the model file's values, not linear-theory estimates")
+    fit.add_argument("--max-iterations", type=int, default=60)
+    fit.add_argument("--sigma-time-s", type=float, default=0.0,
+                     help="spark-time sigma, s (adds V sigma_t to the x sigma)")
+    fit.add_argument("--min-sigma-position-m", type=float, default=0.0,
+                     help="floor of the stage-one position sigmas, m")
+    fit.add_argument("--min-sigma-angle-deg", type=float, default=0.0,
+                     help="floor of the stage-one angle sigmas, deg")
+    fit.add_argument("--no-plots", action="store_true", help="tables and report only")
+    fit.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    fit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    fit.set_defaults(func=_fit)
     sim = sub.add_parser("simulate", help="simulate and render a synthetic shot")
     sim.add_argument("spec", help="shot specification TOML (docs/simulation.md)")
     sim.add_argument("-o", "--output", required=True, help="output directory (must not exist)")

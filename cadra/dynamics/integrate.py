@@ -126,6 +126,10 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
             out[j, i] = y[i]
 
 
+#: work limit of one adaptive run: ~50 times what a 16-station shot needs at tolerance 1e-8
+MAX_ADAPTIVE_EVALS = 150_000
+
+
 @njit(cache=True)
 def _adaptive_setup(y0, phys):
     dtype_one = y0[0] * 0.0 + 1.0
@@ -173,7 +177,11 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
     where the dynamics are rough, e.g. at the kinks of Table 4's ``max(...)`` pitch-damping
     forms, where fixed-step RK4 loses its order (docs/dynamics.md).
 
-    Returns the number of derivative evaluations.
+    A run that needs more than ``MAX_ADAPTIVE_EVALS`` derivative evaluations (a tumbling or
+    diverging trajectory, e.g. from absurd starting values) or meets a non-finite state stops;
+    its remaining outputs are NaN, so a caller sees a failed prediction, never a hang.
+
+    Returns the number of derivative evaluations (negative when the run was stopped).
     """
     tau = 0.01
     I, Iinv = _adaptive_setup(y0, phys)
@@ -225,6 +233,11 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
                           plane, scratch, coef, stack, k1, k2, k3, k4, tmp)
                 n_eval += 12
                 err = _doubling_error(y1, y2, tol_pos, tol_ang, tau)
+                if n_eval > MAX_ADAPTIVE_EVALS or not np.isfinite(err):
+                    for jj in range(n_out):
+                        for i in range(N_STATE):
+                            out[jj, i] = np.nan
+                    return -n_eval
                 if err <= 1.0:
                     for i in range(N_STATE):
                         y[i] = y2[i] + (y2[i] - y1[i]) / 15.0
@@ -250,6 +263,6 @@ def propagate_batch(Y0, t0, t_out, h_max, tol_pos, tol_ang, PHYS, ops, args, sta
     ``OUT`` (m, n, 13). Releases the GIL, so threads can share the rows out."""
     n_eval = 0
     for k in range(Y0.shape[0]):
-        n_eval += propagate_adaptive(Y0[k], t0, t_out, h_max, tol_pos, tol_ang, PHYS[k], ops,
-                                     args, starts, PARAMS[k], plane, stack_size, OUT[k])
+        n_eval += abs(propagate_adaptive(Y0[k], t0, t_out, h_max, tol_pos, tol_ang, PHYS[k], ops,
+                                     args, starts, PARAMS[k], plane, stack_size, OUT[k]))
     return n_eval

@@ -98,7 +98,8 @@ def apply_local(y_nom: np.ndarray, u: np.ndarray) -> np.ndarray:
 def observables(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> np.ndarray:
     """(..., 5) predicted x, y, z, theta, psi from (..., 13) states."""
     shape = states.shape[:-1]
-    o = observe(states.reshape(-1, N_STATE), ref_from_cg_body_m)
+    with np.errstate(invalid="ignore", divide="ignore"):   # NaN states: a failed run
+        o = observe(states.reshape(-1, N_STATE), ref_from_cg_body_m)
     out = np.stack([o["x_m"], o["y_m"], o["z_m"], o["theta_rad"], o["psi_rad"]], axis=-1)
     return out.reshape(*shape, 5)
 

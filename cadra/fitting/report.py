@@ -1,0 +1,625 @@
+"""The output layer of a stage-two fit: files, a one-page report and plots.
+
+:func:`write_fit_outputs` writes a :class:`cadra.fitting.result.FitResult` to a directory,
+atomically (everything is built in a temporary sibling directory and moved into place at the
+end by :func:`cadra.io.atomic.atomic_output_dir`; an existing directory is refused unless
+``overwrite=True``; a failure leaves nothing behind):
+
+=============================  =================================================================
+file                           contents
+=============================  =================================================================
+``results.json``               status, statistics, every parameter (value, sigmas, initial
+                               value, held, bounds), per-shot fitted state at the epoch with
+                               sigmas, residual rms per shot and channel, near-singular
+                               directions, warnings. Plain JSON: a value that is not finite
+                               (an undetermined sigma) is ``null``.
+``coefficients.csv``           :meth:`FitResult.coefficient_table` (seed 004 Table 4 layout)
+``covariance.csv``             (J^T W J)^-1, labelled by ``param_names`` (SI, radians)
+``correlation.csv``            its correlation form
+``correlation_coloured.csv``   correlation of the coloured-residual (sandwich) covariance
+``residuals.csv``              one row per measured channel and station: ``measured``,
+                               ``fitted``, ``residual``, ``sigma`` in the ``unit`` column's unit
+                               (``m`` or ``deg``) and ``normalized`` (residual / sigma)
+``report.md``                  one page, lmfit-style (see :func:`report_markdown`)
+``plots/*.png``                coefficients, angle histories, residuals, 3-D trajectory
+=============================  =================================================================
+
+The pure helpers (:func:`results_dict`, :func:`residuals_table`, :func:`report_markdown`,
+:func:`fitted_histories`) take plain data and do no I/O; plots live in
+:mod:`cadra.fitting.plots` (matplotlib and pyvista imported lazily).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cadra.aero import AeroModel
+from cadra.conventions import aero_angles, body_to_facility_matrix
+from cadra.dynamics.observe import observe
+from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.result import FitResult
+from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local
+
+#: results.json format tag
+RESULTS_FORMAT = "cadra.fit-results/1"
+#: |correlation| above which the report lists a pair
+REPORT_CORRELATION = 0.9
+#: plot files written by :func:`write_fit_outputs` (key -> file name under ``plots/``)
+PLOT_FILES = {"coefficients": "coefficients.png", "angles": "angles.png",
+              "residuals": "residuals.png", "trajectory3d": "trajectory3d.png"}
+#: residual channel -> (unit in the files, factor from SI)
+CHANNEL_OUTPUT_UNITS = {"x": ("m", 1.0), "y": ("m", 1.0), "z": ("m", 1.0),
+                        "theta": ("deg", 180.0 / math.pi), "psi": ("deg", 180.0 / math.pi)}
+#: finite-difference step of the local unknowns (m, m/s, rad, rad/s) for derived sigmas;
+#: the maps are linear in position and smooth in rotation (error ~ step^2 ~ 1e-12 relative)
+_FD_STEP = 1e-6
+
+
+# --------------------------------------------------------------------------- plain data
+
+
+def _plain(x):
+    """``x`` as plain JSON types: numpy -> Python, non-finite floats -> None."""
+    if isinstance(x, Mapping):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_plain(v) for v in x.tolist()]
+    if isinstance(x, bool | np.bool_):
+        return bool(x)
+    if isinstance(x, int | np.integer):
+        return int(x)
+    if isinstance(x, float | np.floating):
+        x = float(x)
+        return x if math.isfinite(x) else None
+    if x is None or isinstance(x, str):
+        return x
+    return str(x)
+
+
+def _shots_by_id(shots: Sequence[ShotData]) -> dict[str, ShotData]:
+    return {s.shot_id: s for s in shots}
+
+
+def air_angles(states: np.ndarray, rigid) -> dict[str, np.ndarray]:
+    """Aerodynamic angles and Mach number at each state, as the dynamics computes them.
+
+    Parameters
+    ----------
+    states : (n, 13) 6-DOF states (cadra/dynamics/layout.py).
+    rigid : the shot's :class:`cadra.dynamics.setup.RigidBody` (air, wind effects).
+
+    Returns
+    -------
+    dict of (n,) arrays: ``alpha_rad``, ``beta_rad``, ``sigma_rad`` (classical: 0 = nose, i.e.
+    heat shield, into the wind; docs/conventions.md), ``mach``, and the nondimensional rates
+    ``p_hat``, ``q_hat``, ``r_hat`` (rate d / 2V).
+    """
+    states = np.atleast_2d(np.asarray(states, dtype=float))
+    wind0 = np.asarray(rigid.effects.wind_facility_m_s, dtype=float)
+    dwind = np.asarray(rigid.effects.wind_gradient_facility_per_s, dtype=float)
+    n = len(states)
+    out = {k: np.empty(n) for k in ("alpha_rad", "beta_rad", "sigma_rad", "mach", "p_hat",
+                                    "q_hat", "r_hat")}
+    for i, y in enumerate(states):
+        R = body_to_facility_matrix(y[6:10])
+        v_b = R.T @ (y[3:6] - (wind0 + y[0] * dwind))
+        a, b, s = aero_angles(v_b)
+        V = float(np.linalg.norm(v_b))
+        out["alpha_rad"][i], out["beta_rad"][i], out["sigma_rad"][i] = a, b, s
+        out["mach"][i] = V / rigid.speed_of_sound_m_s
+        k = rigid.d_m / (2.0 * V)
+        out["p_hat"][i], out["q_hat"][i], out["r_hat"][i] = y[10] * k, y[11] * k, y[12] * k
+    return out
+
+
+def fitted_histories(result: FitResult, shots: Sequence[ShotData], n_points: int = 400,
+                     ) -> dict[str, pd.DataFrame]:
+    """Each shot's fitted trajectory, densely sampled over its measured span.
+
+    The fitted state at the epoch is propagated with the fitted model
+    (:func:`cadra.dynamics.setup.propagate_states`, the synthetic-truth step
+    ``DT_MAX_TRUTH``). Returns ``{shot_id: DataFrame}`` with columns ``t_s``, ``x_m``, ``y_m``,
+    ``z_m`` (reference point, facility frame), ``theta_deg``, ``psi_deg``, ``alpha_deg``,
+    ``beta_deg``, ``sigma_deg``, ``mach``, ``p_hat``, ``q_hat``, ``r_hat`` and the cg state
+    ``state_0`` .. ``state_12``.
+    """
+    from cadra.dynamics.setup import DT_MAX_TRUTH, propagate_states
+
+    by_id = _shots_by_id(shots)
+    program = result.model.compile()
+    params = result.model.values()
+    out = {}
+    for sf in result.shots:
+        sd = by_id.get(sf.shot_id)
+        if sd is None:
+            raise ValueError(f"no ShotData given for shot {sf.shot_id!r} of the result")
+        t = np.linspace(float(sd.t_s[0]), float(sd.t_s[-1]), int(n_points))
+        states = propagate_states(sf.state, sf.t0_s, t, sd.rigid.phys(), program, params,
+                                  DT_MAX_TRUTH)
+        obs = observe(states, sd.rigid.ref_from_cg_body_m())
+        air = air_angles(states, sd.rigid)
+        df = pd.DataFrame({
+            "t_s": t, "x_m": obs["x_m"], "y_m": obs["y_m"], "z_m": obs["z_m"],
+            "theta_deg": np.degrees(obs["theta_rad"]), "psi_deg": np.degrees(obs["psi_rad"]),
+            "alpha_deg": np.degrees(air["alpha_rad"]), "beta_deg": np.degrees(air["beta_rad"]),
+            "sigma_deg": np.degrees(air["sigma_rad"]), "mach": air["mach"],
+            "p_hat": air["p_hat"], "q_hat": air["q_hat"], "r_hat": air["r_hat"]})
+        for j in range(states.shape[1]):
+            df[f"state_{j}"] = states[:, j]
+        out[sf.shot_id] = df
+    return out
+
+
+def _epoch_observables(y: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    o = observe(y[None, :], ref)
+    return np.array([o["x_m"][0], o["y_m"][0], o["z_m"][0], o["theta_rad"][0], o["psi_rad"][0]])
+
+
+def shot_epoch_table(result: FitResult, shots: Sequence[ShotData]) -> list[dict]:
+    """Per shot, the fitted state at the epoch in range-engineer terms, with 1-sigma.
+
+    Reference-point position and nose-axis inclinations get their sigmas from the result's
+    covariance of the shot's local unknowns (cg position and attitude correct them both),
+    propagated linearly; velocity and body rates are local unknowns themselves. Held
+    unknowns contribute nothing; an undetermined one (infinite sigma) makes the derived
+    sigmas infinite.
+    """
+    by_id = _shots_by_id(shots)
+    rows = []
+    for sf in result.shots:
+        sd = by_id.get(sf.shot_id)
+        if sd is None:
+            raise ValueError(f"no ShotData given for shot {sf.shot_id!r} of the result")
+        ref = sd.rigid.ref_from_cg_body_m()
+        y = np.asarray(sf.state, dtype=float)
+        obs0 = _epoch_observables(y, ref)
+        free = [LOCAL_NAMES.index(n) for n in sf.local_free]
+        J = np.zeros((5, len(free)))
+        for c, k in enumerate(free):
+            u = np.zeros(len(LOCAL_NAMES))
+            u[k] = _FD_STEP
+            up = _epoch_observables(apply_local(y, u), ref)
+            dn = _epoch_observables(apply_local(y, -u), ref)
+            J[:, c] = (up - dn) / (2.0 * _FD_STEP)
+        idx = [result.param_names.index(f"{sf.shot_id}:{LOCAL_NAMES[k]}") for k in free]
+        C = result.covariance[np.ix_(idx, idx)] if idx else np.zeros((0, 0))
+        var = np.einsum("ij,jk,ik->i", J, C, J) if idx else np.zeros(5)
+        sig_obs = np.sqrt(np.maximum(var, 0.0))
+        local_sig = np.asarray(sf.local_sigma, dtype=float)
+        inf_cols = [c for c, k in enumerate(free) if math.isinf(local_sig[k])]
+        for c in inf_cols:
+            sig_obs[np.abs(J[:, c]) > 1e-12] = math.inf
+        air = air_angles(y[None, :], sd.rigid)
+        deg = 180.0 / math.pi
+        rms = {f"{ch}_{CHANNEL_OUTPUT_UNITS[ch][0]}": sf.rms.get(ch, math.nan)
+               * CHANNEL_OUTPUT_UNITS[ch][1] for ch in CHANNELS}
+        rows.append({
+            "shot_id": sf.shot_id,
+            "t0_s": sf.t0_s,
+            "epoch_station": int(sd.stations[sd.epoch_index]),
+            "n_observations": sf.n_observations,
+            "chi2": sf.chi2,
+            "local_free": list(sf.local_free),
+            "reference_point_m": obs0[:3], "reference_point_sigma_m": sig_obs[:3],
+            "velocity_m_s": y[3:6], "velocity_sigma_m_s": local_sig[3:6],
+            "speed_m_s": float(np.linalg.norm(y[3:6])),
+            "theta_deg": obs0[3] * deg, "theta_sigma_deg": sig_obs[3] * deg,
+            "psi_deg": obs0[4] * deg, "psi_sigma_deg": sig_obs[4] * deg,
+            "rates_rad_s": y[10:13], "rates_sigma_rad_s": local_sig[9:12],
+            "alpha_deg": air["alpha_rad"][0] * deg, "beta_deg": air["beta_rad"][0] * deg,
+            "sigma_deg": air["sigma_rad"][0] * deg, "mach": air["mach"][0],
+            "cg_state": y, "local_sigma": dict(zip(LOCAL_NAMES, local_sig, strict=True)),
+            "residual_rms": rms,
+        })
+    return rows
+
+
+def _left_at_start(value: float, initial: float) -> bool:
+    return value == initial or abs(value - initial) <= 1e-12 * max(abs(initial), 1e-300)
+
+
+def _at_bound(p) -> bool:
+    return bool(p.vary and (p.value <= p.min or p.value >= p.max))
+
+
+def extra_warnings(result: FitResult, start_model: AeroModel | None = None) -> list[str]:
+    """Warnings the report adds to the fit's own: free parameters left at their start, and
+    free parameters whose sigma is not finite (not determined by the data)."""
+    out = []
+    if start_model is not None:
+        for n in result.aero_names:
+            if _left_at_start(result.value(n), start_model.parameter(n).value):
+                out.append(f"{n} was left at its starting value {result.value(n):g}: the data "
+                           "did not move it (check that it affects the measurements)")
+    for n, s in zip(result.aero_names, result.aero_sigma, strict=True):
+        if not math.isfinite(s) and not any(d["hold"] == n for d in result.near_singular):
+            out.append(f"{n}: sigma is not finite (not determined by the data)")
+    return [w for w in out if w not in result.warnings]
+
+
+def results_dict(result: FitResult, shots: Sequence[ShotData], *,
+                 start_model: AeroModel | None = None, title: str | None = None) -> dict:
+    """Everything of ``result`` as plain JSON data (what ``results.json`` holds).
+
+    Units are in the key names; model parameter values, sigmas and bounds are SI (radians for
+    angle parameters; ``unit`` says how the model file writes them, ``file_value`` is the value
+    in that unit). ``initial`` is the value in ``start_model`` (None if not given). Non-finite
+    numbers are ``null``.
+    """
+    sig = dict(zip(result.aero_names, result.aero_sigma, strict=True))
+    sig_c = dict(zip(result.aero_names, result.aero_sigma_coloured, strict=True))
+    sig_s = dict(zip(result.aero_names, result.aero_sigma_scaled, strict=True))
+    params = {}
+    for p in result.model.parameters:
+        free = p.name in sig
+        params[p.name] = {
+            "value": p.value, "file_value": p.file_value, "unit": p.unit,
+            "sigma": sig.get(p.name) if free else None,
+            "sigma_coloured": sig_c.get(p.name) if free else None,
+            "sigma_scaled": sig_s.get(p.name) if free else None,
+            "initial": (start_model.parameter(p.name).value if start_model is not None
+                        else None),
+            "held": not free, "min": p.min, "max": p.max, "at_bound": _at_bound(p),
+        }
+    out = {
+        "format": RESULTS_FORMAT,
+        "title": title,
+        "status": result.status, "message": result.message, "converged": result.converged,
+        "chi2": result.chi2, "dof": result.dof, "reduced_chi2": result.reduced_chi2,
+        "n_observations": result.n_observations, "n_free": result.n_free,
+        "iterations": result.iterations, "elapsed_s": result.elapsed_s,
+        "chi2_history": list(result.history),
+        "model": {"name": result.model.name, "angle_plane": result.model.angle_plane},
+        "parameters": params,
+        "shots": shot_epoch_table(result, shots),
+        "residual_rms_all_shots": {f"{ch}_{CHANNEL_OUTPUT_UNITS[ch][0]}":
+                                   v * CHANNEL_OUTPUT_UNITS[ch][1]
+                                   for ch, v in result.rms().items()},
+        "high_correlations": [{"a": a, "b": b, "r": r}
+                              for a, b, r in result.high_correlations(REPORT_CORRELATION)],
+        "near_singular": [dict(d) for d in result.near_singular],
+        "warnings": list(result.warnings) + extra_warnings(result, start_model),
+        "param_names": list(result.param_names),
+        "options": result.options,
+    }
+    return _plain(out)
+
+
+def residuals_table(result: FitResult) -> pd.DataFrame:
+    """The residuals with angles in degrees and the unit of each row named.
+
+    Columns: ``shot_id``, ``station``, ``t_s``, ``channel``, ``unit`` (``m`` or ``deg``),
+    ``measured``, ``fitted``, ``residual`` (measured - fitted), ``sigma`` (all in ``unit``) and
+    ``normalized`` (residual / sigma, dimensionless).
+    """
+    r = result.residuals
+    cols = ["shot_id", "station", "t_s", "channel", "unit", "measured", "fitted", "residual",
+            "sigma", "normalized"]
+    if r is None or len(r) == 0:
+        return pd.DataFrame(columns=cols)
+    factor = r["channel"].map(lambda c: CHANNEL_OUTPUT_UNITS[c][1]).to_numpy(float)
+    out = pd.DataFrame({
+        "shot_id": r["shot_id"], "station": r["station"], "t_s": r["t_s"],
+        "channel": r["channel"], "unit": r["channel"].map(lambda c: CHANNEL_OUTPUT_UNITS[c][0]),
+        "measured": r["measured"].to_numpy(float) * factor,
+        "fitted": r["fitted"].to_numpy(float) * factor,
+        "residual": r["residual"].to_numpy(float) * factor,
+        "sigma": r["sigma"].to_numpy(float) * factor,
+        "normalized": r["normalized"].to_numpy(float)})
+    return out.loc[:, cols]
+
+
+# --------------------------------------------------------------------------- formatting
+
+
+def _pm(value: float, sigma: float | None) -> str:
+    """``value ± sigma`` with sigma to 2 significant digits and value to the same place."""
+    if sigma is None or not math.isfinite(value):
+        return f"{value:.6g}"
+    if not math.isfinite(sigma):
+        return f"{value:.6g} ± inf"
+    if sigma <= 0:
+        return f"{value:.6g} ± 0"
+    place = math.floor(math.log10(sigma)) - 1
+    if -8 <= place <= 0:
+        dec = -place
+        return f"{value:.{dec}f} ± {sigma:.{dec}f}"
+    return f"{value:.4g} ± {sigma:.2g}"
+
+
+def _pct(value: float, sigma: float) -> str:
+    if not math.isfinite(sigma) or value == 0:
+        return "—"
+    return f"{100.0 * abs(sigma / value):.2g}%"
+
+
+def coefficient_markdown(table: pd.DataFrame) -> str:
+    """A :meth:`FitResult.coefficient_table` as a Markdown table: coefficient | form |
+    A1 ± σ | ... | other (held values marked "(held)", unused cells blank)."""
+    ks = sorted(int(c[1:]) for c in table.columns if c[0] == "A" and c[1:].isdigit())
+    head = ["coefficient", "form"] + [f"A{k} ± σ" for k in ks] + ["other"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for row in table.itertuples(index=False):
+        d = row._asdict()
+        cells = [f"{d['coefficient']}", f"`{d['form']}`"]
+        for k in ks:
+            v = d.get(f"A{k}")
+            if v is None or (isinstance(v, float) and math.isnan(v)):
+                cells.append("")
+            elif bool(d.get(f"A{k}_held")):
+                cells.append(f"{v:.6g} (held)")
+            else:
+                cells.append(_pm(float(v), float(d.get(f"A{k}_sigma"))))
+        cells.append(str(d.get("other") or ""))
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines)
+
+
+def _bounds_text(p) -> str:
+    if math.isinf(p.min) and math.isinf(p.max):
+        return ""
+    return f"[{p.min:g}, {p.max:g}]"
+
+
+def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
+                    start_model: AeroModel | None = None, title: str | None = None,
+                    plot_files: Mapping[str, str] | None = None,
+                    notes: Sequence[str] = ()) -> str:
+    """The one-page fit report (Markdown), lmfit's fit report in a range engineer's units.
+
+    Sections: status; fit statistics; free parameters (value ± sigma (%), coloured and
+    scaled sigmas, initial value, bounds, flags) and held ones; the Table 4 coefficient
+    table; correlations above 0.9; identifiability (near-singular directions with the
+    parameter to hold) and warnings; each shot's fitted state at the epoch; residual rms per
+    shot and channel (µm, deg); links to the plots (``plot_files``: key -> relative path).
+    """
+    deg = 180.0 / math.pi
+    name = title or f"{result.model.name}: " + ", ".join(s.shot_id for s in result.shots)
+    L = [f"# Stage-two fit: {name}", ""]
+    if result.converged:
+        L += [f"**Status: converged** — {result.message}", ""]
+    else:
+        L += [f"**Status: {result.status.upper()} — NOT A RESULT.** {result.message}. The "
+              "values below are the best point the fit reached; do not use them as "
+              "coefficients.", ""]
+    L += ["## Fit statistics", "",
+          "| quantity | value |", "|---|---|",
+          f"| χ² | {result.chi2:.6g} |",
+          f"| degrees of freedom | {result.dof} ({result.n_observations} measurements − "
+          f"{result.n_free} free unknowns) |",
+          f"| reduced χ² | {result.reduced_chi2:.4g} |",
+          f"| shots | {len(result.shots)} |",
+          f"| iterations | {result.iterations} |",
+          f"| elapsed | {result.elapsed_s:.2f} s |", ""]
+    if math.isfinite(result.reduced_chi2) and result.reduced_chi2 > 2.0:
+        L += [f"Reduced χ² = {result.reduced_chi2:.3g} > 2: the sigmas or the model do not "
+              "describe the data; use the scaled or coloured sigmas.", ""]
+
+    # parameters
+    sig = dict(zip(result.aero_names, result.aero_sigma, strict=True))
+    sig_c = dict(zip(result.aero_names, result.aero_sigma_coloured, strict=True))
+    sig_s = dict(zip(result.aero_names, result.aero_sigma_scaled, strict=True))
+    L += ["## Parameters", "",
+          "Values SI (angles in rad); σ from (JᵀWJ)⁻¹; σ coloured: sandwich estimate for "
+          "correlated residuals; σ scaled: σ·√(χ²/dof) when that exceeds 1.", "",
+          "| parameter | value ± σ | σ (%) | σ coloured | σ scaled | initial | bounds | flags |",
+          "|---|---|---|---|---|---|---|---|"]
+    for n in result.aero_names:
+        p = result.model.parameter(n)
+        flags = []
+        if _at_bound(p):
+            flags.append("AT BOUND")
+        init = "—"
+        if start_model is not None:
+            v0 = start_model.parameter(n).value
+            init = f"{v0:.6g}"
+            if _left_at_start(p.value, v0):
+                flags.append("LEFT AT START")
+        if not math.isfinite(sig[n]):
+            flags.append("UNDETERMINED")
+        if any(d["hold"] == n for d in result.near_singular):
+            flags.append("hold suggested")
+        L.append(f"| {n} | {_pm(p.value, sig[n])} | {_pct(p.value, sig[n])} | "
+                 f"{sig_c[n]:.2g} | {sig_s[n]:.2g} | {init} | {_bounds_text(p)} | "
+                 f"{', '.join(flags)} |")
+    held = [p for p in result.model.parameters if p.name not in sig]
+    if held:
+        L += ["", "Held: " + ", ".join(
+            f"{p.name} = {p.file_value:g}{' ' + p.unit if p.unit else ''}" for p in held) + "."]
+    L += ["", "## Coefficients (seed 004 Table 4 layout)", "",
+          coefficient_markdown(result.coefficient_table()), ""]
+
+    corr = result.high_correlations(REPORT_CORRELATION)
+    L += [f"## Correlations (|r| ≥ {REPORT_CORRELATION})", ""]
+    if corr:
+        L += ["| a | b | r |", "|---|---|---|"]
+        L += [f"| {a} | {b} | {r:+.4f} |" for a, b, r in
+              sorted(corr, key=lambda t: -abs(t[2]))]
+    else:
+        L.append("None.")
+    L.append("")
+
+    L += ["## Identifiability and warnings", ""]
+    if result.near_singular:
+        L += ["Directions the data do not determine (eigenvalue ratio of the normal matrix in "
+              "correlation form):", ""]
+        for d in result.near_singular:
+            L.append(f"- **hold {d['hold']}**: {d['text']}")
+        L.append("")
+    near_texts = {d["text"] for d in result.near_singular}
+    warns = [w for w in list(result.warnings) + extra_warnings(result, start_model)
+             if w not in near_texts]
+    L += [f"- {w}" for w in warns] + list(f"- note: {n}" for n in notes)
+    if not (result.near_singular or warns or notes):
+        L.append("None: no parameter at a bound or left at its start, no near-singular "
+                 "direction.")
+    L.append("")
+
+    # per-shot states
+    rows = shot_epoch_table(result, shots)
+    L += ["## Fitted state at each shot's epoch", "",
+          "Reference point (what the images show) in the facility frame; θ, ψ nose-axis "
+          "inclinations; α, β, σ classical (0 = heat shield into the wind; CEV α = 180° − α).",
+          "",
+          "| shot | station | t0 (s) | x (m) | y (mm) | z (mm) | V (m/s) | θ (deg) | ψ (deg) "
+          "| p, q, r (rad/s) | α, β, σ (deg) | Mach |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        x, y, z = r["reference_point_m"]
+        sx, sy, sz = r["reference_point_sigma_m"]
+        rates = ", ".join(_pm(float(v), float(s)) if np.isfinite(s) else f"{v:.4g}"
+                          for v, s in zip(r["rates_rad_s"], r["rates_sigma_rad_s"],
+                                          strict=True))
+        L.append(f"| {r['shot_id']} | {r['epoch_station']} | {r['t0_s']:.6f} | "
+                 f"{_pm(x, sx)} | {_pm(y * 1e3, sy * 1e3)} | {_pm(z * 1e3, sz * 1e3)} | "
+                 f"{r['speed_m_s']:.3f} | {_pm(r['theta_deg'], r['theta_sigma_deg'])} | "
+                 f"{_pm(r['psi_deg'], r['psi_sigma_deg'])} | {rates} | "
+                 f"{r['alpha_deg']:.2f}, {r['beta_deg']:.2f}, {r['sigma_deg']:.2f} | "
+                 f"{r['mach']:.4f} |")
+    L.append("")
+
+    L += ["## Residual rms", "",
+          "| shot | n | χ² | x (µm) | y (µm) | z (µm) | θ (deg) | ψ (deg) |",
+          "|---|---|---|---|---|---|---|---|"]
+
+    def cells(rms: Mapping[str, float]) -> str:
+        out = []
+        for ch in CHANNELS:
+            v = rms.get(ch, math.nan)
+            if not math.isfinite(v):
+                out.append("—")
+            elif ch in ("x", "y", "z"):
+                out.append(f"{v * 1e6:.3g}")
+            else:
+                out.append(f"{v * deg:.3g}")
+        return " | ".join(out)
+
+    for sf in result.shots:
+        L.append(f"| {sf.shot_id} | {sf.n_observations} | {sf.chi2:.4g} | {cells(sf.rms)} |")
+    if len(result.shots) > 1:
+        L.append(f"| all | {result.n_observations} | {result.chi2:.4g} | "
+                 f"{cells(result.rms())} |")
+    L.append("")
+    if plot_files:
+        captions = {"coefficients": "fitted coefficients vs angle with ±1σ bands",
+                    "angles": "measured vs fitted θ, ψ and α (σ) vs distance",
+                    "residuals": "normalized residuals per channel vs station",
+                    "trajectory3d": "3-D view of the fitted flight"}
+        L += ["## Plots", ""]
+        for key, rel in plot_files.items():
+            L.append(f"- [{captions.get(key, key)}]({rel})")
+        L.append("")
+        for key, rel in plot_files.items():
+            L += [f"![{captions.get(key, key)}]({rel})", ""]
+    L += ["Files: results.json, coefficients.csv, covariance.csv, correlation.csv, "
+          "correlation_coloured.csv, residuals.csv (angles in deg, `unit` column).", ""]
+    return "\n".join(L)
+
+
+# --------------------------------------------------------------------------- writer
+
+
+def _matrix_csv(M: np.ndarray, names: Sequence[str], path: Path) -> None:
+    pd.DataFrame(np.asarray(M, dtype=float), index=list(names), columns=list(names)) \
+        .to_csv(path, index_label="parameter")
+
+
+def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str | os.PathLike,
+                      *, overwrite: bool = False, plots: bool = True, title: str | None = None,
+                      start_model: AeroModel | None = None, bodies: Mapping | None = None,
+                      reference_model: AeroModel | None = None,
+                      extra_files: Mapping[str, str] | None = None) -> Path:
+    """Write a fit's files, report and plots to ``out_dir`` (module doc), atomically.
+
+    Parameters
+    ----------
+    result : the fit (a failed fit is written too; the report says it is not a result).
+    shots : the :class:`ShotData` the fit used (matched to ``result.shots`` by shot id).
+    out_dir : the directory to create.
+    overwrite : replace an existing ``out_dir`` (default: :class:`FileExistsError`).
+    plots : write ``plots/*.png`` (matplotlib; pyvista for the 3-D view, with a matplotlib
+        fallback when off-screen rendering is unavailable, noted in the report).
+    title : report title (default: model name and shot ids).
+    start_model : the model the fit started from (its values are the "initial" column).
+    bodies : optional ``{shot_id: cadra.body.Body}`` for the 3-D view (default: rebuilt from
+        ``shot.source["shot_file"]``, else a generic body of the shot's kind).
+    reference_model : optional model drawn beside the fitted coefficients (e.g. the truth of
+        a synthetic shot).
+    extra_files : ``{file name: text}`` written in the same atomic step (the CLI's fitted
+        model file and run configuration).
+
+    Returns
+    -------
+    The output directory. On any error nothing is left at ``out_dir`` (an existing directory
+    being replaced is kept unchanged).
+    """
+    from cadra.io.atomic import atomic_output_dir
+
+    out_dir = Path(out_dir)
+    shots = list(shots)
+    missing = [sf.shot_id for sf in result.shots if sf.shot_id not in _shots_by_id(shots)]
+    if missing:
+        raise ValueError(f"write_fit_outputs: no ShotData for shot(s) {missing}")
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        data = results_dict(result, shots, start_model=start_model, title=title)
+        (tmp / "results.json").write_text(json.dumps(data, indent=2, allow_nan=False) + "\n",
+                                          encoding="utf-8")
+        result.coefficient_table().to_csv(tmp / "coefficients.csv", index=False)
+        names = result.param_names
+        _matrix_csv(result.covariance, names, tmp / "covariance.csv")
+        _matrix_csv(result.correlation(), names, tmp / "correlation.csv")
+        _matrix_csv(result.correlation(coloured=True), names, tmp / "correlation_coloured.csv")
+        residuals_table(result).to_csv(tmp / "residuals.csv", index=False)
+        for name, text in (extra_files or {}).items():
+            (tmp / name).write_text(text, encoding="utf-8")
+        plot_files: dict[str, str] = {}
+        notes: list[str] = []
+        if plots:
+            plot_files, notes = _write_plots(result, shots, tmp / "plots", bodies=bodies,
+                                             reference_model=reference_model, title=title)
+        (tmp / "report.md").write_text(
+            report_markdown(result, shots, start_model=start_model, title=title,
+                            plot_files=plot_files, notes=notes), encoding="utf-8")
+    return out_dir
+
+
+def _write_plots(result, shots, plot_dir: Path, *, bodies, reference_model, title):
+    from cadra.fitting import plots as P
+
+    plot_dir.mkdir()
+    files: dict[str, str] = {}
+    notes: list[str] = []
+
+    def save(key, fig):
+        fig.savefig(plot_dir / PLOT_FILES[key], dpi=110)
+        files[key] = f"plots/{PLOT_FILES[key]}"
+
+    histories = fitted_histories(result, shots)
+    save("coefficients", P.plot_coefficients(result, shots, histories=histories,
+                                             reference_model=reference_model))
+    save("angles", P.plot_angle_histories(result, shots, histories=histories))
+    save("residuals", P.plot_residuals(result))
+    path3d = plot_dir / PLOT_FILES["trajectory3d"]
+    try:
+        P.render_trajectory_3d(result, shots, path3d, bodies=bodies, histories=histories,
+                               title=title)
+    except P.RenderingUnavailable as exc:
+        save("trajectory3d", P.trajectory_3d_matplotlib(result, shots, bodies=bodies,
+                                                        histories=histories, title=title))
+        notes.append(f"the 3-D view was drawn with matplotlib: {exc}")
+    files["trajectory3d"] = f"plots/{PLOT_FILES['trajectory3d']}"
+    return files, notes
+
+
+__all__ = ["CHANNEL_OUTPUT_UNITS", "PLOT_FILES", "RESULTS_FORMAT", "air_angles",
+           "coefficient_markdown", "fitted_histories", "report_markdown", "residuals_table",
+           "results_dict", "shot_epoch_table", "write_fit_outputs"]
