@@ -235,9 +235,11 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     n_obs = sum(st.mask.sum() for st in states)
     n_free = na + sum(st.local_free.size for st in states)
     warnings: list[str] = []
+    message = ""
     if n_obs < n_free:
-        warnings.append(f"{n_obs} measurements for {n_free} free unknowns: too few stations "
-                        "for the free parameters; the fit cannot determine them all")
+        message = (f"{n_obs} measurements for {n_free} free unknowns: too few stations for the "
+                   "free parameters (hold some, or add stations or shots); not fitted")
+        warnings.append(message)
 
     def evaluate_jac(p):
         for st in states:
@@ -251,7 +253,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                 for st, y in zip(states, ys, strict=True)]
 
     history = []
-    status, message = "failed", ""
+    status = "failed"
     lam = options.lambda_start
     iterations = 0
     bar = None
@@ -261,6 +263,10 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         bar = tqdm(total=options.max_iterations, desc="cadra2 fit", unit="it", leave=False)
     try:
         chi2 = evaluate_jac(params)
+        if n_obs < n_free:
+            history.append(chi2)
+            return build_result(shots, model, params, states, aero_idx, "failed", message,
+                                history, warnings, iterations, t_start, options, lam)
         if not math.isfinite(chi2):
             message = ("the starting point gives a non-finite prediction (the trajectory "
                        "diverges or tumbles); better starting values are needed")

@@ -1,0 +1,170 @@
+"""``cadra2 fit`` in-process: outputs, refusals and bad input (no images needed: the
+trajectory files are made from the simulator's exact truth plus seeded noise)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cadra.aero import save_model
+from cadra.cli.cadra2 import main
+from cadra.io.trajectory import COLUMNS, write_trajectory
+from cadra.simulate import load_shot_spec, simulate_shot, write_shot
+
+SPECS = Path("sample_shots/specs")
+
+
+def _trajectory(shot, shot_file: Path, path: Path, rng, *, sp=1e-4, sa_deg=0.1, rows=None):
+    t = shot.truth if rows is None else shot.truth.iloc[rows]
+    n = len(t)
+    table = pd.DataFrame({
+        "station": t["station"].to_numpy(), "t_s": t["t_s"].to_numpy(), "status": "ok",
+        "x_m": t["x_m"] + rng.normal(0, sp, n), "y_m": t["y_m"] + rng.normal(0, sp, n),
+        "z_m": t["z_m"] + rng.normal(0, sp, n),
+        "theta_deg": t["theta_deg"] + rng.normal(0, sa_deg, n),
+        "psi_deg": t["psi_deg"] + rng.normal(0, sa_deg, n),
+        "sigma_x_m": sp, "sigma_y_m": sp, "sigma_z_m": sp, "sigma_theta_deg": sa_deg,
+        "sigma_psi_deg": sa_deg, "x_top_minus_side_m": 0.0, "x_consistency": 0.0,
+        "reason": "", "warnings": ""})
+    write_trajectory(path, table.loc[:, list(COLUMNS)],
+                     {"shot_id": shot.spec.shot_id, "shot_file": str(shot_file.resolve())})
+    return path
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory):
+    base = tmp_path_factory.mktemp("cli")
+    out = {}
+    rng = np.random.default_rng(42)
+    for name in ("m2_2429", "m2_2427"):
+        sim = simulate_shot(load_shot_spec(SPECS / f"{name}.toml"))
+        d = write_shot(sim, base / name, images=False, progress=False)
+        traj = _trajectory(sim, d / "shot.toml", base / f"{name}_trajectory.csv", rng)
+        out[name] = (sim, d / "shot.toml", traj)
+    out["base"] = base
+    return out
+
+
+def test_fit_writes_everything_and_refuses_to_overwrite(shots, capsys):
+    sim, _, traj = shots["m2_2429"]
+    out = shots["base"] / "fit1"
+    assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(out), "-q",
+                 "--no-plots"]) == 0
+    for f in ("results.json", "coefficients.csv", "covariance.csv", "correlation.csv",
+              "correlation_coloured.csv", "residuals.csv", "report.md", "model_fitted.toml",
+              "config.toml"):
+        assert (out / f).is_file(), f
+    res = json.loads((out / "results.json").read_text())
+    assert res["status"] == "converged"
+    text = capsys.readouterr().out
+    assert "Cm_A1" in text and "converged" in text
+    # fitted values within 3 sigma of Table 4 M2 M0.70 (the truth of the simulated shot)
+    table = pd.read_csv(out / "coefficients.csv")
+    cm = table.loc[table["coefficient"] == "Cm"].iloc[0]
+    assert abs(cm["A1"] - sim.model.parameter("Cm_A1").value) < 3 * cm["A1_sigma"]
+    before = (out / "results.json").stat().st_mtime_ns
+    assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(out), "-q"]) == 1
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert (out / "results.json").stat().st_mtime_ns == before
+
+
+def test_multifit_two_shots_with_holds(shots):
+    trajs = [str(shots[n][2]) for n in ("m2_2429", "m2_2427")]
+    out = shots["base"] / "multi"
+    assert main(["fit", *trajs, "--model", "m2_m070", "-o", str(out), "-q", "--no-plots",
+                 "--hold", "Cnr_A1=0.81", "--hold", "CD_A5"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert len(res["shots"]) == 2
+    free = {name for name, p in res["parameters"].items() if not p["held"]}
+    assert "Cnr_A1" not in free and "CD_A5" not in free and "Cm_A1" in free
+
+
+def test_files_that_do_not_belong_together(shots, capsys):
+    _, shot_b, _ = shots["m2_2427"]
+    _, _, traj_a = shots["m2_2429"]
+    out = shots["base"] / "mismatch"
+    assert main(["fit", str(traj_a), "--shot", str(shot_b), "--model", "m2_m070", "-o",
+                 str(out), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "do not belong together" in err
+    assert not out.exists()
+
+
+def test_too_few_stations(shots, capsys):
+    sim, shot_file, _ = shots["m2_2429"]
+    traj = _trajectory(sim, shot_file, shots["base"] / "short.csv",
+                       np.random.default_rng(1), rows=[0, 1, 2])
+    out = shots["base"] / "short_fit"
+    assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(out), "-q",
+                 "--no-plots"]) == 1
+    assert "too few stations" in capsys.readouterr().err
+    res = json.loads((out / "results.json").read_text())
+    assert res["status"] == "failed" and not res["converged"]
+    assert "NOT" in (out / "report.md").read_text()
+
+
+def test_nan_measurements_and_failed_stations(shots):
+    sim, shot_file, traj = shots["m2_2429"]
+    text = traj.read_text().splitlines()
+    header = [i for i, line in enumerate(text) if line.startswith("station,")][0]
+    lines = text[:]
+    # station 4: failed (values empty); station 6: theta missing
+    cols = lines[header].split(",")
+    row = lines[header + 4].split(",")
+    row[cols.index("status")] = "failed"
+    for c in ("x_m", "y_m", "z_m", "theta_deg", "psi_deg"):
+        row[cols.index(c)] = ""
+    row[cols.index("reason")] = "image unreadable"
+    lines[header + 4] = ",".join(row)
+    row = lines[header + 6].split(",")
+    row[cols.index("theta_deg")] = "nan"
+    lines[header + 6] = ",".join(row)
+    bad = shots["base"] / "holes.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    out = shots["base"] / "holes_fit"
+    assert main(["fit", str(bad), "--model", "m2_m070", "-o", str(out), "-q",
+                 "--no-plots"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["n_observations"] == 16 * 5 - 5 - 1
+
+
+def test_diverging_start_marked_not_converged(shots, capsys):
+    sim, _, traj = shots["m2_2429"]
+    bad = shots["base"] / "absurd.toml"
+    save_model(sim.model.with_values({"Cm_A1": 5e3, "Cmq_A1": 5e3}), bad)
+    out = shots["base"] / "diverged"
+    rc = main(["fit", str(traj), "--model", str(bad), "--no-auto-start", "-o", str(out),
+               "-q", "--no-plots", "--max-iterations", "1"])
+    assert rc == 1
+    assert "NOT CONVERGED" in capsys.readouterr().err
+    res = json.loads((out / "results.json").read_text())
+    assert not res["converged"]
+
+
+def test_unknown_model_and_bad_hold(shots, capsys):
+    _, _, traj = shots["m2_2429"]
+    out = shots["base"] / "nomodel"
+    assert main(["fit", str(traj), "--model", "no_such_model", "-o", str(out), "-q"]) == 1
+    assert "no_such_model" in capsys.readouterr().err
+    assert main(["fit", str(traj), "--model", "m2_m070", "--hold", "Cx_A9", "-o", str(out),
+                 "-q"]) == 1
+    assert "Cx_A9" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_hold_value_in_file_units(shots):
+    """--hold alpha_ref=21.21 is degrees (the model file's unit), stored as radians."""
+    from cadra.cli.cadra2 import _apply_holds, build_parser
+    from cadra.simulate import resolve_model
+
+    args = build_parser().parse_args(["fit", "x", "--model", "m2_m070", "-o", "y",
+                                      "--hold", "alpha_ref=20.0", "--bound", "CD_A1=0.5:1.5"])
+    m = _apply_holds(resolve_model("m2_m070"), args)
+    assert m.parameter("alpha_ref").value == pytest.approx(math.radians(20.0), rel=1e-15)
+    assert not m.parameter("alpha_ref").vary
+    assert (m.parameter("CD_A1").min, m.parameter("CD_A1").max) == (0.5, 1.5)
