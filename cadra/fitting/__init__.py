@@ -11,6 +11,9 @@ Public API:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.fitting.data import (
@@ -27,21 +30,52 @@ from cadra.fitting.solver import FitOptions, fit
 from cadra.fitting.start import estimate_motion, initial_states, starting_model
 
 
+def _floored(shot: ShotData, floor: dict) -> ShotData:
+    sigma = shot.sigma.copy()
+    sigma[:, :3] = np.fmax(sigma[:, :3], floor["position_m"])
+    sigma[:, 3:] = np.fmax(sigma[:, 3:], floor["angle_rad"])
+    return replace(shot, sigma=sigma)
+
+
 def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
               options: FitOptions | None = None, auto_start: bool = True,
-              initial: Sequence | None = None) -> tuple[FitResult, AeroModel]:
+              initial: Sequence | None = None,
+              continuation: dict | None = FILM_SIGMAS) -> tuple[FitResult, AeroModel]:
     """Fit ``model`` to ``shots`` from automatic starting values.
 
     With ``auto_start`` the free parameters first move to the linear-theory targets
     (:func:`starting_model`); each shot's initial state comes from its measurements
-    (:func:`initial_states`) unless ``initial`` gives them. Returns the result and the starting
-    model (for the report's "initial value" column).
+    (:func:`initial_states`) unless ``initial`` gives them.
+
+    ``continuation`` (default: the film-range sigmas, 0.1 mm and 0.1 deg): when the
+    measurements are more precise than that, the fit first converges with the sigmas floored
+    at these values and then refines with the real ones from there. From a rough start the
+    very steep chi^2 of micrometre data can otherwise walk into a region where a term of a
+    ``max(...)`` form never acts (its parameter then has no effect and cannot come back);
+    ``None`` fits with the real sigmas at once.
+
+    Returns the result and the starting model (for the report's "initial value" column).
     """
     options = options or FitOptions()
     shots = list(shots)
-    start = starting_model(shots, model) if auto_start else model
+    staged = continuation is not None and any(
+        np.nanmin(s.sigma[:, :3]) < continuation["position_m"]
+        or (s.has_angles and np.nanmin(s.sigma[:, 3:]) < continuation["angle_rad"])
+        for s in shots)
+    # starting values (and the roll grid's chi^2) under the weights of the first stage
+    first_shots = [_floored(s, continuation) for s in shots] if staged else shots
+    start = starting_model(first_shots, model) if auto_start else model
     states = list(initial) if initial is not None else initial_states(
-        shots, start, options.integration)
+        first_shots, start, options.integration)
+    if staged:
+        first = fit(first_shots, start, states, options=options)
+        if first.status in ("converged", "max_iterations", "stalled") and np.all(
+                np.isfinite(first.aero_values)):
+            result = fit(shots, first.model, [sf.state for sf in first.shots],
+                         options=options)
+            return replace(result, iterations=first.iterations + result.iterations,
+                           elapsed_s=first.elapsed_s + result.elapsed_s,
+                           history=first.history + result.history), start
     return fit(shots, start, states, options=options), start
 
 
