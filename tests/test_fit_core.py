@@ -260,3 +260,14 @@ def test_multifit_shares_parameters(m2_2429):
     assert multi.aero_sigma[i] < min(s.aero_sigma[i] for s in singles)
     assert len(multi.shots) == 2
     assert set(pd.unique(multi.residuals["shot_id"])) == {s.shot_id for s in sds}
+
+
+def test_bounds_are_respected_and_reported(m2_2429):
+    """CD_A1 bounded below its true 0.953: the fit stops at the bound and says so."""
+    shot = m2_2429
+    sd = _data(shot, np.random.default_rng(6))
+    model = shot.model.with_values({"CD_A1": 0.9}).with_bounds({"CD_A1": (0.5, 0.94)})
+    result, _ = fit_shots([sd], model)
+    assert result.value("CD_A1") <= 0.94
+    assert result.value("CD_A1") == pytest.approx(0.94, abs=1e-12)
+    assert any("CD_A1" in w and "bound" in w for w in result.warnings)
