@@ -287,7 +287,17 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             per, Ca, ga = _normal_equations(blocks, na)
             ds, da = _scales(per, Ca)
             # Gauss-Newton step size (lambda ~ 0): the convergence test
-            _, _, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
+            _, gn_a, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
+            # active set: a parameter at a bound whose step points outward is frozen for
+            # this iteration (its column is dropped), so neither the step nor the convergence
+            # test pushes against the bound
+            pa = params[aero_idx]
+            blocked = ((pa <= lo) & (gn_a < 0)) | ((pa >= hi) & (gn_a > 0))
+            if blocked.any():
+                blocks = [(Js, np.where(blocked, 0.0, Ja), r) for Js, Ja, r in blocks]
+                per, Ca, ga = _normal_equations(blocks, na)
+                ds, da = _scales(per, Ca)
+                _, _, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
             dof = max(n_obs - n_free, 1)
             scale = max(1.0, chi2 / dof)
             if gn_decrease <= options.step_tol_sigma**2 * scale:
