@@ -168,3 +168,31 @@ def test_hold_value_in_file_units(shots):
     assert m.parameter("alpha_ref").value == pytest.approx(math.radians(20.0), rel=1e-15)
     assert not m.parameter("alpha_ref").vary
     assert (m.parameter("CD_A1").min, m.parameter("CD_A1").max) == (0.5, 1.5)
+
+
+def test_single_fits_and_quasi_linear(shots, capsys):
+    """Seed 004 steps 1-2 from the CLI: one linear fit per shot (lifting body -> the
+    alpha-beta template), quasi-linear table and plots."""
+    trajs = [str(shots[n][2]) for n in ("m2_2429", "m2_2427")]
+    out = shots["base"] / "single"
+    assert main(["single", *trajs, "-o", str(out)]) == 0
+    table = pd.read_csv(out / "single_fits.csv")
+    assert list(table["shot_id"]) == ["M2-2429", "M2-2427"]
+    assert table["converged"].all()
+    # the linear pitch slope is near Table 4's local slope A1 cos(alpha) (~ -0.14)
+    assert (table["Cm_a"].between(-0.2, -0.1)).all()
+    assert "alpha_rms_deg" in table
+    assert (out / "quasi_linear.json").is_file()
+    assert any(p.name.startswith("quasi_linear_Cm_a") for p in (out / "plots").iterdir())
+
+
+def test_hold_one_study_cli(shots):
+    """Fig. 15 from the CLI: Cnr_A1 held at three values; chi^2 is lowest at the truth."""
+    _, _, traj = shots["m2_2429"]
+    out = shots["base"] / "holdone"
+    assert main(["holdone", str(traj), "--model", "m2_m070", "--param", "Cnr_A1",
+                 "--values", "0.2,0.81,1.6", "-o", str(out)]) == 0
+    table = pd.read_csv(out / "hold_one.csv")
+    assert list(table["value"]) == [0.2, 0.81, 1.6]
+    assert table["chi2"].idxmin() == 1
+    assert (out / "hold_one.png").is_file()

@@ -6,6 +6,13 @@ Subcommands:
   differential correction of the model's free parameters and each shot's initial state to stage
   one's measurements (one trajectory file: a single fit; several: a multi-fit); writes the
   coefficient table, covariances, residuals, report and plots (docs/fitting.md).
+* ``cadra2 single TRAJECTORY [...] -o OUT_DIR`` — seed 004 step 1 and 2: each shot fitted on
+  its own with a linear model (default: the bundled linear template that suits the body),
+  the quasi-linear coefficients vs amplitude (alpha_rms, sigma_rms) with straight-line tests
+  and plots.
+* ``cadra2 holdone TRAJECTORY [...] --model MODEL --param NAME --values V1,V2,... -o OUT_DIR``
+  — seed 004 Fig. 15: hold one parameter at each value (model file's unit), refit the rest
+  on all shots; table of rms and the other parameters, and a plot.
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 
@@ -100,11 +107,10 @@ def _apply_holds(model, args):
 
 
 def _fit(args) -> int:
-    import math
 
     import tomli_w
 
-    from cadra.fitting import FitDataError, FitOptions, fit_shots, load_shot_data
+    from cadra.fitting import FitDataError, FitOptions, fit_shots
     from cadra.fitting.report import write_fit_outputs
     from cadra.simulate import SpecError, resolve_model
 
@@ -113,19 +119,9 @@ def _fit(args) -> int:
         print(f"cadra2 fit: {out} exists; refusing to overwrite (use --overwrite)",
               file=sys.stderr)
         return 1
-    if args.shot and len(args.shot) != len(args.trajectories):
-        print("cadra2 fit: give one --shot per trajectory file (same order), or none",
-              file=sys.stderr)
-        return 2
     try:
         model = _apply_holds(resolve_model(args.model), args)
-        shots = []
-        for k, item in enumerate(args.trajectories):
-            traj, shot_path = _trajectory_and_shot(item, args.shot[k] if args.shot else None)
-            shots.append(load_shot_data(
-                shot_path, traj, sigma_t_s=args.sigma_time_s,
-                min_sigma={"position_m": args.min_sigma_position_m,
-                           "angle_rad": math.radians(args.min_sigma_angle_deg)}))
+        shots = _load_shots(args)
         options = FitOptions(max_iterations=args.max_iterations, progress=not args.quiet)
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start)
@@ -148,6 +144,157 @@ def _fit(args) -> int:
     return 0
 
 
+def _load_shots(args):
+    import math
+
+    from cadra.fitting import load_shot_data
+
+    if args.shot and len(args.shot) != len(args.trajectories):
+        raise ValueError("give one --shot per trajectory file (same order), or none")
+    shots = []
+    for k, item in enumerate(args.trajectories):
+        traj, shot_path = _trajectory_and_shot(item, args.shot[k] if args.shot else None)
+        shots.append(load_shot_data(
+            shot_path, traj, sigma_t_s=args.sigma_time_s,
+            min_sigma={"position_m": args.min_sigma_position_m,
+                       "angle_rad": math.radians(args.min_sigma_angle_deg)}))
+    return shots
+
+
+def _single(args) -> int:
+    import json
+
+    from cadra.aero import load_bundled_model
+    from cadra.fitting import FitDataError, FitOptions
+    from cadra.fitting.studies import (
+        linear_template_for,
+        plot_quasi_linear,
+        quasi_linear_summary,
+        single_fits,
+    )
+    from cadra.io.atomic import atomic_output_dir
+    from cadra.simulate import SpecError, resolve_model
+
+    out = Path(args.output)
+    if out.exists() and not args.overwrite:
+        print(f"cadra2 single: {out} exists; refusing to overwrite (use --overwrite)",
+              file=sys.stderr)
+        return 1
+    try:
+        shots = _load_shots(args)
+        model = (_apply_holds(resolve_model(args.model), args) if args.model
+                 else linear_template_for(shots[0]))
+        if args.model is None and any(linear_template_for(s).name != model.name
+                                      for s in shots[1:]):
+            model = load_bundled_model("linear_template_alpha_beta")
+        table = single_fits(shots, model, None,
+                            options=FitOptions(max_iterations=args.max_iterations))
+    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"cadra2 single: {msg}", file=sys.stderr)
+        return 1
+    against = [c for c in ("alpha_rms_deg", "sigma_rms_deg") if c in table]
+    summaries = {}
+    with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
+        table.to_csv(tmp / "single_fits.csv", index=False)
+        lines = [f"# Single fits with {model.name} (seed 004 step 1) and quasi-linear "
+                 "trends (step 2)", "",
+                 "| shot | status | chi2/dof | " + " | ".join(model.free_names()) + " |",
+                 "|---|---|---|" + "---|" * len(model.free_names())]
+        for _, row in table.iterrows():
+            cells = [f"{row[n]:.5g} ± {row[n + '_sigma']:.2g}" for n in model.free_names()]
+            lines.append(f"| {row['shot_id']} | {row['status']} | "
+                         f"{row['reduced_chi2']:.3g} | " + " | ".join(cells) + " |")
+        lines += ["", "## Quasi-linear trends (weighted straight line vs amplitude)", "",
+                  "| coefficient | against | slope ± σ | intercept ± σ | p (line) |",
+                  "|---|---|---|---|---|"]
+        (tmp / "plots").mkdir()
+        for name in model.free_names():
+            for col in against:
+                try:
+                    q = quasi_linear_summary(table, name, col)
+                except ValueError as exc:
+                    lines.append(f"| {name} | {col} | {exc} | | |")
+                    continue
+                summaries[f"{name}:{col}"] = q
+                lines.append(f"| {name} | {col} | {q['slope']:.4g} ± {q['slope_sigma']:.2g} | "
+                             f"{q['intercept']:.4g} ± {q['intercept_sigma']:.2g} | "
+                             f"{q['p_value'] if q['p_value'] is not None else '—'} |")
+                fig = plot_quasi_linear(table, name, col)
+                fig.savefig(tmp / "plots" / f"quasi_linear_{name}_{col}.png", dpi=110)
+        (tmp / "quasi_linear.json").write_text(
+            json.dumps(summaries, indent=2,
+                       default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)),
+            encoding="utf-8")
+        (tmp / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    print("\n".join(lines[2:2 + 2 + len(table)]))
+    print(f"wrote {out}/ (single_fits.csv, quasi_linear.json, report.md, plots/)")
+    return 0 if table["converged"].all() else 1
+
+
+def _holdone(args) -> int:
+    import math
+
+    from cadra.fitting import FitDataError, FitOptions, fit_shots
+    from cadra.fitting.studies import hold_one_study, plot_hold_one
+    from cadra.io.atomic import atomic_output_dir
+    from cadra.simulate import SpecError, resolve_model
+
+    out = Path(args.output)
+    if out.exists() and not args.overwrite:
+        print(f"cadra2 holdone: {out} exists; refusing to overwrite (use --overwrite)",
+              file=sys.stderr)
+        return 1
+    try:
+        shots = _load_shots(args)
+        model = _apply_holds(resolve_model(args.model), args)
+        p = model.parameter(args.param)
+        values = [float(v) for v in args.values.split(",") if v.strip()]
+        si = [math.radians(v) if p.unit == "deg" else v for v in values]
+        options = FitOptions(max_iterations=args.max_iterations)
+        # the study starts from the free fit's solution (its parameters and states)
+        free, _ = fit_shots(shots, model, options=options)
+        if not free:
+            raise ValueError(f"the free fit did not converge ({free.message}); the study "
+                             "needs a converged starting point")
+        start = free.model.with_vary({args.param: model.parameter(args.param).vary})
+        table = hold_one_study(shots, start, [sf.state for sf in free.shots], args.param, si,
+                               options=options)
+    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"cadra2 holdone: {msg}", file=sys.stderr)
+        return 1
+    with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
+        table.to_csv(tmp / "hold_one.csv", index=False)
+        plot_hold_one(table, args.param).savefig(tmp / "hold_one.png", dpi=110)
+    cols = ["value", "status", "reduced_chi2", "theta_rms_deg", "psi_rms_deg"]
+    print(table[[c for c in cols if c in table]].to_string(index=False))
+    print(f"wrote {out}/ (hold_one.csv, hold_one.png)")
+    return 0 if table["converged"].all() else 1
+
+
+def _add_data_options(p) -> None:
+    p.add_argument("trajectories", nargs="+",
+                   help="stage one's trajectory.csv files (or their directories)")
+    p.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
+    p.add_argument("--shot", action="append",
+                   help="shot file of each trajectory, same order (default: the one the "
+                        "trajectory file names)")
+    p.add_argument("--hold", action="append", metavar="NAME[=VALUE]",
+                   help="hold a parameter (at VALUE, in the model file's unit)")
+    p.add_argument("--free", action="append", metavar="NAME", help="free a held parameter")
+    p.add_argument("--bound", action="append", metavar="NAME=LO:HI",
+                   help="bounds of a parameter (file unit; either side may be empty)")
+    p.add_argument("--max-iterations", type=int, default=60)
+    p.add_argument("--sigma-time-s", type=float, default=0.0,
+                   help="spark-time sigma, s (adds V sigma_t to the x sigma)")
+    p.add_argument("--min-sigma-position-m", type=float, default=0.0,
+                   help="floor of the stage-one position sigmas, m")
+    p.add_argument("--min-sigma-angle-deg", type=float, default=0.0,
+                   help="floor of the stage-one angle sigmas, deg")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+
+
 def _print_summary(result) -> None:
     print(f"{result.status}: {result.message}")
     print(f"chi^2/dof = {result.chi2:.1f}/{result.dof} = {result.reduced_chi2:.3f}, "
@@ -164,34 +311,29 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="cadra2", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     fit = sub.add_parser("fit", help="fit aerodynamic coefficients to measured trajectories")
-    fit.add_argument("trajectories", nargs="+",
-                     help="stage one's trajectory.csv files (or their directories); several "
-                          "make a multi-fit")
+    _add_data_options(fit)
     fit.add_argument("--model", required=True,
                      help="aero model: a bundled name (m2_m070, linear_template_alpha_beta, "
                           "...) or a model file (docs/aero_models.md)")
-    fit.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
-    fit.add_argument("--shot", action="append",
-                     help="shot file of each trajectory, same order (default: the one the "
-                          "trajectory file names)")
-    fit.add_argument("--hold", action="append", metavar="NAME[=VALUE]",
-                     help="hold a parameter (at VALUE, in the model file's unit)")
-    fit.add_argument("--free", action="append", metavar="NAME", help="free a held parameter")
-    fit.add_argument("--bound", action="append", metavar="NAME=LO:HI",
-                     help="bounds of a parameter (file unit; either side may be empty)")
     fit.add_argument("--no-auto-start", action="store_true",
                      help="start from the model file's values, not linear-theory estimates")
-    fit.add_argument("--max-iterations", type=int, default=60)
-    fit.add_argument("--sigma-time-s", type=float, default=0.0,
-                     help="spark-time sigma, s (adds V sigma_t to the x sigma)")
-    fit.add_argument("--min-sigma-position-m", type=float, default=0.0,
-                     help="floor of the stage-one position sigmas, m")
-    fit.add_argument("--min-sigma-angle-deg", type=float, default=0.0,
-                     help="floor of the stage-one angle sigmas, deg")
     fit.add_argument("--no-plots", action="store_true", help="tables and report only")
-    fit.add_argument("--overwrite", action="store_true", help="replace an existing output")
     fit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     fit.set_defaults(func=_fit)
+    single = sub.add_parser("single", help="single fits with linear forms and quasi-linear "
+                                           "trends (seed 004 steps 1-2)")
+    _add_data_options(single)
+    single.add_argument("--model", default=None,
+                        help="linear model (default: linear_template_sigma for symmetric "
+                             "bodies, linear_template_alpha_beta for lifting ones)")
+    single.set_defaults(func=_single)
+    hold = sub.add_parser("holdone", help="hold-one-parameter study (seed 004 Fig. 15)")
+    _add_data_options(hold)
+    hold.add_argument("--model", required=True, help="aero model (name or file)")
+    hold.add_argument("--param", required=True, help="the parameter to hold")
+    hold.add_argument("--values", required=True,
+                      help="comma-separated values to hold it at (model file's unit)")
+    hold.set_defaults(func=_holdone)
     sim = sub.add_parser("simulate", help="simulate and render a synthetic shot")
     sim.add_argument("spec", help="shot specification TOML (docs/simulation.md)")
     sim.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
