@@ -27,13 +27,27 @@ import sys
 from pathlib import Path
 
 
+def _exists(out: Path, args, command: str) -> bool:
+    """True (and says so) when ``out`` exists and --overwrite was not given."""
+    if out.exists() and not args.overwrite:
+        print(f"cadra2 {command}: {out} exists; refusing to overwrite (use --overwrite)",
+              file=sys.stderr)
+        return True
+    return False
+
+
+def _refused(command: str, exc: Exception) -> int:
+    """Print why the input was refused; exit status 1."""
+    msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+    print(f"cadra2 {command}: {msg}", file=sys.stderr)
+    return 1
+
+
 def _simulate(args) -> int:
     from cadra.simulate import SpecError, load_shot_spec, simulate_shot, write_shot
 
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        print(f"cadra2 simulate: {out} exists; refusing to overwrite (use --overwrite)",
-              file=sys.stderr)
+    if _exists(out, args, "simulate"):
         return 1
     try:
         spec = load_shot_spec(args.spec)
@@ -107,7 +121,6 @@ def _apply_holds(model, args):
 
 
 def _fit(args) -> int:
-
     import tomli_w
 
     from cadra.fitting import FitDataError, FitOptions, fit_shots
@@ -115,9 +128,7 @@ def _fit(args) -> int:
     from cadra.simulate import SpecError, resolve_model
 
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        print(f"cadra2 fit: {out} exists; refusing to overwrite (use --overwrite)",
-              file=sys.stderr)
+    if _exists(out, args, "fit"):
         return 1
     try:
         model = _apply_holds(resolve_model(args.model), args)
@@ -126,9 +137,7 @@ def _fit(args) -> int:
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start)
     except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"cadra2 fit: {msg}", file=sys.stderr)
-        return 1
+        return _refused("fit", exc)
     config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
     extra = {"model_fitted.toml": "# CADRA aerodynamic model (docs/aero_models.md): the fitted "
                                   "values, written by cadra2 fit\n"
@@ -176,9 +185,7 @@ def _single(args) -> int:
     from cadra.simulate import SpecError, resolve_model
 
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        print(f"cadra2 single: {out} exists; refusing to overwrite (use --overwrite)",
-              file=sys.stderr)
+    if _exists(out, args, "single"):
         return 1
     try:
         shots = _load_shots(args)
@@ -190,9 +197,7 @@ def _single(args) -> int:
         table = single_fits(shots, model, None,
                             options=FitOptions(max_iterations=args.max_iterations))
     except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"cadra2 single: {msg}", file=sys.stderr)
-        return 1
+        return _refused("single", exc)
     against = [c for c in ("alpha_rms_deg", "sigma_rms_deg") if c in table]
     summaries = {}
     with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
@@ -241,9 +246,7 @@ def _holdone(args) -> int:
     from cadra.simulate import SpecError, resolve_model
 
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        print(f"cadra2 holdone: {out} exists; refusing to overwrite (use --overwrite)",
-              file=sys.stderr)
+    if _exists(out, args, "holdone"):
         return 1
     try:
         shots = _load_shots(args)
@@ -261,9 +264,7 @@ def _holdone(args) -> int:
         table = hold_one_study(shots, start, [sf.state for sf in free.shots], args.param, si,
                                options=options)
     except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        print(f"cadra2 holdone: {msg}", file=sys.stderr)
-        return 1
+        return _refused("holdone", exc)
     with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
         table.to_csv(tmp / "hold_one.csv", index=False)
         plot_hold_one(table, args.param).savefig(tmp / "hold_one.png", dpi=110)

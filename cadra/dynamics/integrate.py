@@ -60,21 +60,9 @@ def _rk4_span(y, h, n, phys, I, Iinv, ops, args, starts, params, plane, scratch,
 
 
 @njit(cache=True)
-def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, stack_size, out):
-    """Integrate from state ``y0`` at time ``t0`` to each time of ``t_out`` (ascending).
-
-    Parameters
-    ----------
-    y0 : (13,) state at ``t0`` (float64 or complex128; see :mod:`cadra.dynamics.layout`).
-    t0 : float, epoch, s.
-    t_out : (n,) float64 ascending output times, s (may straddle ``t0``).
-    dt_max : float, largest RK4 step, s.
-    phys : (N_PHYS,) physical constants, same dtype as ``y0``.
-    ops, args, starts, params, plane, stack_size : the compiled aerodynamic model
-        (:class:`cadra.aero.program.AeroProgram`) and its parameter values (``params`` has the
-        state's dtype).
-    out : (n, 13) written with the state at each output time.
-    """
+def _workspace(y0, phys, stack_size):
+    """Inertia tensor and its inverse from ``phys``, and the scratch arrays of the RK4 steps,
+    in the state's dtype (float64 or complex128)."""
     dtype_one = y0[0] * 0.0 + 1.0
     I = np.empty((3, 3), dtype=y0.dtype)
     for i in range(3):
@@ -92,6 +80,26 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
     k3 = np.empty(N_STATE, dtype=y0.dtype)
     k4 = np.empty(N_STATE, dtype=y0.dtype)
     tmp = np.empty(N_STATE, dtype=y0.dtype)
+    return I, Iinv, scratch, coef, stack, k1, k2, k3, k4, tmp
+
+
+@njit(cache=True)
+def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, stack_size, out):
+    """Integrate from state ``y0`` at time ``t0`` to each time of ``t_out`` (ascending).
+
+    Parameters
+    ----------
+    y0 : (13,) state at ``t0`` (float64 or complex128; see :mod:`cadra.dynamics.layout`).
+    t0 : float, epoch, s.
+    t_out : (n,) float64 ascending output times, s (may straddle ``t0``).
+    dt_max : float, largest RK4 step, s.
+    phys : (N_PHYS,) physical constants, same dtype as ``y0``.
+    ops, args, starts, params, plane, stack_size : the compiled aerodynamic model
+        (:class:`cadra.aero.program.AeroProgram`) and its parameter values (``params`` has the
+        state's dtype).
+    out : (n, 13) written with the state at each output time.
+    """
+    I, Iinv, scratch, coef, stack, k1, k2, k3, k4, tmp = _workspace(y0, phys, stack_size)
     y = np.empty(N_STATE, dtype=y0.dtype)
     n_out = t_out.shape[0]
     # first output index at or after the epoch
@@ -128,18 +136,6 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
 
 #: work limit of one adaptive run: ~50 times what a 16-station shot needs at tolerance 1e-8
 MAX_ADAPTIVE_EVALS = 150_000
-
-
-@njit(cache=True)
-def _adaptive_setup(y0, phys):
-    dtype_one = y0[0] * 0.0 + 1.0
-    I = np.empty((3, 3), dtype=y0.dtype)
-    for i in range(3):
-        for j in range(3):
-            I[i, j] = phys[P_INERTIA + 3 * i + j] * dtype_one
-    Iinv = np.empty((3, 3), dtype=y0.dtype)
-    inverse3(I, Iinv)
-    return I, Iinv
 
 
 @njit(cache=True)
@@ -184,17 +180,7 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
     Returns the number of derivative evaluations (negative when the run was stopped).
     """
     tau = 0.01
-    I, Iinv = _adaptive_setup(y0, phys)
-    scratch = (np.empty((3, 3), dtype=y0.dtype), np.empty(3, dtype=y0.dtype),
-               np.empty(8, dtype=y0.dtype), np.empty(3, dtype=y0.dtype),
-               np.empty(3, dtype=y0.dtype))
-    coef = np.empty(9, dtype=y0.dtype)
-    stack = np.empty(max(stack_size, 1), dtype=y0.dtype)
-    k1 = np.empty(N_STATE, dtype=y0.dtype)
-    k2 = np.empty(N_STATE, dtype=y0.dtype)
-    k3 = np.empty(N_STATE, dtype=y0.dtype)
-    k4 = np.empty(N_STATE, dtype=y0.dtype)
-    tmp = np.empty(N_STATE, dtype=y0.dtype)
+    I, Iinv, scratch, coef, stack, k1, k2, k3, k4, tmp = _workspace(y0, phys, stack_size)
     y = np.empty(N_STATE, dtype=y0.dtype)
     y1 = np.empty(N_STATE, dtype=y0.dtype)
     y2 = np.empty(N_STATE, dtype=y0.dtype)
