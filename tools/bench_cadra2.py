@@ -2,9 +2,10 @@
 
 Usage::
 
-    python tools/bench_cadra2.py                 # full run (~10-20 min on 2 cores)
+    python tools/bench_cadra2.py                 # full run (~20-30 min on 2 cores)
     python tools/bench_cadra2.py --quick         # fewer realisations, for a smoke test
     python tools/bench_cadra2.py --realisations 100 --seed 7 --skip-baseline --skip-pulls
+    python tools/bench_cadra2.py --baseline-only       # sections 1-2 only (speed, baseline)
 
 Problems (synthetic data from the sample-shot specs; truth = the simulator's truth.csv):
 single fit of M2-2429 (model m2_m070, all its free parameters) and the 7-shot M2 M0.70
@@ -24,7 +25,16 @@ Sections:
 2. baseline: :func:`cadra.fitting.baseline.baseline_fit` (``solve_ivp`` DOP853 at rtol 1e-10,
    atol 1e-12 over the same compiled equations of motion and observation model;
    ``least_squares`` 'trf' with a '2-point' finite-difference Jacobian, relative step 1e-5)
-   on the same problems and starts: wall time, speed-up, and both fits' accuracy vs truth;
+   on the same problems and starts: wall time, speed-up, and both fits' accuracy vs truth.
+   Two right-hand sides: ``rhs="compiled"`` (CADRA's numba equations of motion called from
+   ``solve_ivp``: the strict baseline, keys ``baseline_*``, ``baseline_speedup``) and
+   ``rhs="python"`` (what a SciPy user without CADRA writes: the same equations in plain
+   Python, coefficients from the model's trees by :func:`cadra.aero.expr.evaluate_tree`; keys
+   ``baseline_python_*``, ``baseline_python_speedup``) with the same start, tolerances and
+   ``least_squares`` settings; per-trajectory times (fit wall time / trajectories, ms) of both.
+   The python multi-fit runs only if its estimate (python ms per trajectory of the single fit
+   x the compiled multi-fit's trajectory count) is under 10 min; otherwise it is skipped and the
+   reason printed (``baseline_python_multifit_skipped``);
 3. cold start: the first fit in a fresh Python process (import, data from truth.csv, fit),
    with the on-disk compiled caches present, and with an empty ``NUMBA_CACHE_DIR`` (a temporary
    directory: the shared caches of the repository are not touched);
@@ -164,12 +174,17 @@ def _best_of(fn, n):
     return min(times), float(np.median(times)), out
 
 
+#: skip the plain-Python baseline multi-fit when its estimated wall time exceeds this, s
+PYTHON_MULTIFIT_LIMIT_S = 600.0
+
+
 def speed_and_baseline(seed, skip_baseline, quick):
     from cadra.fitting.data import FILM_SIGMAS
     from cadra.fitting.sensitivity import Integration
     from cadra.fitting.solver import FitOptions, fit
 
     out = {}
+    python_ms = None                        # plain-Python baseline ms per trajectory (single)
     for label, names in (("single", SINGLE), ("multi", M2_SET)):
         rng = np.random.default_rng([seed, 1, len(names)])
         sds, ytrue, model, start_model, starts = make_problem(names, rng, FILM_SIGMAS)
@@ -209,6 +224,9 @@ def speed_and_baseline(seed, skip_baseline, quick):
             print("   automatic start: cadra.fitting.start not available")
         if not skip_baseline:
             r.update(_baseline(label, sds, model, start_model, starts, res, best, best1))
+            r.update(_baseline_python(label, sds, model, start_model, starts, res, best,
+                                      python_ms, r["baseline_trajectories"]))
+            python_ms = r.get("baseline_python_ms_per_trajectory", python_ms)
         out[label] = r
     return out
 
@@ -221,6 +239,7 @@ def _baseline(label, sds, model, start_model, starts, res, cadra_s, cadra_one_s)
     bp_c, _ = truth_errors(b.aero_names, b.aero_values, res.aero_sigma, model)
     agree = np.abs(b.aero_values - res.aero_values) / res.aero_sigma
     r = {"baseline_s": b.elapsed_s, "baseline_speedup": b.elapsed_s / cadra_s,
+         "baseline_ms_per_trajectory": 1e3 * b.elapsed_s / b.n_trajectories,
          "baseline_speedup_one_thread": b.elapsed_s / cadra_one_s,
          "baseline_success": b.success, "baseline_chi2": b.chi2,
          "baseline_trajectories": b.n_trajectories, "baseline_nfev": b.nfev,
@@ -232,7 +251,8 @@ def _baseline(label, sds, model, start_model, starts, res, cadra_s, cadra_one_s)
          "baseline_sigma_ratio_max": float(np.max(b.aero_sigma / res.aero_sigma))}
     print(f"   baseline (solve_ivp DOP853 rtol 1e-10 + least_squares 2-point): "
           f"{b.elapsed_s:.2f} s, {b.n_trajectories} trajectories ({b.nfev} evaluations, "
-          f"{b.njev} Jacobians), success {b.success}: speed-up {r['baseline_speedup']:.1f}x "
+          f"{b.njev} Jacobians; {r['baseline_ms_per_trajectory']:.1f} ms per trajectory), "
+          f"success {b.success}: speed-up {r['baseline_speedup']:.1f}x "
           f"({r['baseline_speedup_one_thread']:.1f}x over CADRA on one thread)")
     print(f"   chi2 baseline {b.chi2:.3f} vs CADRA {res.chi2:.3f}; max |fit-truth|/sigma: "
           f"CADRA {float(np.max(np.abs(truth_errors(res.aero_names, res.aero_values, res.aero_sigma, model)[0]))):.2f}, "  # noqa: E501
@@ -241,6 +261,42 @@ def _baseline(label, sds, model, start_model, starts, res, cadra_s, cadra_one_s)
           f"|baseline - CADRA| <= {r['baseline_vs_cadra_max_sigma']:.3f} sigma; "
           f"baseline sigma / CADRA sigma {r['baseline_sigma_ratio_min']:.2f}-"
           f"{r['baseline_sigma_ratio_max']:.2f}")
+    return r
+
+
+def _baseline_python(label, sds, model, start_model, starts, res, cadra_s, python_ms,
+                     compiled_trajectories):
+    """The baseline fit with the plain-Python right-hand side (``rhs="python"``); for the
+    multi-fit only if the estimate from the single fit's ms per trajectory is affordable."""
+    from cadra.fitting.baseline import baseline_fit
+
+    if label != "single":
+        estimate = (None if python_ms is None
+                    else 1e-3 * python_ms * compiled_trajectories)
+        if estimate is None or estimate > PYTHON_MULTIFIT_LIMIT_S:
+            why = ("no single-fit timing to estimate from" if estimate is None else
+                   f"estimated {estimate:.0f} s = {python_ms:.0f} ms per trajectory x "
+                   f"{compiled_trajectories} trajectories (compiled-RHS count) > "
+                   f"{PYTHON_MULTIFIT_LIMIT_S:.0f} s")
+            print(f"   baseline, plain-Python RHS: skipped ({why})")
+            return {"baseline_python_skipped": why}
+        print(f"   baseline, plain-Python RHS: estimated {estimate:.0f} s, running")
+    b = baseline_fit(sds, start_model, starts, rhs="python")
+    bp, _ = truth_errors(b.aero_names, b.aero_values, b.aero_sigma, model)
+    agree = np.abs(b.aero_values - res.aero_values) / res.aero_sigma
+    r = {"baseline_python_s": b.elapsed_s, "baseline_python_speedup": b.elapsed_s / cadra_s,
+         "baseline_python_ms_per_trajectory": 1e3 * b.elapsed_s / b.n_trajectories,
+         "baseline_python_success": b.success, "baseline_python_chi2": b.chi2,
+         "baseline_python_trajectories": b.n_trajectories,
+         "baseline_python_max_abs_pull": float(np.max(np.abs(bp))),
+         "baseline_python_vs_cadra_max_sigma": float(np.max(agree))}
+    print(f"   baseline, plain-Python RHS (same solve_ivp and least_squares settings): "
+          f"{b.elapsed_s:.2f} s, {b.n_trajectories} trajectories "
+          f"({r['baseline_python_ms_per_trajectory']:.1f} ms per trajectory), success "
+          f"{b.success}: speed-up {r['baseline_python_speedup']:.1f}x")
+    print(f"   chi2 python baseline {b.chi2:.3f} vs CADRA {res.chi2:.3f}; max |fit-truth|/sigma "
+          f"{r['baseline_python_max_abs_pull']:.2f}; |python baseline - CADRA| <= "
+          f"{r['baseline_python_vs_cadra_max_sigma']:.3f} sigma")
     return r
 
 
@@ -411,6 +467,8 @@ def main() -> int:
                     help="realisations at stage-one sigmas (default realisations / 2.5)")
     ap.add_argument("--skip-baseline", action="store_true")
     ap.add_argument("--skip-pulls", action="store_true")
+    ap.add_argument("--baseline-only", action="store_true",
+                    help="run only sections 1-2 (speed and the SciPy baselines)")
     ap.add_argument("--seed", type=int, default=2024)
     ap.add_argument("--workers", type=int, default=2, help="processes for the pulls")
     args = ap.parse_args()
@@ -421,12 +479,13 @@ def main() -> int:
 
     print("== 1-2. speed (warm) and the SciPy baseline")
     sp = speed_and_baseline(args.seed, args.skip_baseline, args.quick)
-    print("\n== 3. cold start (fresh process: imports, data from truth.csv, first fit)")
-    cold = cold_start()
-    print("\n== 4. noise-free 7-shot multi-fits, max |fit - truth| / |truth|")
-    nf = noise_free(args.seed)
-    pl = None
-    if not args.skip_pulls:
+    cold = nf = pl = None
+    if not args.baseline_only:
+        print("\n== 3. cold start (fresh process: imports, data from truth.csv, first fit)")
+        cold = cold_start()
+        print("\n== 4. noise-free 7-shot multi-fits, max |fit - truth| / |truth|")
+        nf = noise_free(args.seed)
+    if not (args.skip_pulls or args.baseline_only):
         print(f"\n== 5. pulls: {n_film} film-sigma and {n_stage1} stage-one-sigma realisations"
               f" per multi-fit, {args.workers} processes")
         pl = pulls(args.seed, n_film, n_stage1, args.workers)
@@ -467,9 +526,40 @@ def main() -> int:
             "cadra_multifit_chi2": round(m["chi2"], 4),
             "baseline_vs_cadra_single_max_sigma": round(s["baseline_vs_cadra_max_sigma"], 4),
             "baseline_vs_cadra_multifit_max_sigma": round(m["baseline_vs_cadra_max_sigma"], 4),
+            "baseline_single_ms_per_trajectory": round(s["baseline_ms_per_trajectory"], 2),
+            "baseline_multifit_ms_per_trajectory": round(m["baseline_ms_per_trajectory"], 2),
+            "baseline_python_single_fit_s": round(s["baseline_python_s"], 3),
+            "baseline_python_speedup": round(s["baseline_python_speedup"], 1),
+            "baseline_python_single_ms_per_trajectory":
+                round(s["baseline_python_ms_per_trajectory"], 2),
+            "baseline_python_single_trajectories": s["baseline_python_trajectories"],
+            "baseline_python_single_success": s["baseline_python_success"],
+            "baseline_python_single_max_abs_pull": round(s["baseline_python_max_abs_pull"], 3),
+            "baseline_python_single_chi2": round(s["baseline_python_chi2"], 4),
+            "baseline_python_vs_cadra_single_max_sigma":
+                round(s["baseline_python_vs_cadra_max_sigma"], 4),
         })
+        if "baseline_python_s" in m:
+            result.update({
+                "baseline_python_multifit_s": round(m["baseline_python_s"], 3),
+                "baseline_python_multifit_speedup": round(m["baseline_python_speedup"], 1),
+                "baseline_python_multifit_ms_per_trajectory":
+                    round(m["baseline_python_ms_per_trajectory"], 2),
+                "baseline_python_multifit_trajectories": m["baseline_python_trajectories"],
+                "baseline_python_multifit_max_abs_pull":
+                    round(m["baseline_python_max_abs_pull"], 3),
+                "baseline_python_multifit_chi2": round(m["baseline_python_chi2"], 4),
+                "baseline_python_vs_cadra_multifit_max_sigma":
+                    round(m["baseline_python_vs_cadra_max_sigma"], 4),
+            })
+        else:
+            result["baseline_python_multifit_skipped"] = m["baseline_python_skipped"]
     else:
         result["baseline_speedup"] = result["baseline_single_fit_s"] = None
+    if args.baseline_only:
+        result["bench_seconds"] = round(time.perf_counter() - t_bench, 1)
+        print(json.dumps(result))
+        return 0
     c = cold.get("cached", {})
     result["cold_start_s"] = round(c["first_fit_s"], 3) if "first_fit_s" in c else None
     result["cold_start_process_s"] = round(c["to_result_s"], 3) if "to_result_s" in c else None

@@ -2,13 +2,21 @@
 
 What a careful analyst would write without CADRA's machinery: the model trajectory from
 :func:`scipy.integrate.solve_ivp` (an adaptive Runge-Kutta pair, tight tolerances) over the
-*same* equations of motion (the compiled :func:`cadra.dynamics.eom.derivative`, called
-from Python in the right-hand side) and the *same* observation model
+*same* equations of motion (by default the compiled :func:`cadra.dynamics.eom.derivative`,
+called from Python in the right-hand side; see below) and the *same* observation model
 (:func:`cadra.dynamics.observe.observe`), and the fit by :func:`scipy.optimize.least_squares`
 with its finite-difference Jacobian. The unknowns are those of :func:`cadra.fitting.solver.fit`:
 the model's free aerodynamic parameters (SI/radians, shared by the shots) and each shot's 12
 local corrections at its epoch (:data:`cadra.fitting.sensitivity.LOCAL_NAMES`, applied with
 :func:`cadra.fitting.sensitivity.apply_local`), residuals weighted by 1/sigma.
+
+The right-hand side comes in two variants (``rhs=``): ``"compiled"`` calls CADRA's numba
+:func:`cadra.dynamics.eom.derivative` (the strict baseline: only the integrator and the fitter
+differ from CADRA's), ``"python"`` is what a SciPy user without CADRA would write: the same
+6-DOF equations in plain Python on float scalars (:func:`derivative_python`, a line-by-line
+translation of :mod:`cadra.dynamics.eom`), the aerodynamic coefficients from the model's
+expression trees by the pure-Python evaluator :func:`cadra.aero.expr.evaluate_tree`; no
+compiled code in the loop.
 
 It exists to check CADRA's fitter (two implementations, one answer:
 ``tests/test_fit_baseline.py``) and to measure its speed-up (``tools/bench_cadra2.py``). It is
@@ -22,6 +30,7 @@ in ``solve_ivp``'s step-selection noise and the fit stops early, at a higher chi
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -29,9 +38,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from cadra.aero import AeroModel
+from cadra.aero.expr import evaluate_tree
+from cadra.aero.program import COEFFICIENTS, VARIABLES
 from cadra.dynamics.eom import derivative
 from cadra.dynamics.integrate import inverse3
-from cadra.dynamics.layout import N_STATE, P_INERTIA
+from cadra.dynamics.layout import (
+    N_STATE,
+    P_CG_OFFSET,
+    P_D,
+    P_G,
+    P_INERTIA,
+    P_MASS,
+    P_MU,
+    P_RHO,
+    P_RHO_GRAD,
+    P_S,
+    P_SOUND,
+    P_WIND,
+    P_WIND_GRAD,
+)
 from cadra.dynamics.setup import plane_code
 from cadra.fitting.data import ShotData
 from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, apply_local, observables
@@ -61,6 +86,7 @@ class BaselineResult:
         not in ``nfev``; ``n_trajectories`` counts every trajectory integrated).
     n_trajectories : ``solve_ivp`` trajectories integrated in all.
     elapsed_s : wall time of the fit, s.
+    rhs : the right-hand side used, ``"compiled"`` or ``"python"``.
     """
 
     success: bool
@@ -77,22 +103,196 @@ class BaselineResult:
     njev: int
     n_trajectories: int
     elapsed_s: float
+    rhs: str = "compiled"
+
+
+# --- the right-hand side in plain Python (a line-by-line translation of cadra.dynamics.eom) ---
+
+def rotation_fb_python(y) -> list[list[float]]:
+    """R_FB (body -> facility), rows as lists, of the quaternion ``y[6:10]`` (need not be unit).
+
+    Plain-Python translation of :func:`cadra.dynamics.eom.rotation_fb`.
+    """
+    qw, qx, qy, qz = y[6], y[7], y[8], y[9]
+    s = 2.0 / (qw * qw + qx * qx + qy * qy + qz * qz)
+    # R_EB, then flip rows 1 and 2 (F = diag(1, -1, -1) E)
+    return [[1.0 - s * (qy * qy + qz * qz), s * (qx * qy - qw * qz), s * (qx * qz + qw * qy)],
+            [-(s * (qx * qy + qw * qz)), -(1.0 - s * (qx * qx + qz * qz)),
+             -(s * (qy * qz - qw * qx))],
+            [-(s * (qx * qz - qw * qy)), -(s * (qy * qz + qw * qx)),
+             -(1.0 - s * (qx * qx + qy * qy))]]
+
+
+def air_data_python(y, phys, R) -> tuple[tuple[float, float, float], float, float, dict]:
+    """Air-relative body velocity (u, v, w) (m/s), airspeed V (m/s), density rho (kg/m^3) and
+    the aero-model variables ``{name: value}`` (:data:`cadra.aero.program.VARIABLES`; angles
+    rad) at state ``y``; plain-Python translation of :func:`cadra.dynamics.eom.air_data`.
+    """
+    x = y[0]
+    ax = y[3] - (phys[P_WIND] + phys[P_WIND_GRAD] * x)
+    ay = y[4] - (phys[P_WIND + 1] + phys[P_WIND_GRAD + 1] * x)
+    az = y[5] - (phys[P_WIND + 2] + phys[P_WIND_GRAD + 2] * x)
+    u, v, w = (R[0][j] * ax + R[1][j] * ay + R[2][j] * az for j in range(3))
+    V = math.sqrt(u * u + v * v + w * w)
+    rho = phys[P_RHO] * (1.0 + phys[P_RHO_GRAD] * x)
+    s_xz = math.sqrt(u * u + w * w)
+    s_perp = math.sqrt(v * v + w * w)
+    alpha = 2.0 * math.atan(w / (s_xz + u)) if s_xz + u > 0.0 else math.pi
+    k = phys[P_D] / (2.0 * V)
+    values = (alpha, math.asin(v / V), 2.0 * math.atan(s_perp / (V + u)), V / phys[P_SOUND],
+              rho * V * phys[P_D] / phys[P_MU], y[10] * k, y[11] * k, y[12] * k)
+    return (u, v, w), V, rho, dict(zip(VARIABLES, values, strict=True))
+
+
+def aero_force_moment_python(v_b, V, rho, phys, coef, sigma_plane: bool
+                             ) -> tuple[list[float], list[float], tuple[float, float, float]]:
+    """Static aerodynamic force and moment (N, N m; body axes, about the cg) and the damping
+    derivatives (about x_b, y_b, z_b) from the 9 coefficients ``coef``
+    (:data:`cadra.aero.program.COEFFICIENTS` order); plain-Python translation of
+    :func:`cadra.dynamics.eom.aero_force_moment`.
+    """
+    u, v, w = v_b
+    qS = 0.5 * rho * V * V * phys[P_S]
+    qSd = qS * phys[P_D]
+    CD, CL, CC, Cl, Cm, Cn, Clp, Cmq, Cnr = coef
+    evx, evy, evz = u / V, v / V, w / V
+    s_xz = math.sqrt(u * u + w * w)
+    if s_xz > 1e-300:
+        elx, elz = w / s_xz, -u / s_xz
+    else:
+        elx, elz = 0.0, 0.0
+    ecx = -elz * evy
+    ecy = elz * evx - elx * evz
+    ecz = elx * evy
+    if sigma_plane:
+        s_perp = math.sqrt(v * v + w * w)
+        if s_perp > 1e-12 * V:
+            sin_s, cos_s = s_perp / V, u / V
+            enx, eny, enz = sin_s, -cos_s * v / s_perp, -cos_s * w / s_perp
+            emy, emz = w / s_perp, -v / s_perp
+        else:
+            enx = eny = enz = emy = emz = 0.0
+        F = [qS * (-CD * evx + CL * enx + CC * ecx), qS * (-CD * evy + CL * eny + CC * ecy),
+             qS * (-CD * evz + CL * enz + CC * ecz)]
+        M = [qSd * Cl, qSd * Cm * emy, qSd * (Cm * emz - Cn)]
+        return F, M, (Clp, Cmq, Cmq)
+    F = [qS * (-CD * evx + CL * elx + CC * ecx), qS * (-CD * evy + CC * ecy),
+         qS * (-CD * evz + CL * elz + CC * ecz)]
+    M = [qSd * Cl, qSd * Cm, -qSd * Cn]
+    return F, M, (Clp, Cmq, Cnr)
+
+
+def python_rhs(phys: np.ndarray, model: AeroModel, params: np.ndarray):
+    """The right-hand side ``f(t, y) -> dy/dt`` (13,) in plain Python, for ``solve_ivp``.
+
+    The equations of :func:`cadra.dynamics.eom.derivative` on Python floats (``math``), with
+    the 9 coefficients from ``model``'s expression trees by
+    :func:`cadra.aero.expr.evaluate_tree` (``params``, (n_params,) SI/rad in ``model.names``
+    order, give the values). ``phys`` is the (26,) constants vector of
+    :mod:`cadra.dynamics.layout`; the inertia inverse is numpy's. No compiled code is called.
+    """
+    ph = [float(v) for v in phys]
+    I = np.asarray(phys[P_INERTIA:P_INERTIA + 9], dtype=float).reshape(3, 3)
+    Ii = np.linalg.inv(I).tolist()
+    I = I.tolist()
+    pmap = dict(zip(model.names, (float(v) for v in params), strict=True))
+    trees = [model.tree(c) for c in COEFFICIENTS]
+    sigma_plane = model.angle_plane == "sigma"
+    m, g, d, S = ph[P_MASS], ph[P_G], ph[P_D], ph[P_S]
+    ox, oy, oz = ph[P_CG_OFFSET:P_CG_OFFSET + 3]
+
+    def rhs(_t, y):
+        y = y.tolist() if isinstance(y, np.ndarray) else list(y)
+        R = rotation_fb_python(y)
+        v_b, V, rho, variables = air_data_python(y, ph, R)
+        coef = [0.0 if t is None else float(evaluate_tree(t, variables, pmap)) for t in trees]
+        F, M, (damp_p, damp_q, damp_r) = aero_force_moment_python(v_b, V, rho, ph, coef,
+                                                                  sigma_plane)
+        qSd = 0.5 * rho * V * V * S * d
+        k = d / (2.0 * V)
+        p, q, r = y[10], y[11], y[12]
+        M[0] += qSd * damp_p * (p * k)
+        M[1] += qSd * damp_q * (q * k)
+        M[2] += qSd * damp_r * (r * k)
+        # true cg offset from the moment reference point: M_cg = M_ref - offset x F
+        M[0] -= oy * F[2] - oz * F[1]
+        M[1] -= oz * F[0] - ox * F[2]
+        M[2] -= ox * F[1] - oy * F[0]
+        acc = [(R[i][0] * F[0] + R[i][1] * F[1] + R[i][2] * F[2]) / m for i in range(3)]
+        acc[2] -= g
+        # rotation: I w' = M - w x (I w)
+        hx = I[0][0] * p + I[0][1] * q + I[0][2] * r
+        hy = I[1][0] * p + I[1][1] * q + I[1][2] * r
+        hz = I[2][0] * p + I[2][1] * q + I[2][2] * r
+        tx = M[0] - (q * hz - r * hy)
+        ty = M[1] - (r * hx - p * hz)
+        tz = M[2] - (p * hy - q * hx)
+        wdot = [Ii[i][0] * tx + Ii[i][1] * ty + Ii[i][2] * tz for i in range(3)]
+        # attitude: q' = 1/2 q (x) (0, w)
+        qw, qx, qy, qz = y[6], y[7], y[8], y[9]
+        return np.array([y[3], y[4], y[5], *acc,
+                         -0.5 * (qx * p + qy * q + qz * r), 0.5 * (qw * p + qy * r - qz * q),
+                         0.5 * (qw * q + qz * p - qx * r), 0.5 * (qw * r + qx * q - qy * p),
+                         *wdot])
+
+    return rhs
+
+
+def derivative_python(y: np.ndarray, phys: np.ndarray, model: AeroModel,
+                      params: np.ndarray) -> np.ndarray:
+    """dy/dt (13,) at state ``y`` (13,) by :func:`python_rhs` (the plain-Python counterpart of
+    :func:`cadra.dynamics.eom.derivative`; units of :mod:`cadra.dynamics.layout`)."""
+    return python_rhs(phys, model, params)(0.0, np.asarray(y, dtype=float))
 
 
 def trajectory_ivp(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray, program,
                    params: np.ndarray, *, method: str = "DOP853", rtol: float = 1e-10,
-                   atol: float = 1e-12) -> np.ndarray:
+                   atol: float = 1e-12, rhs: str = "compiled",
+                   model: AeroModel | None = None) -> np.ndarray:
     """States (n, 13) at ``times`` (ascending, s) from ``y0`` at ``t0`` by ``solve_ivp``.
 
     Integrates forward to the times after ``t0`` and backward to those before it; the states
     at ``times`` come from the method's dense output (``t_eval``). ``rtol``/``atol`` are
     ``solve_ivp``'s tolerances on every state component (SI units of
-    :mod:`cadra.dynamics.layout`). Raises ``RuntimeError`` if the integration fails.
+    :mod:`cadra.dynamics.layout`). ``rhs="compiled"`` evaluates the right-hand side with
+    :func:`cadra.dynamics.eom.derivative` and the compiled ``program``; ``rhs="python"`` with
+    :func:`python_rhs` over ``model``'s expression trees (``model`` required, ``program``
+    unused; ``params`` in ``model.names`` order in both cases). Raises ``RuntimeError`` if the
+    integration fails.
     """
     from scipy.integrate import solve_ivp
 
     phys = np.ascontiguousarray(phys, dtype=float)
     params = np.ascontiguousarray(params, dtype=float)
+    if rhs == "python":
+        if model is None:
+            raise ValueError('trajectory_ivp: rhs="python" needs the model')
+        f = python_rhs(phys, model, params)
+    elif rhs == "compiled":
+        f = _compiled_rhs(phys, program, params)
+    else:
+        raise ValueError(f'trajectory_ivp: rhs must be "compiled" or "python", got {rhs!r}')
+    times = np.asarray(times, dtype=float)
+    out = np.empty((times.size, N_STATE))
+    y0 = np.asarray(y0, dtype=float)
+    after = times >= t0
+    for sel, t_end in ((after, times[-1]), (~after, times[0])):
+        if not sel.any():
+            continue
+        t_eval = times[sel] if t_end >= t0 else times[sel][::-1]
+        if t_end == t0:
+            out[sel] = y0
+            continue
+        sol = solve_ivp(f, (t0, t_end), y0, method=method, t_eval=t_eval, rtol=rtol,
+                        atol=atol)
+        if sol.status != 0:
+            raise RuntimeError(f"solve_ivp failed: {sol.message}")
+        out[sel] = sol.y.T if t_end >= t0 else sol.y.T[::-1]
+    return out
+
+
+def _compiled_rhs(phys: np.ndarray, program, params: np.ndarray):
+    """``f(t, y)`` calling the compiled :func:`cadra.dynamics.eom.derivative`."""
     I = phys[P_INERTIA:P_INERTIA + 9].reshape(3, 3).copy()
     Iinv = np.empty((3, 3))
     inverse3(I, Iinv)
@@ -108,23 +308,7 @@ def trajectory_ivp(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarra
                    R, v_b, variables, F_b, M_b, coef, stack, dy)
         return dy.copy()            # solve_ivp keeps the returned array
 
-    times = np.asarray(times, dtype=float)
-    out = np.empty((times.size, N_STATE))
-    y0 = np.asarray(y0, dtype=float)
-    after = times >= t0
-    for sel, t_end in ((after, times[-1]), (~after, times[0])):
-        if not sel.any():
-            continue
-        t_eval = times[sel] if t_end >= t0 else times[sel][::-1]
-        if t_end == t0:
-            out[sel] = y0
-            continue
-        sol = solve_ivp(rhs, (t0, t_end), y0, method=method, t_eval=t_eval, rtol=rtol,
-                        atol=atol)
-        if sol.status != 0:
-            raise RuntimeError(f"solve_ivp failed: {sol.message}")
-        out[sel] = sol.y.T if t_end >= t0 else sol.y.T[::-1]
-    return out
+    return rhs
 
 
 def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
@@ -132,7 +316,7 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
                  rtol: float = 1e-10, atol: float = 1e-12, jac: str = "2-point",
                  aero_step: float = 1e-4, ftol: float = 1e-10, xtol: float = 1e-10,
                  gtol: float = 1e-10, max_nfev: int | None = None,
-                 sparsity: bool = True) -> BaselineResult:
+                 sparsity: bool = True, rhs: str = "compiled") -> BaselineResult:
     """Fit like :func:`cadra.fitting.solver.fit` with ``scipy.optimize.least_squares``.
 
     Parameters
@@ -151,6 +335,9 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
     sparsity : for several shots, pass the Jacobian's block-arrow sparsity pattern to
         ``least_squares`` (it then groups columns of different shots' local unknowns into one
         finite-difference evaluation).
+    rhs : ``"compiled"`` (CADRA's numba :func:`cadra.dynamics.eom.derivative`, default) or
+        ``"python"`` (:func:`python_rhs`: the same equations in plain Python with the
+        coefficients from :func:`cadra.aero.expr.evaluate_tree`); see :func:`trajectory_ivp`.
 
     Returns
     -------
@@ -159,8 +346,10 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
     from scipy.optimize import least_squares
     from scipy.sparse import lil_matrix
 
+    if rhs not in ("compiled", "python"):
+        raise ValueError(f'baseline_fit: rhs must be "compiled" or "python", got {rhs!r}')
     t_start = time.perf_counter()
-    program = model.compile()
+    program = model.compile() if rhs == "compiled" else None
     params0 = model.values()
     aero_idx = model.free_indices()
     na = aero_idx.size
@@ -180,7 +369,8 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
 
     def shot_residuals(k, p, u):
         states = trajectory_ivp(apply_local(y_nom[k], u), t0s[k], shots[k].t_s, phys[k],
-                                program, p, method=method, rtol=rtol, atol=atol)
+                                program, p, method=method, rtol=rtol, atol=atol, rhs=rhs,
+                                model=model)
         n_traj[0] += 1
         pred = observables(states, refs[k])
         return ((shots[k].meas - pred) / shots[k].sigma)[masks[k]]
@@ -193,7 +383,7 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
             u = x[na + N_LOCAL * k: na + N_LOCAL * (k + 1)]
             try:
                 out.append(shot_residuals(k, p, u))
-            except (RuntimeError, FloatingPointError, ZeroDivisionError):
+            except (RuntimeError, ArithmeticError):     # incl. plain-Python float errors
                 out.append(np.full(counts[k], 1e10))
         return np.concatenate(out)
 
@@ -237,7 +427,9 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
         aero_sigma=sig[:na].copy(), states=tuple(states), local_sigma=tuple(local_sigma),
         chi2=float(res.fun @ res.fun), n_observations=sum(counts), nfev=int(res.nfev),
         njev=int(res.njev or 0), n_trajectories=n_traj[0],
-        elapsed_s=time.perf_counter() - t_start)
+        elapsed_s=time.perf_counter() - t_start, rhs=rhs)
 
 
-__all__ = ["BaselineResult", "LOCAL_NAMES", "LOCAL_STEPS", "baseline_fit", "trajectory_ivp"]
+__all__ = ["BaselineResult", "LOCAL_NAMES", "LOCAL_STEPS", "aero_force_moment_python",
+           "air_data_python", "baseline_fit", "derivative_python", "python_rhs",
+           "rotation_fb_python", "trajectory_ivp"]
