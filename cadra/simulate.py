@@ -2,10 +2,16 @@
 
 The specification (TOML, ``docs/simulation.md``) names the model, its mass properties and range
 conditions (or a seed-004 shot whose Tables 2/3 rows supply them), the aerodynamic model used as
-truth, the launch conditions, optional effects and the render settings. :func:`simulate_shot`
-flies the 6-DOF model (the same code the fitter uses), finds the light-sheet spark times and
-returns the exact per-station truth; :func:`write_shot` renders and writes everything,
-atomically, refusing to overwrite.
+truth, the launch conditions, optional effects, optional per-station biases to inject into the
+images and the render settings. :func:`simulate_shot` flies the 6-DOF model (the same code the
+fitter uses), finds the light-sheet spark times and returns the exact per-station truth;
+:func:`write_shot` renders and writes everything, atomically, refusing to overwrite.
+
+Station biases (``[station_biases]``) are injected where each view's scene is built
+(:func:`station_scenes`): a position bias displaces the model in the facility frame relative to
+the station's wires; a timing bias shows the model at the recorded spark time plus the bias. The
+shot file keeps the recorded times and ``truth.csv`` the unbiased truth; what the images show is
+in ``truth_images.csv``, the biases in ``station_biases.csv``.
 """
 
 from __future__ import annotations
@@ -41,6 +47,13 @@ BUNDLED_MODELS = Path(__file__).resolve().parent / "aero" / "models"
 
 #: Kerr-cell exposure of seed 004 (30-40 ns); the motion blur is V * exposure
 EXPOSURE_S = 35e-9
+
+#: keys of one station's entry in ``[station_biases]`` (m, m, m, s), in this order
+BIAS_KEYS = ("x_m", "y_m", "z_m", "time_s")
+#: plausibility limits of an injected bias: each position component (m), the time (s)
+BIAS_POSITION_MAX_M = 0.01
+BIAS_TIME_MAX_S = 1e-4
+_NO_BIAS = (0.0, 0.0, 0.0, 0.0)
 
 
 class SpecError(ValueError):
@@ -99,6 +112,8 @@ class ShotSpec:
     source_path: str | None = None
     seed004_shot: int | None = None
     aim: str = "none"            # "centre": slant the gun so the path stays centred in view
+    # injected biases: station id -> (x_m, y_m, z_m, time_s); absent = unbiased
+    station_biases: dict = field(default_factory=dict)
 
 
 def _get(d: dict, key: str, where: str, kind=float):
@@ -125,7 +140,7 @@ def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
     data = dict(data)
     known = {"shot_id", "seed004_shot", "model", "mass", "range", "aero_model", "aero_values",
              "launch", "effects", "facility", "n_stations", "trigger", "film", "render", "seed",
-             "dt_max_s", "aim"}
+             "dt_max_s", "aim", "station_biases"}
     unknown = sorted(set(data) - known)
     if unknown:
         raise SpecError(f"unknown key(s) {unknown}; known: {sorted(known)}")
@@ -236,7 +251,51 @@ def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
         source_path=str(source_path) if source_path else None,
         seed004_shot=int(data["seed004_shot"]) if "seed004_shot" in data else None,
         aim=_aim(data.get("aim", "none")),
+        station_biases=_station_biases(data.get("station_biases")),
     )
+
+
+def _station_biases(table) -> dict[int, tuple[float, float, float, float]]:
+    """Parse ``[station_biases]``: ``{"5": {"y_m": 5e-4}, ...}`` -> ``{5: (0, 5e-4, 0, 0)}``.
+
+    Keys are station ids (strings in TOML); each value a table with any of ``x_m``, ``y_m``,
+    ``z_m`` (m) and ``time_s`` (s), the rest 0. Each position component must be within
+    :data:`BIAS_POSITION_MAX_M` and the time within :data:`BIAS_TIME_MAX_S`. Whether the
+    stations exist is checked against the facility by :func:`simulate_shot`.
+    """
+    if table is None:
+        return {}
+    if not isinstance(table, dict):
+        raise SpecError("station_biases: expected a table of station id -> "
+                        "{x_m, y_m, z_m, time_s}")
+    out = {}
+    for key, entry in table.items():
+        where = f"station_biases.{key}"
+        try:
+            station = int(str(key).strip())
+        except ValueError:
+            raise SpecError(f"{where}: not a station id (an integer such as \"5\")") from None
+        if station in out:
+            raise SpecError(f"{where}: station {station} given twice")
+        if not isinstance(entry, dict):
+            raise SpecError(f"{where}: expected a table with any of {list(BIAS_KEYS)}, "
+                            f"got {entry!r}")
+        unknown = sorted(set(entry) - set(BIAS_KEYS))
+        if unknown:
+            raise SpecError(f"{where}.{unknown[0]}: unknown key; known: {list(BIAS_KEYS)}")
+        values = []
+        for name in BIAS_KEYS:
+            value = entry.get(name, 0.0)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not np.isfinite(value):
+                raise SpecError(f"{where}.{name}: expected a finite number, got {value!r}")
+            limit = BIAS_TIME_MAX_S if name == "time_s" else BIAS_POSITION_MAX_M
+            if abs(value) > limit:
+                raise SpecError(f"{where}.{name}: {value:g} is not a plausible bias "
+                                f"(|{name}| <= {limit:g})")
+            values.append(float(value))
+        out[station] = tuple(values)
+    return out
 
 
 def _aim(value) -> str:
@@ -293,7 +352,15 @@ def rigid_body(spec: ShotSpec, body: Body | None = None) -> RigidBody:
 
 @dataclass(frozen=True)
 class SimulatedShot:
-    """A flown shot: spark times, exact states and the per-station truth table."""
+    """A flown shot: spark times, exact states and the per-station truth table.
+
+    ``times_s``, ``states`` and ``truth`` are the exact, unbiased truth at the recorded spark
+    times (what an unbiased station would measure). ``station_biases`` (station id ->
+    ``(x_m, y_m, z_m, time_s)`` in m and s, unbiased stations absent) are injected into the
+    images only: ``image_states`` are the states the images show, at the recorded time plus the
+    station's time bias (``None``: no time bias anywhere, the images show ``states``); the
+    position bias is added where the scene is built (:func:`station_scenes`).
+    """
 
     spec: ShotSpec
     body: Body
@@ -304,6 +371,21 @@ class SimulatedShot:
     times_s: np.ndarray          # spark times, s, relative to the station-1 (first) spark
     states: np.ndarray           # (n, 13) exact states at the sparks
     truth: pd.DataFrame
+    station_biases: dict = field(default_factory=dict)
+    image_states: np.ndarray | None = None   # (n, 13) states at the sparks + time biases
+
+    def station_bias(self, station: int) -> tuple[float, float, float, float]:
+        """The injected bias ``(x_m, y_m, z_m, time_s)`` of station id ``station`` (m, s)."""
+        return self.station_biases.get(station, _NO_BIAS)
+
+    def biases_table(self) -> pd.DataFrame:
+        """Every station of the shot with its injected bias (zeros where unbiased).
+
+        Columns ``station``, ``x_m``, ``y_m``, ``z_m`` (m), ``time_s`` (s): the table written
+        as ``station_biases.csv``.
+        """
+        rows = [(s, *self.station_bias(s)) for s in self.stations]
+        return pd.DataFrame(rows, columns=["station", *BIAS_KEYS])
 
 
 def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> SimulatedShot:
@@ -321,6 +403,11 @@ def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> Simulated
     program = model.compile()
     params = model.values()
     stations = facility.stations[: spec.n_stations] if spec.n_stations else facility.stations
+    ids = [s.id for s in stations]
+    for station in spec.station_biases:
+        if station not in ids:
+            raise SpecError(f"station_biases.{station}: no station {station} in this shot "
+                            f"(stations {ids[0]}..{ids[-1]} of facility {spec.facility!r})")
     rng = np.random.default_rng(spec.seed)
     offsets = rng.normal(spec.trigger_offset_mean_m, spec.trigger_offset_sd_m, len(stations))
     x_planes = np.array([s.x_m for s in stations]) + offsets
@@ -336,9 +423,20 @@ def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> Simulated
     if not np.all(np.isfinite(states)):
         raise SpecError("launch: the trajectory diverged (non-finite state)")
     times = t_abs - t_abs[0]
-    truth = truth_table(times, states, rigid, [s.id for s in stations])
-    return SimulatedShot(spec, body, rigid, model, facility, tuple(s.id for s in stations),
-                         times, states, truth)
+    truth = truth_table(times, states, rigid, ids)
+    image_states = None
+    for k, station in enumerate(ids):
+        dt = spec.station_biases.get(station, _NO_BIAS)[3]
+        if dt != 0.0:
+            # the spark really fired at the recorded time + dt: the exact state then, by a short
+            # propagation from the exact spark state at the truth's step bound
+            if image_states is None:
+                image_states = states.copy()
+            image_states[k] = propagate_states(states[k], t_abs[k], [t_abs[k] + dt],
+                                               rigid.phys(), program, params,
+                                               spec.dt_max_s)[0]
+    return SimulatedShot(spec, body, rigid, model, facility, tuple(ids), times, states, truth,
+                         dict(spec.station_biases), image_states)
 
 
 # --------------------------------------------------------------------------- images
@@ -411,12 +509,19 @@ def station_scenes(shot: SimulatedShot, k: int, rng: np.random.Generator) -> lis
 
     Each item: ``station``, ``view``, ``scene`` (:class:`cadra.imaging.render.Scene`), ``affine``
     (the image->view-plane map actually used, film placement included) and ``truth`` (see
-    :func:`view_scene`).
+    :func:`view_scene`: what the image shows, biases included).
+
+    The station's injected biases act here: the scene shows the state at the recorded spark
+    time plus the time bias (``shot.image_states``), and the model displaced by the position
+    bias (m, facility frame) relative to the wires, which stay where the facility file says.
     """
     station = shot.facility.stations[k]
-    y = shot.states[k]
+    y = (shot.image_states if shot.image_states is not None else shot.states)[k]
     R = body_to_facility_matrix(y[6:10])
     r_ref = y[0:3] + R @ shot.rigid.ref_from_cg_body_m()
+    bias_F = np.asarray(shot.station_bias(station.id)[:3], dtype=float)
+    if np.any(bias_F != 0.0):
+        r_ref = r_ref + bias_F
     out = []
     for name, view in sorted(station.views.items()):
         affine = _film_affine(view.image_to_plane, shot.spec.film, rng, view.width_px,
@@ -447,6 +552,10 @@ def render_station_views(shot: SimulatedShot, k: int, rng: np.random.Generator,
 def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool = True,
                overwrite: bool = False, progress: bool = True) -> Path:
     """Write the shot file, truth tables and (optionally) the rendered images to ``out_dir``.
+
+    Files: ``shot.toml`` (recorded spark times), ``truth.csv`` (exact unbiased truth),
+    ``truth_images.csv`` (with images: what each image shows, biases included),
+    ``station_biases.csv`` (only if the spec injects biases) and ``spec.toml``.
 
     Everything is written into a temporary sibling directory and moved into place at the end,
     so an interrupted or failed run leaves nothing behind; an existing ``out_dir`` is refused
@@ -491,10 +600,15 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
             facility=shot.spec.facility, stations=tuple(records),
             notes=(f"synthetic shot simulated by cadra from "
                    f"{shot.spec.source_path or 'a spec'}; truth aero model "
-                   f"{shot.spec.aero_model}; effects {list(shot.rigid.effects.active)}"),
+                   f"{shot.spec.aero_model}; effects {list(shot.rigid.effects.active)}"
+                   + ("; station biases injected (station_biases.csv)"
+                      if shot.station_biases else "")),
             source_path=None)
         save_shot(shotfile, tmp / "shot.toml")
         shot.truth.to_csv(tmp / "truth.csv", index=False, float_format="%.12g")
+        if shot.station_biases:
+            shot.biases_table().to_csv(tmp / "station_biases.csv", index=False,
+                                       float_format="%.12g")
         if image_truth:
             pd.DataFrame(image_truth).to_csv(tmp / "truth_images.csv", index=False,
                                              float_format="%.12g")

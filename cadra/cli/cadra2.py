@@ -13,6 +13,10 @@ Subcommands:
 * ``cadra2 holdone TRAJECTORY [...] --model MODEL --param NAME --values V1,V2,... -o OUT_DIR``
   — seed 004 Fig. 15: hold one parameter at each value (model file's unit), refit the rest
   on all shots; table of rms and the other parameters, and a plot.
+* ``cadra2 calibrate TRAJECTORY [...] -o OUT_DIR`` — sphere calibration shots: per-station
+  position and timing biases with sigmas, compared with the facility's station history
+  (``stations/<facility>/``), to which the new estimate is appended (docs/calibration.md).
+  ``cadra2 fit --bias-table current|FILE`` applies a table.
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 
@@ -133,6 +137,10 @@ def _fit(args) -> int:
     try:
         model = _apply_holds(resolve_model(args.model), args)
         shots = _load_shots(args)
+        notes = []
+        if args.bias_table:
+            shots, note = _apply_bias_table(shots, args)
+            notes.append(note)
         options = FitOptions(max_iterations=args.max_iterations, progress=not args.quiet)
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start)
@@ -144,7 +152,7 @@ def _fit(args) -> int:
                                   + tomli_w.dumps(result.model.to_dict()),
              "config.toml": "# cadra2 fit: the command's settings\n" + tomli_w.dumps(config)}
     write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
-                      start_model=start, extra_files=extra)
+                      start_model=start, extra_files=extra, notes=notes)
     _print_summary(result)
     print(f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
     if not result.converged:
@@ -296,6 +304,137 @@ def _add_data_options(p) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 
 
+def _shot_facility(shot_data) -> str:
+    from cadra.io.shotfile import load_shot
+
+    return load_shot(shot_data.source["shot_file"]).facility
+
+
+def _apply_bias_table(shots, args):
+    """Correct the shots by a station bias table (``current``: the facility history's latest
+    entry; otherwise a bias-table CSV). Returns the shots and the report's note."""
+    from cadra.calibration.history import current_table, load_bias_table, load_history
+    from cadra.calibration.sphere import apply_bias_table
+
+    facilities = {_shot_facility(s) for s in shots}
+    if len(facilities) != 1:
+        raise ValueError(f"the shots come from several facilities {sorted(facilities)}")
+    facility = facilities.pop()
+    if args.bias_table == "current":
+        history, _ = load_history(Path(args.stations_root), facility)
+        table = current_table(history)
+        if table is None:
+            raise ValueError(f"--bias-table current: no station history for facility "
+                             f"{facility!r} under {Path(args.stations_root) / 'stations'}")
+        source = (f"{Path(args.stations_root) / 'stations' / facility / 'bias_history.jsonl'}"
+                  f", latest entry")
+    else:
+        table = load_bias_table(args.bias_table)
+        source = args.bias_table
+    if table.facility != facility:
+        raise ValueError(f"bias table of facility {table.facility!r} given for shots of "
+                         f"facility {facility!r}")
+    note = (f"station bias table applied: {source} (created {table.created_utc}, from shots "
+            f"{', '.join(table.shots)})")
+    return [apply_bias_table(s, table) for s in shots], note
+
+
+def _calibrate(args) -> int:
+    import math
+
+    from cadra.calibration.history import (
+        append_entry,
+        compare,
+        load_history,
+        save_bias_table,
+    )
+    from cadra.calibration.plots import plot_biases
+    from cadra.calibration.sphere import CalibrationError, estimate_station_biases
+    from cadra.fitting import FitDataError
+    from cadra.io.atomic import atomic_output_dir
+
+    out = Path(args.output)
+    if _exists(out, args, "calibrate"):
+        return 1
+    root = Path(args.stations_root)
+    try:
+        shots = _load_shots(args)
+        facilities = {_shot_facility(s) for s in shots}
+        if len(facilities) != 1:
+            raise CalibrationError(f"the shots come from several facilities "
+                                   f"{sorted(facilities)}")
+        facility = facilities.pop()
+        history, hist_warnings = load_history(root, facility)
+        est = estimate_station_biases(shots, facility=facility)
+    except (FitDataError, CalibrationError, ValueError, KeyError, FileNotFoundError) as exc:
+        return _refused("calibrate", exc)
+    table = est.to_table(note=args.note or "")
+    comparison = compare(table, history, threshold_sigma=args.threshold_sigma)
+    with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
+        save_bias_table(table, tmp / "bias_table.csv")
+        comparison.to_csv(tmp / "comparison.csv", index=False)
+        plot_biases(table, history).savefig(tmp / "biases.png", dpi=110)
+        (tmp / "report.md").write_text(
+            _calibration_report(est, table, comparison, history, hist_warnings, args),
+            encoding="utf-8")
+    if not args.no_history:
+        path = append_entry(table, root)
+        print(f"appended to {path}")
+    unit = {"x": ("mm", 1e3), "y": ("mm", 1e3), "z": ("mm", 1e3), "time": ("us", 1e6)}
+    print(f"{facility}: station biases from {len(shots)} sphere shot(s) "
+          f"(speeds {', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s)")
+    for k, st in enumerate(table.stations):
+        cells = []
+        for c, name in enumerate(("x", "y", "z", "time")):
+            u, f = unit[name]
+            b, sg = table.bias[k, c], table.sigma[k, c]
+            if math.isfinite(sg) and sg > 0:
+                mark = " *" if abs(b) > args.threshold_sigma * sg else ""
+                cells.append(f"{name} {b * f:+.4f}±{sg * f:.4f} {u}{mark}")
+        print(f"  station {st:2d}: " + ", ".join(cells))
+    for w in (*est.warnings, *hist_warnings):
+        print(f"warning: {w}")
+    print(f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
+    return 0
+
+
+def _calibration_report(est, table, comparison, history, hist_warnings, args) -> str:
+    lines = [f"# Sphere calibration: facility {est.facility}", "",
+             f"Shots: {', '.join(est.shots)} (speeds "
+             f"{', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s). {est.method}.",
+             f"chi^2/dof after correction: {est.chi2:.1f}/{est.dof} = "
+             f"{est.chi2 / max(est.dof, 1):.3f}. Timing biases "
+             f"{'estimated' if est.timing_estimated else 'not estimated'}.", "",
+             "Biases are relative: per channel they have no component along a polynomial in "
+             "the stations' x (degree 1 for y, z; 2 for x and time), which the shots' own "
+             "initial state and drag law cannot be told apart from (docs/calibration.md).", "",
+             "| station | x (mm) | y (mm) | z (mm) | time (µs) |", "|---|---|---|---|---|"]
+    for k, st in enumerate(table.stations):
+        cells = []
+        for c, f in enumerate((1e3, 1e3, 1e3, 1e6)):
+            b, sg = table.bias[k, c], table.sigma[k, c]
+            cells.append("—" if not sg == sg else f"{b * f:+.4f} ± {sg * f:.4f}")
+        lines.append(f"| {st} | " + " | ".join(cells) + " |")
+    lines += ["", "## Residual rms per shot (µm), before → after the correction", "",
+              "| shot | x | y | z |", "|---|---|---|---|"]
+    for sid in est.shots:
+        b, a = est.shot_rms_before[sid], est.shot_rms_after[sid]
+        lines.append(f"| {sid} | " + " | ".join(f"{b[c] * 1e6:.2f} → {a[c] * 1e6:.2f}"
+                                              for c in "xyz") + " |")
+    lines += ["", f"## Comparison with the station history ({len(history)} earlier "
+              "entries)", ""]
+    flagged = comparison[comparison.get("moved", False) == True] if "moved" in comparison \
+        else comparison.iloc[0:0]  # noqa: E712
+    lines.append(f"{len(flagged)} station channel(s) moved significantly; see "
+                 "comparison.csv." if len(history) else "No earlier entries.")
+    lines += ["", "![biases](biases.png)", ""]
+    for w in (*est.warnings, *hist_warnings):
+        lines.append(f"- warning: {w}")
+    if not args.no_history:
+        lines.append(f"- appended to the history under {Path(args.stations_root) / 'stations'}")
+    return "\n".join(lines) + "\n"
+
+
 def _print_summary(result) -> None:
     print(f"{result.status}: {result.message}")
     print(f"chi^2/dof = {result.chi2:.1f}/{result.dof} = {result.reduced_chi2:.3f}, "
@@ -320,6 +459,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="start from the model file's values, not linear-theory estimates")
     fit.add_argument("--no-plots", action="store_true", help="tables and report only")
     fit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    fit.add_argument("--bias-table", default=None, metavar="current|FILE",
+                     help="correct the measurements by a station bias table: 'current' (the "
+                          "facility history's latest entry) or a bias-table CSV")
+    fit.add_argument("--stations-root", default=".",
+                     help="directory holding stations/<facility>/ (default: .)")
     fit.set_defaults(func=_fit)
     single = sub.add_parser("single", help="single fits with linear forms and quasi-linear "
                                            "trends (seed 004 steps 1-2)")
@@ -335,6 +479,17 @@ def build_parser() -> argparse.ArgumentParser:
     hold.add_argument("--values", required=True,
                       help="comma-separated values to hold it at (model file's unit)")
     hold.set_defaults(func=_holdone)
+    cal = sub.add_parser("calibrate", help="station biases from sphere calibration shots")
+    _add_data_options(cal)
+    cal.add_argument("--stations-root", default=".",
+                     help="directory holding stations/<facility>/ (default: .)")
+    cal.add_argument("--no-history", action="store_true",
+                     help="do not append the estimate to the station history")
+    cal.add_argument("--threshold-sigma", type=float, default=3.0,
+                     help="a station is flagged when its bias moved by more than this many "
+                          "sigma (default 3)")
+    cal.add_argument("--note", default="", help="a note stored with the history entry")
+    cal.set_defaults(func=_calibrate)
     sim = sub.add_parser("simulate", help="simulate and render a synthetic shot")
     sim.add_argument("spec", help="shot specification TOML (docs/simulation.md)")
     sim.add_argument("-o", "--output", required=True, help="output directory (must not exist)")

@@ -537,7 +537,8 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
                       *, overwrite: bool = False, plots: bool = True, title: str | None = None,
                       start_model: AeroModel | None = None, bodies: Mapping | None = None,
                       reference_model: AeroModel | None = None,
-                      extra_files: Mapping[str, str] | None = None) -> Path:
+                      extra_files: Mapping[str, str] | None = None,
+                      notes: Sequence[str] = ()) -> Path:
     """Write a fit's files, report and plots to ``out_dir`` (module doc), atomically.
 
     Parameters
@@ -556,6 +557,7 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
         a synthetic shot).
     extra_files : ``{file name: text}`` written in the same atomic step (the CLI's fitted
         model file and run configuration).
+    notes : lines the report lists under its warnings (e.g. the station bias table applied).
 
     Returns
     -------
@@ -582,10 +584,11 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
         for name, text in (extra_files or {}).items():
             (tmp / name).write_text(text, encoding="utf-8")
         plot_files: dict[str, str] = {}
-        notes: list[str] = []
+        notes = list(notes)
         if plots:
-            plot_files, notes = _write_plots(result, shots, tmp / "plots", bodies=bodies,
-                                             reference_model=reference_model, title=title)
+            plot_files, plot_notes = _write_plots(result, shots, tmp / "plots", bodies=bodies,
+                                                  reference_model=reference_model, title=title)
+            notes += plot_notes
         (tmp / "report.md").write_text(
             report_markdown(result, shots, start_model=start_model, title=title,
                             plot_files=plot_files, notes=notes), encoding="utf-8")

@@ -435,13 +435,20 @@ def quasi_linear_summary(table: pd.DataFrame, coefficient: str = "Cmq_0",
     return out
 
 
+class _Figures:
+    """``subplots`` on a fresh :class:`matplotlib.figure.Figure`: no pyplot state, so no figure
+    is kept alive (or counted) after the caller drops it."""
+
+    @staticmethod
+    def subplots(*args, figsize=None, constrained_layout=False, **kw):
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=figsize, layout="constrained" if constrained_layout else None)
+        return fig, fig.subplots(*args, **kw)
+
+
 def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    return _Figures
 
 
 def plot_quasi_linear(table: pd.DataFrame, coefficient: str = "Cmq_0",
