@@ -196,3 +196,101 @@ def test_hold_one_study_cli(shots):
     assert list(table["value"]) == [0.2, 0.81, 1.6]
     assert table["chi2"].idxmin() == 1
     assert (out / "hold_one.png").is_file()
+
+
+# --------------------------------------------------------------------------- calibrate
+
+
+def _biased_trajectory(sim, shot_file, path, bias, rng, sp=2.5e-7):
+    """A trajectory file measured through stations with position/timing biases."""
+    t = sim.truth
+    v = t[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()
+    off = bias[:, :3] + v * bias[:, 3:4]
+    n = len(t)
+    table = pd.DataFrame({
+        "station": t["station"].to_numpy(), "t_s": t["t_s"].to_numpy(), "status": "ok",
+        "x_m": t["x_m"] + off[:, 0] + rng.normal(0, sp, n),
+        "y_m": t["y_m"] + off[:, 1] + rng.normal(0, sp, n),
+        "z_m": t["z_m"] + off[:, 2] + rng.normal(0, sp, n),
+        "theta_deg": np.nan if sim.body.kind == "sphere" else t["theta_deg"],
+        "psi_deg": np.nan if sim.body.kind == "sphere" else t["psi_deg"],
+        "sigma_x_m": sp, "sigma_y_m": sp, "sigma_z_m": sp,
+        "sigma_theta_deg": np.nan if sim.body.kind == "sphere" else 0.0012,
+        "sigma_psi_deg": np.nan if sim.body.kind == "sphere" else 0.0012,
+        "x_top_minus_side_m": 0.0, "x_consistency": 0.0, "reason": "", "warnings": ""})
+    write_trajectory(path, table.loc[:, list(COLUMNS)],
+                     {"shot_id": sim.spec.shot_id, "shot_file": str(shot_file.resolve())})
+    return path
+
+
+@pytest.fixture(scope="module")
+def sphere_trajectories(shots):
+    base = shots["base"]
+    bias = np.zeros((16, 4))
+    bias[4, 1], bias[10, 2], bias[7, 3] = 6e-4, -4e-4, 1e-6
+    rng = np.random.default_rng(9)
+    trajs = []
+    for k in (1, 2, 3):
+        sim = simulate_shot(load_shot_spec(SPECS / f"sphere_{k}.toml"))
+        d = write_shot(sim, base / f"sphere_{k}", images=False, progress=False)
+        trajs.append(str(_biased_trajectory(sim, d / "shot.toml",
+                                            base / f"sphere_{k}.csv", bias, rng)))
+    return trajs, bias
+
+
+def test_calibrate_history_and_fit_with_table(shots, sphere_trajectories, capsys):
+    trajs, bias = sphere_trajectories
+    root = shots["base"] / "facility_root"
+    out = shots["base"] / "cal1"
+    assert main(["calibrate", *trajs, "-o", str(out), "--stations-root", str(root)]) == 0
+    text = capsys.readouterr().out
+    assert "station  5: " in text and "*" in text
+    table = pd.read_csv(out / "bias_table.csv", comment="#")
+    row = table.set_index("station")
+    assert abs(row.loc[5, "bias_y_m"] - 6e-4) < 3 * row.loc[5, "sigma_y_m"]
+    assert abs(row.loc[11, "bias_z_m"] + 4e-4) < 3 * row.loc[11, "sigma_z_m"]
+    assert abs(row.loc[8, "bias_time_s"] - 1e-6) < 3 * row.loc[8, "sigma_time_s"]
+    hist = root / "stations" / "hffaf" / "bias_history.jsonl"
+    assert len(hist.read_text().splitlines()) == 1
+    for f in ("comparison.csv", "biases.png", "report.md"):
+        assert (out / f).is_file()
+    # a second calibration appends (never rewrites) and is compared with the first
+    out2 = shots["base"] / "cal2"
+    assert main(["calibrate", *trajs, "-o", str(out2), "--stations-root", str(root)]) == 0
+    lines = hist.read_text().splitlines()
+    assert len(lines) == 2
+    assert "Comparison with the station history (1 earlier" in (out2 / "report.md").read_text()
+    # a capsule shot through the same stations, fitted with the current table
+    sim, shot_file, _ = shots["m2_2429"]
+    traj = _biased_trajectory(sim, shot_file, shots["base"] / "capsule_biased.csv", bias,
+                              np.random.default_rng(4))
+    fit_out = shots["base"] / "fit_with_table"
+    assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(fit_out), "-q",
+                 "--no-plots", "--bias-table", "current", "--stations-root", str(root)]) == 0
+    report = (fit_out / "report.md").read_text()
+    assert "station bias table applied" in report and "bias_history.jsonl" in report
+
+
+def test_calibrate_refusals(shots, sphere_trajectories, capsys):
+    trajs, _ = sphere_trajectories
+    root = shots["base"] / "refusal_root"
+    _, _, capsule_traj = shots["m2_2429"]
+    out = shots["base"] / "cal_bad"
+    assert main(["calibrate", str(capsule_traj), "-o", str(out), "--stations-root",
+                 str(root)]) == 1
+    assert "sphere" in capsys.readouterr().err
+    assert not out.exists()
+    # a history from another facility
+    other = root / "stations" / "hffaf"
+    other.mkdir(parents=True)
+    (other / "bias_history.jsonl").write_text(
+        '{"format": "cadra-station-bias-1", "facility": "other_range"}\n')
+    assert main(["calibrate", *trajs, "-o", str(out), "--stations-root", str(root)]) == 1
+    err = capsys.readouterr().err
+    assert "bias_history.jsonl" in err or "facility" in err
+    assert not out.exists()
+    # a corrupted history
+    (other / "bias_history.jsonl").write_text("not json at all\n{}\n")
+    assert main(["calibrate", *trajs, "-o", str(out), "--stations-root", str(root)]) == 1
+    assert "line" in capsys.readouterr().err
+    assert not out.exists()

@@ -423,10 +423,16 @@ def _calibration_report(est, table, comparison, history, hist_warnings, args) ->
                                               for c in "xyz") + " |")
     lines += ["", f"## Comparison with the station history ({len(history)} earlier "
               "entries)", ""]
-    flagged = comparison[comparison.get("moved", False) == True] if "moved" in comparison \
-        else comparison.iloc[0:0]  # noqa: E712
-    lines.append(f"{len(flagged)} station channel(s) moved significantly; see "
-                 "comparison.csv." if len(history) else "No earlier entries.")
+    if len(history):
+        moved = comparison[comparison["moved_family"].astype(bool)] \
+            if "moved_family" in comparison else comparison.iloc[0:0]
+        lines.append(f"{len(moved)} station channel(s) moved significantly (family-wise test; "
+                     "per-test z in comparison.csv).")
+        for _, row in moved.iterrows():
+            lines.append(f"- station {row['station']} {row['channel']}: moved "
+                         f"{row['z_move']:+.1f} sigma")
+    else:
+        lines.append("No earlier entries.")
     lines += ["", "![biases](biases.png)", ""]
     for w in (*est.warnings, *hist_warnings):
         lines.append(f"- warning: {w}")
