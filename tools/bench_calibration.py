@@ -65,7 +65,7 @@ def _rms(result):
     return float(np.sqrt(np.mean([result.rms()[c] ** 2 for c in "xyz"])))
 
 
-def trials(n, sigma, seed):
+def trials(n, sigma, seed, capsule_sigma=None):
     from tqdm import tqdm
 
     from cadra.calibration.sphere import apply_bias_table, estimate_station_biases
@@ -75,6 +75,7 @@ def trials(n, sigma, seed):
     specs = ROOT / "sample_shots" / "specs"
     spheres = [simulate_shot(load_shot_spec(specs / f"sphere_{k}.toml")) for k in (1, 2, 3)]
     capsule = simulate_shot(load_shot_spec(specs / "m2_2429.toml"))
+    capsule_sigma = capsule_sigma or sigma
     rng = np.random.default_rng(seed)
     inj_ok = inj_n = all_ok = all_n = ff = ff_n = det = 0
     ratios, seconds = [], []
@@ -95,13 +96,14 @@ def trials(n, sigma, seed):
         ff_n += int((~injected).sum())
         det += int((flagged & injected).sum())
         seed_c = int(rng.integers(1 << 31))
-        clean = _measure(capsule, np.zeros_like(b), sigma, np.random.default_rng(seed_c))
-        biased = _measure(capsule, b, sigma, np.random.default_rng(seed_c))
+        clean = _measure(capsule, np.zeros_like(b), capsule_sigma,
+                         np.random.default_rng(seed_c))
+        biased = _measure(capsule, b, capsule_sigma, np.random.default_rng(seed_c))
         r_clean, _ = fit_shots([clean], capsule.model)
         r_fixed, _ = fit_shots([apply_bias_table(biased, est.to_table())], capsule.model)
         ratios.append(_rms(r_fixed) / _rms(r_clean))
     return {
-        "trials": n, "sigma_um": sigma * 1e6,
+        "trials": n, "sigma_um": sigma * 1e6, "capsule_sigma_um": capsule_sigma * 1e6,
         "bias_within_2sigma_frac": inj_ok / inj_n,
         "all_within_2sigma_frac": all_ok / all_n,
         "false_flag_rate": ff / ff_n,
@@ -157,11 +159,15 @@ def end_to_end() -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--trials", type=int, default=50)
-    parser.add_argument("--sigma-um", type=float, default=0.25)
+    parser.add_argument("--sigma-um", type=float, default=0.22,
+                        help="sphere position noise, um (stage one: 0.22)")
+    parser.add_argument("--capsule-sigma-um", type=float, default=0.28,
+                        help="capsule position noise, um (stage one: 0.28)")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--e2e", action="store_true", help="also calibrate from images")
     args = parser.parse_args(argv)
-    figures = trials(args.trials, args.sigma_um * 1e-6, args.seed)
+    figures = trials(args.trials, args.sigma_um * 1e-6, args.seed,
+                     args.capsule_sigma_um * 1e-6)
     for k, v in figures.items():
         print(f"{k}: {v}")
     if args.e2e:

@@ -66,8 +66,9 @@ def _simulate(args) -> int:
           f"Mach {t.mach.min():.3f}..{t.mach.max():.3f}, "
           f"alpha {t.alpha_deg.min():+.2f}..{t.alpha_deg.max():+.2f} deg, "
           f"beta {t.beta_deg.min():+.2f}..{t.beta_deg.max():+.2f} deg")
-    print(f"wrote {out}/shot.toml, truth.csv" + ("" if args.no_images else
-                                                  ", truth_images.csv, images/"))
+    extra = ", station_biases.csv" if (out / "station_biases.csv").is_file() else ""
+    print(f"wrote {out}/shot.toml, truth.csv{extra}" + ("" if args.no_images else
+                                                         ", truth_images.csv, images/"))
     return 0
 
 
