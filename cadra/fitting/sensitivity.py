@@ -141,15 +141,22 @@ def predict(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray, prog
 def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,
                           program, params: np.ndarray, ref_from_cg_body_m: np.ndarray,
                           local_free: np.ndarray, aero_free: np.ndarray,
-                          integ: Integration = Integration()) -> tuple[np.ndarray, np.ndarray]:
-    """Prediction (n, 5) and Jacobian (n, 5, n_local + n_aero) by complex step.
+                          integ: Integration = Integration(), phys_dirs=None
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction (n, 5) and Jacobian (n, 5, n_local + n_aero + n_phys) by complex step.
 
     ``local_free`` are indices into :data:`LOCAL_NAMES` (corrections at ``y0``),
-    ``aero_free`` indices into ``params``. Columns: local ones first, then aero ones.
+    ``aero_free`` indices into ``params``, ``phys_dirs`` (k, N_PHYS) directions in the
+    ``phys`` vector (the effects of :mod:`cadra.dynamics.layout`: cg offset, wind, density
+    gradient, inertia; a product of inertia is a direction with two entries). Columns in
+    that order. (A cg offset also moves the observed reference point; that part is not in a
+    ``phys`` column -- callers add it.)
     """
     local_free = np.asarray(local_free, dtype=int)
     aero_free = np.asarray(aero_free, dtype=int)
-    m = local_free.size + aero_free.size
+    phys_dirs = (np.zeros((0, len(phys))) if phys_dirs is None
+                 else np.atleast_2d(np.asarray(phys_dirs, dtype=float)))
+    m = local_free.size + aero_free.size + phys_dirs.shape[0]
     if m == 0:
         return predict(y0, t0, times, phys, program, params, ref_from_cg_body_m, integ), \
             np.zeros((len(times), 5, 0))
@@ -170,6 +177,8 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
             Y0[row, 10 + k - 9] += 1j * EPS
     for row, j in enumerate(aero_free, start=local_free.size):
         PARAMS[row, j] += 1j * EPS
+    for row, direction in enumerate(phys_dirs, start=local_free.size + aero_free.size):
+        PHYS[row] += 1j * EPS * direction
     states = _run(Y0, t0, times, PHYS, program, PARAMS, integ)
     obs = observables(states, ref_from_cg_body_m)          # (m, n, 5) complex
     pred = obs[0].real.copy()
