@@ -85,3 +85,36 @@ def test_out_of_library_effect_reported_unexplained_where_it_lies(spec):
     dg = diagnose_gap(res, [sd])
     assert dg.unexplained
     assert "station 5 theta" in dg.verdict or "station 12 psi" in dg.verdict
+
+
+def test_diagnose_cli(tmp_path, spec):
+    """cadra2 diagnose from a trajectory file: a cg offset found, report written."""
+    import pandas as pd
+
+    from cadra.cli.cadra2 import main
+    from cadra.io.trajectory import COLUMNS, write_trajectory
+    from cadra.simulate import write_shot
+
+    sim = simulate_shot(replace(spec, effects=Effects(cg_offset_body_m=(0, 0, 2e-4))))
+    d = write_shot(sim, tmp_path / "shot", images=False, progress=False)
+    # the shot file tells the analyst nothing of the effect: its cg is the nominal one
+    rng = np.random.default_rng(5)
+    t = sim.truth
+    n = len(t)
+    table = pd.DataFrame({
+        "station": t["station"], "t_s": t["t_s"], "status": "ok",
+        "x_m": t["x_m"] + rng.normal(0, SP, n), "y_m": t["y_m"] + rng.normal(0, SP, n),
+        "z_m": t["z_m"] + rng.normal(0, SP, n),
+        "theta_deg": t["theta_deg"] + rng.normal(0, 0.0012, n),
+        "psi_deg": t["psi_deg"] + rng.normal(0, 0.0012, n),
+        "sigma_x_m": SP, "sigma_y_m": SP, "sigma_z_m": SP, "sigma_theta_deg": 0.0012,
+        "sigma_psi_deg": 0.0012, "x_top_minus_side_m": 0.0, "x_consistency": 0.0,
+        "reason": "", "warnings": ""})
+    traj = write_trajectory(tmp_path / "traj.csv", table.loc[:, list(COLUMNS)],
+                            {"shot_id": sim.spec.shot_id,
+                             "shot_file": str((d / "shot.toml").resolve())})
+    out = tmp_path / "diag"
+    assert main(["diagnose", str(traj), "--model", "m2_m070", "-o", str(out)]) == 0
+    report = (out / "report.md").read_text()
+    assert "lateral cg offset" in report.split("## How much")[0]
+    assert (out / "ranking.csv").is_file() and (out / "where.csv").is_file()

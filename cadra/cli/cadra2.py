@@ -17,6 +17,9 @@ Subcommands:
   position and timing biases with sigmas, compared with the facility's station history
   (``stations/<facility>/``), to which the new estimate is appended (docs/calibration.md).
   ``cadra2 fit --bias-table current|FILE`` applies a table.
+* ``cadra2 diagnose TRAJECTORY [...] --model MODEL -o OUT_DIR`` — fit, then rank the library
+  of unmodelled effects by score tests, add the significant ones, and say where any remaining
+  gap lies (docs/gap.md).
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 
@@ -442,6 +445,33 @@ def _calibration_report(est, table, comparison, history, hist_warnings, args) ->
     return "\n".join(lines) + "\n"
 
 
+def _diagnose(args) -> int:
+    from cadra.fitting import FitDataError, FitOptions, fit_shots
+    from cadra.gap.report import write_diagnosis
+    from cadra.gap.score import diagnose_gap
+    from cadra.simulate import SpecError, resolve_model
+
+    out = Path(args.output)
+    if _exists(out, args, "diagnose"):
+        return 1
+    try:
+        model = _apply_holds(resolve_model(args.model), args)
+        shots = _load_shots(args)
+        result, _ = fit_shots(shots, model,
+                              options=FitOptions(max_iterations=args.max_iterations))
+        if not result:
+            raise ValueError(f"the fit did not converge ({result.message}): nothing to "
+                             "diagnose")
+        dg = diagnose_gap(result, shots, alpha=args.alpha)
+    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+        return _refused("diagnose", exc)
+    write_diagnosis(dg, result, out, overwrite=args.overwrite)
+    print(dg.verdict)
+    print(dg.ranking.head(8)[["candidate", "dchi2", "p_value", "size"]].to_string(index=False))
+    print(f"wrote {out}/ (report.md, ranking.csv, where.csv)")
+    return 0
+
+
 def _print_summary(result) -> None:
     print(f"{result.status}: {result.message}")
     print(f"chi^2/dof = {result.chi2:.1f}/{result.dof} = {result.reduced_chi2:.3f}, "
@@ -486,6 +516,13 @@ def build_parser() -> argparse.ArgumentParser:
     hold.add_argument("--values", required=True,
                       help="comma-separated values to hold it at (model file's unit)")
     hold.set_defaults(func=_holdone)
+    diag = sub.add_parser("diagnose", help="where the fit misses, which unmodelled effect, "
+                                           "how far it shrinks")
+    _add_data_options(diag)
+    diag.add_argument("--model", required=True, help="aero model (name or file)")
+    diag.add_argument("--alpha", type=float, default=0.01,
+                      help="family-wise significance of adding an effect (default 0.01)")
+    diag.set_defaults(func=_diagnose)
     cal = sub.add_parser("calibrate", help="station biases from sphere calibration shots")
     _add_data_options(cal)
     cal.add_argument("--stations-root", default=".",
