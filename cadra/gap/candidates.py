@@ -11,7 +11,9 @@ three kinds:
   missing higher-order C_m term, an alpha-dependent C_mq, a Magnus moment, Mach dependence of
   C_m within the shot), differentiated by complex step through the same aero-model evaluator;
 - ``measurement``: per-station terms added to what stage one measures (a station's position
-  bias, its timing bias, its optical scale error), linear in their parameters.
+  bias in x, y or z -- one candidate per channel, so a one-channel survey error is not charged
+  for three parameters --, its timing bias, its optical scale error), linear in their
+  parameters.
 
 All parameters are SI; each candidate names its parameters with units.
 """
@@ -123,10 +125,10 @@ def measurement_candidates(stations) -> list[Candidate]:
     out = []
     for st in stations:
         st = int(st)
-        out.append(Candidate(f"station {st} position bias", "measurement",
-                             (f"st{st}_x_m", f"st{st}_y_m", f"st{st}_z_m"),
-                             "what the station measures is offset (wire survey)", station=st,
-                             measure="position"))
+        for c in "xyz":
+            out.append(Candidate(f"station {st} {c} bias", "measurement", (f"st{st}_{c}_m",),
+                                 f"the station's measured {c} is offset (wire survey)",
+                                 station=st, measure=f"position_{c}"))
         out.append(Candidate(f"station {st} timing bias", "measurement", (f"st{st}_dt_s",),
                              "the spark fires off its recorded time", station=st,
                              measure="timing"))

@@ -102,8 +102,8 @@ def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
             C = np.zeros((len(sd.t_s), 5, c.n_params))
             rows = np.flatnonzero(sd.stations == c.station)
             for i in rows:
-                if c.measure == "position":
-                    C[i, 0, 0] = C[i, 1, 1] = C[i, 2, 2] = 1.0
+                if c.measure.startswith("position_"):
+                    C[i, "xyz".index(c.measure[-1]), 0] = 1.0
                 elif c.measure == "timing":
                     C[i, :3, 0] = v[i]
                 elif c.measure == "scale":
@@ -168,6 +168,24 @@ def score(Q, r, C, n_obs, n_free):
     return {"dchi2": dchi2, "k": k, "F": F, "p": p, "delta": delta,
             "sigma": np.sqrt(np.maximum(np.diag(cov), 0.0)),
             "dbic": -dchi2 / max(s2, 1.0) + k * math.log(n_obs), "Cp": Cp}
+
+
+def _refit_aero(result: FitResult, shots, cand: Candidate, start_values) -> FitResult | None:
+    """The fit redone with ``cand``'s terms (their parameters free, started at the score
+    estimate), from the fitted states; None if it does not converge."""
+    from cadra.fitting.solver import FitOptions, fit
+
+    aug = augmented_model(result.model, cand).with_values(
+        dict(zip(cand.params, (float(v) for v in start_values), strict=True)))
+    by_id = {s.shot_id: s for s in shots}
+    local = [np.array([LOCAL_NAMES.index(n) for n in sf.local_free]) for sf in result.shots]
+    try:
+        res = fit([by_id[sf.shot_id] for sf in result.shots], aug,
+                  [sf.state for sf in result.shots], options=FitOptions(),
+                  local_free=local)
+    except (ValueError, FloatingPointError):
+        return None
+    return res if res else None
 
 
 def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel | None = None,
@@ -245,6 +263,27 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     rms_after = rms_by_channel(resid)
     dof1 = n_obs - n_used
     rchi1 = float(resid @ resid) / max(dof1, 1)
+    if len(added) == 1 and added[0]["kind"] == "aero":
+        # confirm a lone aero effect by a nonlinear refit with the augmented model (the score
+        # step is one Gauss-Newton step; a large missing term needs the full fit)
+        refit = _refit_aero(result, shots, next(c for c in cands
+                                                if c.name == added[0]["effect"]),
+                            added[0]["size"])
+        if refit is not None:
+            rr = refit.residuals
+            added[0]["size"] = [refit.value(n) for n in added[0]["params"]]
+            added[0]["sigma"] = [refit.sigma(n) for n in added[0]["params"]]
+            added[0]["refit"] = True
+            rms_after = {ch: float(np.sqrt(np.mean(rr.loc[rr["channel"] == ch, "residual"]
+                                                   ** 2)))
+                         if (rr["channel"] == ch).any() else math.nan for ch in CHANNELS}
+            rchi1 = refit.reduced_chi2
+            resid_map = {(a, b, c): v for a, b, c, v in
+                         zip(rr["shot_id"], rr["station"], rr["channel"], rr["normalized"],
+                             strict=True)}
+            resid = np.array([resid_map.get((sh, int(st), CHANNELS[ch]), 0.0)
+                              for sh, st, ch in zip(shot_all, stat_all, chan_all,
+                                                    strict=True)])
     # still above the noise floor? chi^2 test of what remains
     p_floor = float(stats.chi2.sf(float(resid @ resid), max(dof1, 1)))
     unexplained = p_floor < alpha
