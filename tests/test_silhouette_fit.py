@@ -130,3 +130,46 @@ def test_partly_out_of_frame_and_blank():
 
     coarse = locate_model(blank, tpl, case.affine)
     assert not coarse.ok and "no model" in coarse.reason
+
+
+def test_band_pixels_match_brute_force_nearest_edge():
+    """The band search (each edge's box of +-band px) finds, for every pixel within the band,
+    the same signed distance and nearest edge as a brute-force search over all edges."""
+    from cadra.imaging.silhouette_fit import _band_pixels, _outline_geometry, outline_px
+
+    tpl = make_template(capsule("M2"), "top", tilt_rad=0.2)
+    M = np.array([[1.27e-4, 2e-7, -0.03], [-3e-7, 1.27e-4, -0.03]])
+    poly = outline_px(tpl, (0.0012, -0.0007, 0.3), M)
+    geo = _outline_geometry(poly, 3.0)
+    band = 3.5
+    lin, sd, edge, t = _band_pixels(geo, band, (480, 480))
+    W = 480
+    u, v = (lin % W).astype(float), (lin // W).astype(float)
+    # brute force: distance of every band pixel to every edge
+    a, dv = geo.p0, geo.d
+    tt = ((u[:, None] - a[None, :, 0]) * dv[None, :, 0]
+          + (v[:, None] - a[None, :, 1]) * dv[None, :, 1]) / (geo.ell ** 2)[None, :]
+    tt = np.clip(tt, 0.0, 1.0)
+    fx = a[None, :, 0] + tt * dv[None, :, 0]
+    fy = a[None, :, 1] + tt * dv[None, :, 1]
+    dist2 = (u[:, None] - fx) ** 2 + (v[:, None] - fy) ** 2
+    best = np.argmin(dist2, axis=1)
+    rows = np.arange(len(u))
+    np.testing.assert_allclose(np.abs(sd), np.sqrt(dist2[rows, best]), atol=1e-12)
+    same = edge == best
+    # ties (a pixel equidistant from two edges, e.g. at a vertex) may pick either edge
+    assert np.all(same | np.isclose(dist2[rows, edge], dist2[rows, best], rtol=0, atol=1e-12))
+    # and no pixel within the band was missed
+    uu, vv = np.meshgrid(np.arange(int(u.min()) - 6, int(u.max()) + 7),
+                         np.arange(int(v.min()) - 6, int(v.max()) + 7))
+    uu, vv = uu.ravel().astype(float), vv.ravel().astype(float)
+    n_in = 0
+    for c0 in range(0, len(uu), 4096):
+        us, vs = uu[c0:c0 + 4096], vv[c0:c0 + 4096]
+        t2 = np.clip(((us[:, None] - a[None, :, 0]) * dv[None, :, 0]
+                      + (vs[:, None] - a[None, :, 1]) * dv[None, :, 1])
+                     / (geo.ell ** 2)[None, :], 0.0, 1.0)
+        d2 = ((us[:, None] - a[None, :, 0] - t2 * dv[None, :, 0]) ** 2
+              + (vs[:, None] - a[None, :, 1] - t2 * dv[None, :, 1]) ** 2).min(axis=1)
+        n_in += int((d2 <= band * band).sum())
+    assert n_in == len(lin)

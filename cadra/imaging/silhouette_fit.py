@@ -193,7 +193,9 @@ def _band_kernel(p0, dv, ell, nrm, band, u_lo, v_lo, best, sd, edge, tt):
     force over each edge's neighbourhood); ROI arrays are (rows, cols), ``best`` starts at inf.
     """
     H, W = best.shape
-    reach = band + 1.0
+    # a pixel within ``band`` of the polygon is within ``band`` of its nearest edge, so that
+    # edge's box (+-band) holds it: every kept pixel sees the same nearest edge
+    reach = band
     for e in range(p0.shape[0]):
         ax, ay = p0[e, 0], p0[e, 1]
         bx, by = ax + dv[e, 0], ay + dv[e, 1]
@@ -240,18 +242,43 @@ def _band_pixels(geo: _Outline, band: float, shape: tuple[int, int]):
     tt = np.zeros(shp)
     _band_kernel(geo.p0, geo.d, geo.ell, geo.normal, float(band), int(u_lo), int(v_lo),
                  best, sd, edge, tt)
-    rr, cc = np.nonzero(best <= band * band)
-    lin = (rr + v_lo) * W + (cc + u_lo)
-    return lin, sd[rr, cc], edge[rr, cc], tt[rr, cc]
+    return _band_collect(best, sd, edge, tt, float(band * band), int(u_lo), int(v_lo), int(W))
+
+
+@numba.njit(cache=True)
+def _band_collect(best, sd, edge, tt, band2, u_lo, v_lo, W):
+    """The ROI pixels with ``best <= band2``, row-major: linear index, sd, edge, t."""
+    H_r, W_r = best.shape
+    n = 0
+    for r in range(H_r):
+        for c in range(W_r):
+            if best[r, c] <= band2:
+                n += 1
+    lin = np.empty(n, np.int64)
+    sd_o = np.empty(n)
+    e_o = np.empty(n, np.int64)
+    t_o = np.empty(n)
+    j = 0
+    for r in range(H_r):
+        for c in range(W_r):
+            if best[r, c] <= band2:
+                lin[j] = (r + v_lo) * W + (c + u_lo)
+                sd_o[j] = sd[r, c]
+                e_o[j] = edge[r, c]
+                t_o[j] = tt[r, c]
+                j += 1
+    return lin, sd_o, e_o, t_o
 
 
 # =============================================================================== stage A
 
 
 @numba.njit(cache=True)
-def _gn_accumulate(I, d, k, w, L, D, delta, s, A, b):
+def _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, reuse):
     """Gauss-Newton normal equations per segment for (L, D, delta) with edge width s, and
-    the global width's gradient terms. Returns (sum w r^2, sum w Js r, sum w Js^2)."""
+    the global width's gradient terms. Returns (sum w r^2, sum w Js r, sum w Js^2).
+    ``reuse``: take each pixel's edge profile ``g`` and its derivative ``p`` from ``G``, ``P``
+    (filled by the noise-model pass at the same state) instead of computing them."""
     A[:] = 0.0
     b[:] = 0.0
     chi2 = 0.0
@@ -260,8 +287,12 @@ def _gn_accumulate(I, d, k, w, L, D, delta, s, A, b):
     for j in range(I.shape[0]):
         kk = k[j]
         z = (delta[kk] - d[j]) / s
-        g = 0.5 * math.erfc(-z / math.sqrt(2.0))
-        p = math.exp(-0.5 * z * z) / SQRT2PI
+        if reuse:
+            g = G[j]
+            p = P[j]
+        else:
+            g = 0.5 * math.erfc(-z / math.sqrt(2.0))
+            p = math.exp(-0.5 * z * z) / SQRT2PI
         r = I[j] - (L[kk] * (1.0 - g) + D[kk] * g)
         c0 = 1.0 - g
         c1 = g
@@ -351,16 +382,21 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
                              0.2 * max(coef[0] + 0.5 * coef[1] + 0.25 * coef[2], 1e-12))
     A = np.empty((K, 3, 3))
     b = np.empty((K, 3))
+    model = np.empty(n)
+    G = np.empty(n)
+    P = np.empty(n)
+    reuse = False   # G, P hold the current state's profile (after a noise-model pass)
     chi2 = 0.0
     for outer in range(n_outer):
         for _ in range(2):
-            _gn_accumulate(I, d, k, w, L, D, delta, s, A, b)
+            _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, reuse)
+            reuse = False
             for q in range(K):
                 st = _solve3_ridge(A[q], b[q])
                 L[q] += st[0]
                 D[q] += st[1]
                 delta[q] += min(max(st[2], -1.5), 1.5)
-        _, gs, hs = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b)
+        _, gs, hs = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, False)
         if hs > 0.0 and math.isfinite(gs / hs):
             # damped and bounded: a strong diffraction fringe is nearly the shape of a width
             # change, and a full step can throw the width (and every offset) far off
@@ -373,7 +409,10 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
             for j in range(n):
                 z = (delta[k[j]] - d[j]) / s
                 g = 0.5 * math.erfc(-z / math.sqrt(2.0))
+                G[j] = g
+                P[j] = math.exp(-0.5 * z * z) / SQRT2PI
                 m = L[k[j]] * (1.0 - g) + D[k[j]] * g
+                model[j] = m
                 r2 = (I[j] - m) ** 2
                 mean_r2 += r2
                 x0, x1, x2 = 1.0, m, m * m
@@ -392,11 +431,10 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
             coef = _solve3_ridge(N, rhs)
             floor = max(0.2 * mean_r2 / n, 1e-12)   # no pixel weighs > 5x the average
             for j in range(n):
-                z = (delta[k[j]] - d[j]) / s
-                g = 0.5 * math.erfc(-z / math.sqrt(2.0))
-                m = L[k[j]] * (1.0 - g) + D[k[j]] * g
+                m = model[j]
                 w[j] = 1.0 / max(coef[0] + coef[1] * m + coef[2] * m * m, floor)
-    chi2, _, _ = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b)
+            reuse = True
+    chi2, _, _ = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, reuse)
     scale = chi2 / max(n - 3 * K, 1)
     var_delta = np.empty(K)
     e3 = np.zeros(3)
@@ -427,6 +465,28 @@ class EdgeSegments:
     resid_rms: float
     noise_coef: np.ndarray    # variance model v0 + v1 m + v2 m^2 (m = model intensity)
     pixels: dict = field(default_factory=dict)   # per-pixel arrays for the centroid method
+
+
+@numba.njit(cache=True)
+def _segment_geometry(d, k, K, w, L, D, delta, s, e, t, normal, p0, dv, kap_px):
+    """Per segment: mean outward normal (x, y), outline point (x, y) and curvature, each
+    pixel weighted by its information about the segment's offset."""
+    acc = np.zeros((6, K))
+    for j in range(d.shape[0]):
+        q = k[j]
+        z = (delta[q] - d[j]) / s
+        p = math.exp(-0.5 * z * z) / SQRT2PI
+        c = (D[q] - L[q]) * p / s
+        wi = w[j] * (c * c)
+        ej = e[j]
+        acc[0, q] += wi
+        acc[1, q] += wi * normal[ej, 0]
+        acc[2, q] += wi * normal[ej, 1]
+        acc[3, q] += wi * (p0[ej, 0] + t[j] * dv[ej, 0])
+        acc[4, q] += wi * (p0[ej, 1] + t[j] * dv[ej, 1])
+        acc[5, q] += wi * kap_px[j]
+    return (acc[1] / acc[0], acc[2] / acc[0], acc[3] / acc[0], acc[4] / acc[0],
+            acc[5] / acc[0])
 
 
 def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: float,
@@ -477,18 +537,9 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
         float(edge_sigma0), coef_in, has, 2, L0, D0)
     npix = len(I_u)
     # segment geometry, weighted by the pixels' information about delta
-    z = (delta[k] - d_u) / s
-    p = np.exp(-0.5 * z * z) / SQRT2PI
-    wi = w * ((D[k] - L[k]) * p / s) ** 2
-    wsum = np.bincount(k, weights=wi, minlength=K)
-    eu, tu = e[use], t[use]
-    nx = np.bincount(k, weights=wi * geo.normal[eu, 0], minlength=K) / wsum
-    ny = np.bincount(k, weights=wi * geo.normal[eu, 1], minlength=K) / wsum
+    nx, ny, fx, fy, kap = _segment_geometry(d_u, k, K, w, L, D, delta, s, e[use], t[use],
+                                            geo.normal, geo.p0, geo.d, kap_all[use])
     nn = np.hypot(nx, ny)
-    foot = geo.p0[eu] + tu[:, None] * geo.d[eu]
-    fx = np.bincount(k, weights=wi * foot[:, 0], minlength=K) / wsum
-    fy = np.bincount(k, weights=wi * foot[:, 1], minlength=K) / wsum
-    kap = np.bincount(k, weights=wi * kap_all[use], minlength=K) / wsum
     pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
     return EdgeSegments(delta_px=delta, var_px2=var_delta, normal=np.column_stack([nx / nn,
                                                                                   ny / nn]),

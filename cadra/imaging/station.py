@@ -75,6 +75,24 @@ class StationResult:
     warnings: tuple[str, ...] = ()
 
 
+@functools.lru_cache(maxsize=8)
+def _body_cached(spec_items: tuple):
+    from cadra.body.spec import body_from_spec
+
+    return body_from_spec(dict(spec_items))
+
+
+def _body(body_spec: dict):
+    """The body of a spec, one object per distinct spec in a process (so its templates,
+    cached per body object, are shared by the stations of a shot)."""
+    from cadra.body.spec import body_from_spec
+
+    try:
+        return _body_cached(tuple(sorted(body_spec.items())))
+    except TypeError:   # an unhashable or unorderable spec: build it afresh
+        return body_from_spec(body_spec)
+
+
 @functools.lru_cache(maxsize=64)
 def _template_cached(body_key, body, view_name: str, tilt_rad: float, n_points: int):
     return make_template(body, view_name, tilt_rad, n_points=n_points)
@@ -115,10 +133,13 @@ def _wire_crossings(fit: ViewFit, template, affine, wires) -> list[str]:
 
 
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
-                  coarse=None, final: bool = True):
+                  coarse=None, final: bool = True, masks: dict | None = None):
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
-    ``coarse`` the model's rough location (:func:`locate_model`)."""
+    ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
+    wire mask) keeps the wire mask of the first pass for the refits (same affine)."""
     from cadra.imaging.wires import measure_wires, wire_mask
+
+    masks = {} if masks is None else masks
 
     template = _template(body, view.name, tilt)
     if prev is None:
@@ -136,13 +157,15 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
             return None, wires.reason, wires, None, ()
         affine = wires.affine
         pose0 = pose_from_coarse(coarse, template, affine)
-        mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
+        mask = masks[view.name] = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
         # a quick first pass when a refit with better tilts follows
         settings_used = settings if final else replace(settings, max_iter=2)
     else:
         wires, affine = prev.wires, prev.affine
         pose0 = prev.fit.pose
-        mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
+        mask = masks.get(view.name)
+        if mask is None:
+            mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
         settings_used = settings
     if prev is not None:   # a refit after a small tilt change: start close, few iterations
         settings_used = replace(settings, max_iter=min(settings.max_iter, 4))
@@ -177,11 +200,10 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
     """
     import time
 
-    from cadra.body.spec import body_from_spec
     from cadra.facility import load_facility
 
     settings = FitSettings() if settings is None else settings
-    body = body_from_spec(body_spec)
+    body = _body(body_spec)
     facility = load_facility(facility_path)
     station = facility.station(station_id)
     images, results = {}, {}
@@ -210,6 +232,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
         a = axis_from_projected_angles(phi["side"], phi["top"])
         tilts = {"top": math.asin(a[2]), "side": math.asin(a[1])}
     fits: dict[str, ViewResult] = {}
+    masks: dict[str, np.ndarray] = {}
     for _round in range(max_rounds if not sphere else 1):
         for name, img in images.items():
             t0 = time.perf_counter()
@@ -219,7 +242,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             try:
                 fit, reason, wires, affine, warn = _measure_view(
                     img, station.views[name], body, tilts[name], settings, prev, coarse[name],
-                    final=sphere or _round > 0)
+                    final=sphere or _round > 0, masks=masks)
             except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                 fit, reason, wires, affine, warn = (
                     None, f"measurement error ({type(exc).__name__}: {exc})", None, None, ())
