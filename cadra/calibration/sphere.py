@@ -210,6 +210,16 @@ def _design(shot: ShotData, index: dict, nc: int, v: np.ndarray) -> np.ndarray:
     return D
 
 
+def _corrected(shots, designs, beta):
+    """The shots with the biases ``beta`` (through each shot's design) taken out."""
+    out = []
+    for s, D in zip(shots, designs, strict=True):
+        meas = s.meas.copy()
+        meas[:, :3] -= D @ beta
+        out.append(replace(s, meas=meas))
+    return out
+
+
 def _joint_fit(shots: list[ShotData], model: AeroModel, options: FitOptions):
     """Multi-fit of the sphere shots (one drag law, each shot's own position and velocity);
     per shot the prediction and the Jacobian (n, 5, 6 + n_aero) at the solution."""
@@ -276,11 +286,7 @@ def estimate_station_biases(shots: Sequence[ShotData], *, facility: str = "",
     cov_b = np.zeros((n_beta, n_beta))
     null = np.zeros((n_beta, 0))
     for p in range(max(1, passes)):
-        corrected = []
-        for s, D in zip(shots, designs, strict=True):
-            meas = s.meas.copy()
-            meas[:, :3] -= D @ beta
-            corrected.append(replace(s, meas=meas))
+        corrected = _corrected(shots, designs, beta)
         res, fits = _joint_fit(corrected, model, options)
         n_aero = len(res.aero_names)
         new_designs = [_design(s, index, nc, v) for s, (_, _, v) in zip(shots, fits,
@@ -324,11 +330,7 @@ def estimate_station_biases(shots: Sequence[ShotData], *, facility: str = "",
         beta = np.linalg.lstsq(Dall, correction, rcond=None)[0] + cov_b @ g
     dof -= n_beta - null.shape[1]
     # final pass: residual after correction
-    corrected = []
-    for s, D in zip(shots, designs, strict=True):
-        meas = s.meas.copy()
-        meas[:, :3] -= D @ beta
-        corrected.append(replace(s, meas=meas))
+    corrected = _corrected(shots, designs, beta)
     _, fits = _joint_fit(corrected, model, options)
     for sc, (pred, _, _) in zip(corrected, fits, strict=True):
         rms_after[sc.shot_id] = {c: float(np.sqrt(np.nanmean((sc.meas[:, j] - pred[:, j]) ** 2)))
