@@ -43,9 +43,8 @@ from datetime import UTC, datetime
 import numpy as np
 
 from cadra.aero import AeroModel, load_bundled_model
-from cadra.dynamics.setup import propagate_states
 from cadra.fitting import FitOptions, ShotData, fit_shots
-from cadra.fitting.sensitivity import predict_with_jacobian
+from cadra.fitting.sensitivity import predict_states, predict_with_jacobian
 
 #: bias channels: position x, y, z (m) and spark time (s)
 BIAS_CHANNELS = ("x", "y", "z", "time")
@@ -231,8 +230,8 @@ def _joint_fit(shots: list[ShotData], model: AeroModel, options: FitOptions):
                                         res.model.values(), s.rigid.ref_from_cg_body_m(),
                                         np.arange(6), res.model.free_indices(),
                                         options.integration)
-        states = propagate_states(sf.state, sf.t0_s, s.t_s, s.rigid.phys(), program,
-                                  res.model.values(), 2.5e-5)
+        states = predict_states(sf.state, sf.t0_s, s.t_s, s.rigid.phys(), program,
+                                res.model.values(), options.integration)
         out.append((pred, J, states[:, 3:6]))
     return res, out
 

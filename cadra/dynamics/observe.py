@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cadra.conventions import aero_angles
 from cadra.dynamics.layout import S_POS, S_QUAT
 
 
@@ -55,3 +56,32 @@ def observe(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> dict[str, np.
         "psi_rad": np.arcsin(axis[:, 1]),
         "axis": axis,
     }
+
+
+def air_angles(states: np.ndarray, rigid) -> dict[str, np.ndarray]:
+    """Aerodynamic angles, Mach number and non-dimensional rates along (n, 13) states, as the
+    dynamics computes them (air velocity: cg velocity minus the wind and its x gradient of
+    ``rigid.effects``; angles by :func:`cadra.conventions.aero_angles`).
+
+    Returns a dict of (n,) arrays ``alpha_rad``, ``beta_rad``, ``sigma_rad`` (classical: 0 =
+    nose into the wind; docs/conventions.md), ``airspeed_m_s``, ``mach``, ``p_hat``,
+    ``q_hat``, ``r_hat`` (rate d / 2V) and ``air_dir_F`` (n, 3), the unit air-relative
+    velocity in F.
+    """
+    states = np.atleast_2d(np.asarray(states, dtype=float))
+    e = rigid.effects
+    wind = (np.asarray(e.wind_facility_m_s, dtype=float)[None, :]
+            + states[:, 0:1] * np.asarray(e.wind_gradient_facility_per_s, dtype=float)[None, :])
+    v_air = states[:, 3:6] - wind
+    R = rotation_fb_batch(states[:, S_QUAT])
+    v_b = np.einsum("nji,nj->ni", R, v_air)          # R^T v
+    n = len(states)
+    alpha, beta, sigma = (np.empty(n) for _ in range(3))
+    for i in range(n):
+        alpha[i], beta[i], sigma[i] = aero_angles(v_b[i])
+    V = np.linalg.norm(v_air, axis=1)
+    k = rigid.d_m / (2.0 * V)
+    return {"alpha_rad": alpha, "beta_rad": beta, "sigma_rad": sigma, "airspeed_m_s": V,
+            "mach": V / rigid.speed_of_sound_m_s, "p_hat": states[:, 10] * k,
+            "q_hat": states[:, 11] * k, "r_hat": states[:, 12] * k,
+            "air_dir_F": v_air / V[:, None]}

@@ -14,13 +14,11 @@ import numpy as np
 import pandas as pd
 
 from cadra.conventions import (
-    aero_angles,
     alpha_cev_deg,
     axis_from_inclinations,
-    body_to_facility_matrix,
     quat_from_axis_roll,
 )
-from cadra.dynamics.observe import observe
+from cadra.dynamics.observe import air_angles, observe
 from cadra.dynamics.setup import DT_MAX_DEFAULT, RigidBody, propagate_states, state_from_reference
 
 
@@ -93,14 +91,11 @@ def truth_table(times, states, body: RigidBody, stations=None) -> pd.DataFrame:
     """
     ref = body.ref_from_cg_body_m()
     obs = observe(states, ref)
+    air = air_angles(states, body)
     rows = []
     for k, (t, y) in enumerate(zip(times, states, strict=True)):
-        R = body_to_facility_matrix(y[6:10])
-        wind = np.asarray(body.effects.wind_facility_m_s) + y[0] * np.asarray(
-            body.effects.wind_gradient_facility_per_s)
-        v_b = R.T @ (y[3:6] - wind)
-        alpha, beta, sigma = aero_angles(v_b)
-        V = float(np.linalg.norm(v_b))
+        alpha, beta, sigma = air["alpha_rad"][k], air["beta_rad"][k], air["sigma_rad"][k]
+        V = float(air["airspeed_m_s"][k])
         rows.append({
             "station": int(stations[k]) if stations is not None else k + 1,
             "t_s": float(t),
@@ -112,7 +107,7 @@ def truth_table(times, states, body: RigidBody, stations=None) -> pd.DataFrame:
             "vx_m_s": y[3], "vy_m_s": y[4], "vz_m_s": y[5],
             "p_rad_s": y[10], "q_rad_s": y[11], "r_rad_s": y[12],
             "airspeed_m_s": V,
-            "mach": V / body.speed_of_sound_m_s,
+            "mach": float(air["mach"][k]),
             "alpha_deg": np.degrees(alpha), "beta_deg": np.degrees(beta),
             "sigma_deg": np.degrees(sigma), "alpha_cev_deg": alpha_cev_deg(alpha),
         })

@@ -41,11 +41,10 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero import AeroModel
-from cadra.conventions import aero_angles, body_to_facility_matrix
-from cadra.dynamics.observe import observe
+from cadra.dynamics.observe import air_angles, observe
 from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local
+from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local, predict_states
 
 #: results.json format tag
 RESULTS_FORMAT = "cadra.fit-results/1"
@@ -89,51 +88,16 @@ def _shots_by_id(shots: Sequence[ShotData]) -> dict[str, ShotData]:
     return {s.shot_id: s for s in shots}
 
 
-def air_angles(states: np.ndarray, rigid) -> dict[str, np.ndarray]:
-    """Aerodynamic angles and Mach number at each state, as the dynamics computes them.
-
-    Parameters
-    ----------
-    states : (n, 13) 6-DOF states (cadra/dynamics/layout.py).
-    rigid : the shot's :class:`cadra.dynamics.setup.RigidBody` (air, wind effects).
-
-    Returns
-    -------
-    dict of (n,) arrays: ``alpha_rad``, ``beta_rad``, ``sigma_rad`` (classical: 0 = nose, i.e.
-    heat shield, into the wind; docs/conventions.md), ``mach``, and the nondimensional rates
-    ``p_hat``, ``q_hat``, ``r_hat`` (rate d / 2V).
-    """
-    states = np.atleast_2d(np.asarray(states, dtype=float))
-    wind0 = np.asarray(rigid.effects.wind_facility_m_s, dtype=float)
-    dwind = np.asarray(rigid.effects.wind_gradient_facility_per_s, dtype=float)
-    n = len(states)
-    out = {k: np.empty(n) for k in ("alpha_rad", "beta_rad", "sigma_rad", "mach", "p_hat",
-                                    "q_hat", "r_hat")}
-    for i, y in enumerate(states):
-        R = body_to_facility_matrix(y[6:10])
-        v_b = R.T @ (y[3:6] - (wind0 + y[0] * dwind))
-        a, b, s = aero_angles(v_b)
-        V = float(np.linalg.norm(v_b))
-        out["alpha_rad"][i], out["beta_rad"][i], out["sigma_rad"][i] = a, b, s
-        out["mach"][i] = V / rigid.speed_of_sound_m_s
-        k = rigid.d_m / (2.0 * V)
-        out["p_hat"][i], out["q_hat"][i], out["r_hat"][i] = y[10] * k, y[11] * k, y[12] * k
-    return out
-
-
 def fitted_histories(result: FitResult, shots: Sequence[ShotData], n_points: int = 400,
                      ) -> dict[str, pd.DataFrame]:
     """Each shot's fitted trajectory, densely sampled over its measured span.
 
-    The fitted state at the epoch is propagated with the fitted model
-    (:func:`cadra.dynamics.setup.propagate_states`, the synthetic-truth step
-    ``DT_MAX_TRUTH``). Returns ``{shot_id: DataFrame}`` with columns ``t_s``, ``x_m``, ``y_m``,
-    ``z_m`` (reference point, facility frame), ``theta_deg``, ``psi_deg``, ``alpha_deg``,
-    ``beta_deg``, ``sigma_deg``, ``mach``, ``p_hat``, ``q_hat``, ``r_hat`` and the cg state
-    ``state_0`` .. ``state_12``.
+    The fitted state at the epoch is propagated with the fitted model as the fit integrates
+    (:func:`cadra.fitting.sensitivity.predict_states`). Returns ``{shot_id: DataFrame}``
+    with columns ``t_s``, ``x_m``, ``y_m``, ``z_m`` (reference point, facility frame),
+    ``theta_deg``, ``psi_deg``, ``alpha_deg``, ``beta_deg``, ``sigma_deg``, ``mach``,
+    ``p_hat``, ``q_hat``, ``r_hat`` and the cg state ``state_0`` .. ``state_12``.
     """
-    from cadra.dynamics.setup import DT_MAX_TRUTH, propagate_states
-
     by_id = _shots_by_id(shots)
     program = result.model.compile()
     params = result.model.values()
@@ -143,8 +107,7 @@ def fitted_histories(result: FitResult, shots: Sequence[ShotData], n_points: int
         if sd is None:
             raise ValueError(f"no ShotData given for shot {sf.shot_id!r} of the result")
         t = np.linspace(float(sd.t_s[0]), float(sd.t_s[-1]), int(n_points))
-        states = propagate_states(sf.state, sf.t0_s, t, sd.rigid.phys(), program, params,
-                                  DT_MAX_TRUTH)
+        states = predict_states(sf.state, sf.t0_s, t, sd.rigid.phys(), program, params)
         obs = observe(states, sd.rigid.ref_from_cg_body_m())
         air = air_angles(states, sd.rigid)
         df = pd.DataFrame({
@@ -623,6 +586,6 @@ def _write_plots(result, shots, plot_dir: Path, *, bodies, reference_model, titl
     return files, notes
 
 
-__all__ = ["CHANNEL_OUTPUT_UNITS", "PLOT_FILES", "RESULTS_FORMAT", "air_angles",
+__all__ = ["CHANNEL_OUTPUT_UNITS", "PLOT_FILES", "RESULTS_FORMAT",
            "coefficient_markdown", "fitted_histories", "report_markdown", "residuals_table",
            "results_dict", "shot_epoch_table", "write_fit_outputs"]

@@ -128,14 +128,28 @@ def _run(Y0, t0, times, PHYS, program, PARAMS, integ: Integration) -> np.ndarray
     return OUT
 
 
+def predict_states(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray, program,
+                   params: np.ndarray, integ: Integration | None = None) -> np.ndarray:
+    """(n, 13) states at ``times`` (any order) from ``y0`` at epoch ``t0``, integrated as the
+    fit integrates -- the states behind its predictions (the one home for "the fitted
+    trajectory": reports, studies, calibration and the gap diagnosis call this)."""
+    integ = integ or Integration()
+    times = np.asarray(times, dtype=float)
+    order = np.argsort(times, kind="stable")
+    states = _run(np.asarray(y0, float)[None, :], t0, np.ascontiguousarray(times[order]),
+                  np.asarray(phys, float)[None, :], program,
+                  np.asarray(params, float)[None, :], integ)[0]
+    out = np.empty_like(states)
+    out[order] = states
+    return out
+
+
 def predict(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray, program,
             params: np.ndarray, ref_from_cg_body_m: np.ndarray,
             integ: Integration = Integration()) -> np.ndarray:
     """Predicted (n, 5) measurements at ``times`` from state ``y0`` at epoch ``t0``."""
-    times = np.ascontiguousarray(times, dtype=float)
-    states = _run(np.asarray(y0, float)[None, :], t0, times, np.asarray(phys, float)[None, :],
-                  program, np.asarray(params, float)[None, :], integ)[0]
-    return observables(states, ref_from_cg_body_m)
+    return observables(predict_states(y0, t0, times, phys, program, params, integ),
+                       ref_from_cg_body_m)
 
 
 def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,

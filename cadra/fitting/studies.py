@@ -40,14 +40,11 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero import AeroModel, load_bundled_model
-from cadra.conventions import aero_angles, axis_from_inclinations, body_to_facility_matrix
-from cadra.dynamics.integrate import propagate_adaptive
-from cadra.dynamics.layout import N_STATE
-from cadra.dynamics.observe import observe
-from cadra.dynamics.setup import plane_code
+from cadra.conventions import axis_from_inclinations
+from cadra.dynamics.observe import air_angles, observe
 from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import Integration
+from cadra.fitting.sensitivity import Integration, predict_states
 from cadra.fitting.solver import FitOptions, fit
 
 #: an initial-state source: per-shot (13,) states, or ``f(shot, model) -> (13,) state``
@@ -103,61 +100,30 @@ def _alpha_centre(model: AeroModel) -> float:
     return model.parameter("alpha_ref").value if "alpha_ref" in model.names else 0.0
 
 
-def _air_velocity_F(shot: ShotData, states: np.ndarray) -> np.ndarray:
-    """(n, 3) air-relative cg velocity in F (wind and its x gradient removed, as the truth)."""
-    e = shot.rigid.effects
-    wind = (np.asarray(e.wind_facility_m_s, dtype=float)[None, :]
-            + states[:, 0:1] * np.asarray(e.wind_gradient_facility_per_s, dtype=float)[None, :])
-    return states[:, 3:6] - wind
-
-
 def fitted_states(shot: ShotData, model: AeroModel, state: np.ndarray, t0_s: float,
                   times_s: np.ndarray | None = None,
                   integration: Integration | None = None) -> np.ndarray:
     """(n, 13) states of the trajectory through ``state`` at ``t0_s`` (a fitted shot's
     :class:`cadra.fitting.result.ShotFit` ``state``/``t0_s``) with ``model``'s values, at
-    ``times_s`` (any order; default: the shot's spark times).
-
-    Integrated as the fitter integrates (:func:`cadra.dynamics.integrate.propagate_adaptive`
-    with ``integration``, default :class:`cadra.fitting.sensitivity.Integration`), so these are
-    the states behind the fit's predictions. (The fixed-step
+    ``times_s`` (any order; default: the shot's spark times), integrated as the fitter
+    integrates (:func:`cadra.fitting.sensitivity.predict_states`). (The fixed-step
     :func:`cadra.dynamics.setup.propagate_states` at the simulator's 25 us truth step is off by
     up to 2e-5 deg on M1-2366 at the kinks of Table 4's max(...) C_mq; the adaptive run agrees
     with a 1 us fixed-step run to 2e-7 deg.)
     """
-    integ = integration or Integration()
-    times = np.asarray(shot.t_s if times_s is None else times_s, dtype=float)
-    order = np.argsort(times, kind="stable")
-    t_sorted = np.ascontiguousarray(times[order])
-    program = model.compile()
-    out = np.empty((t_sorted.size, N_STATE))
-    propagate_adaptive(np.ascontiguousarray(state, dtype=float), float(t0_s), t_sorted,
-                       integ.h_max_s, integ.tol_position_m, integ.tol_angle_rad,
-                       shot.rigid.phys(), program.ops, program.args, program.starts,
-                       np.ascontiguousarray(model.values(), dtype=float),
-                       plane_code(program.angle_plane), int(program.stack_size), out)
-    result = np.empty_like(out)
-    result[order] = out
-    return result
+    times = shot.t_s if times_s is None else times_s
+    return predict_states(state, t0_s, times, shot.rigid.phys(), model.compile(),
+                          model.values(), integration)
 
 
 def aero_angle_history(shot: ShotData, states: np.ndarray) -> dict[str, np.ndarray]:
-    """Aerodynamic angles (rad) and Mach number along (n, 13) states of ``shot``.
-
-    Returns ``alpha``, ``beta``, ``sigma`` (rad; :func:`cadra.conventions.aero_angles` of the
-    air-relative velocity in body axes), ``mach`` and ``air_dir_F`` (n, 3) unit air-relative
-    velocity in F.
+    """Aerodynamic angles (rad) and Mach number along (n, 13) states of ``shot``
+    (:func:`cadra.dynamics.observe.air_angles`): ``alpha``, ``beta``, ``sigma``, ``mach`` and
+    ``air_dir_F`` (n, 3) unit air-relative velocity in F.
     """
-    v_air = _air_velocity_F(shot, states)
-    n = len(states)
-    alpha, beta, sigma, speed = (np.empty(n) for _ in range(4))
-    for i in range(n):
-        R = body_to_facility_matrix(states[i, 6:10])
-        alpha[i], beta[i], sigma[i] = aero_angles(R.T @ v_air[i])
-        speed[i] = float(np.linalg.norm(v_air[i]))
-    return {"alpha": alpha, "beta": beta, "sigma": sigma,
-            "mach": speed / shot.rigid.speed_of_sound_m_s,
-            "air_dir_F": v_air / speed[:, None]}
+    a = air_angles(states, shot.rigid)
+    return {"alpha": a["alpha_rad"], "beta": a["beta_rad"], "sigma": a["sigma_rad"],
+            "mach": a["mach"], "air_dir_F": a["air_dir_F"]}
 
 
 def amplitude_measures(shot: ShotData, model: AeroModel, state: np.ndarray, t0_s: float, *,

@@ -30,10 +30,15 @@ import pandas as pd
 from scipy import stats
 
 from cadra.aero import AeroModel
-from cadra.dynamics.setup import propagate_states
+from cadra.dynamics.observe import rotation_fb_batch
 from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import LOCAL_NAMES, Integration, predict_with_jacobian
+from cadra.fitting.sensitivity import (
+    LOCAL_NAMES,
+    Integration,
+    predict_states,
+    predict_with_jacobian,
+)
 from cadra.gap.candidates import Candidate, augmented_model, library
 
 
@@ -74,9 +79,7 @@ def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
         pred, J = predict_with_jacobian(sf.state, sf.t0_s, sd.t_s, phys, program, params, ref,
                                         local, aero_free, integ, phys_dirs=phys_dirs)
         n_fit = local.size + aero_free.size
-        states = propagate_states(sf.state, sf.t0_s, sd.t_s, phys, program, params, 2.5e-5)
-        from cadra.dynamics.observe import rotation_fb_batch
-
+        states = predict_states(sf.state, sf.t0_s, sd.t_s, phys, program, params, integ)
         R = rotation_fb_batch(states[:, 6:10])
         cols = {}
         at = n_fit
