@@ -21,6 +21,7 @@ from cadra.fitting.data import (
     FILM_SIGMAS,
     FitDataError,
     ShotData,
+    floor_sigmas,
     load_shot_data,
     shot_data_from_truth,
 )
@@ -28,13 +29,6 @@ from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
 from cadra.fitting.solver import FitOptions, fit
 from cadra.fitting.start import estimate_motion, initial_states, starting_model
-
-
-def _floored(shot: ShotData, floor: dict) -> ShotData:
-    sigma = shot.sigma.copy()
-    sigma[:, :3] = np.fmax(sigma[:, :3], floor["position_m"])
-    sigma[:, 3:] = np.fmax(sigma[:, 3:], floor["angle_rad"])
-    return replace(shot, sigma=sigma)
 
 
 def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
@@ -63,7 +57,7 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
         or (s.has_angles and np.nanmin(s.sigma[:, 3:]) < continuation["angle_rad"])
         for s in shots)
     # starting values (and the roll grid's chi^2) under the weights of the first stage
-    first_shots = [_floored(s, continuation) for s in shots] if staged else shots
+    first_shots = [floor_sigmas(s, continuation) for s in shots] if staged else shots
     start = starting_model(first_shots, model) if auto_start else model
     states = list(initial) if initial is not None else initial_states(
         first_shots, start, options.integration)

@@ -103,6 +103,20 @@ class ShotData:
         return replace(self, rigid=self.rigid.with_effects(effects))
 
 
+def _floor(sigma: np.ndarray, floor: dict) -> np.ndarray:
+    out = sigma.copy()
+    out[:, :3] = np.fmax(out[:, :3], floor.get("position_m", 0.0))
+    out[:, 3:] = np.fmax(out[:, 3:], floor.get("angle_rad", 0.0))
+    return out
+
+
+def floor_sigmas(shot: ShotData, floor: dict) -> ShotData:
+    """``shot`` with its sigmas floored at ``floor`` (``{"position_m": .., "angle_rad": ..}``).
+    An unmeasured channel's NaN sigma becomes the floor; the channel stays masked by its NaN
+    measurement."""
+    return replace(shot, sigma=_floor(shot.sigma, floor))
+
+
 def rigid_body_from_shot(shot, effects: Effects | None = None) -> RigidBody:
     """The dynamics' view of a :class:`cadra.io.shotfile.ShotFile` (mass properties, air)."""
     body = body_from_spec(shot.model)
@@ -165,8 +179,7 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
     sigma = table[["sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_rad",
                    "sigma_psi_rad"]].to_numpy(float)
     if min_sigma:
-        sigma[:, :3] = np.fmax(sigma[:, :3], min_sigma.get("position_m", 0.0))
-        sigma[:, 3:] = np.fmax(sigma[:, 3:], min_sigma.get("angle_rad", 0.0))
+        sigma = _floor(sigma, min_sigma)
     bad = ~np.isfinite(sigma) | ~(sigma > 0)
     meas = np.where(bad, np.nan, meas)
     t_s = table["t_s"].to_numpy(float)

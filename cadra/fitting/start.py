@@ -152,13 +152,14 @@ def estimate_motion(shot: ShotData) -> MotionEstimate:
         wy, ly, _ = _damped_sine(t, shot.meas[:, 4])
         # total angle: between the measured axis and the local flight direction
         sig = []
+        tt = t - t[shot.epoch_index]
+        dpos = [np.polyder(_polyfit(tt, shot.meas[:, j], 2)) for j in range(3)]
         for i in range(len(t)):
             th, ps = shot.meas[i, 3], shot.meas[i, 4]
             if not (np.isfinite(th) and np.isfinite(ps)):
                 continue
             a = axis_from_inclinations(th, ps)
-            c = [_polyfit(t - t[shot.epoch_index], shot.meas[:, j], 2) for j in range(3)]
-            v = np.array([np.polyval(np.polyder(cj), t[i] - t[shot.epoch_index]) for cj in c])
+            v = np.array([np.polyval(d, tt[i]) for d in dpos])
             sig.append(math.acos(np.clip(a @ v / np.linalg.norm(v), -1, 1)))
         sig = np.array(sig)
         if sig.size:
