@@ -183,17 +183,9 @@ def _load_shots(args):
 
 
 def _single(args) -> int:
-    import json
-
     from cadra.aero import load_bundled_model
     from cadra.fitting import FitDataError, FitOptions
-    from cadra.fitting.studies import (
-        linear_template_for,
-        plot_quasi_linear,
-        quasi_linear_summary,
-        single_fits,
-    )
-    from cadra.io.atomic import atomic_output_dir
+    from cadra.fitting.studies import linear_template_for, single_fits, write_single_fits
     from cadra.simulate import SpecError, resolve_model
 
     out = Path(args.output)
@@ -210,40 +202,7 @@ def _single(args) -> int:
                             options=FitOptions(max_iterations=args.max_iterations))
     except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
         return _refused("single", exc)
-    against = [c for c in ("alpha_rms_deg", "sigma_rms_deg") if c in table]
-    summaries = {}
-    with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
-        table.to_csv(tmp / "single_fits.csv", index=False)
-        lines = [f"# Single fits with {model.name} (seed 004 step 1) and quasi-linear "
-                 "trends (step 2)", "",
-                 "| shot | status | chi2/dof | " + " | ".join(model.free_names()) + " |",
-                 "|---|---|---|" + "---|" * len(model.free_names())]
-        for _, row in table.iterrows():
-            cells = [f"{row[n]:.5g} ± {row[n + '_sigma']:.2g}" for n in model.free_names()]
-            lines.append(f"| {row['shot_id']} | {row['status']} | "
-                         f"{row['reduced_chi2']:.3g} | " + " | ".join(cells) + " |")
-        lines += ["", "## Quasi-linear trends (weighted straight line vs amplitude)", "",
-                  "| coefficient | against | slope ± σ | intercept ± σ | p (line) |",
-                  "|---|---|---|---|---|"]
-        (tmp / "plots").mkdir()
-        for name in model.free_names():
-            for col in against:
-                try:
-                    q = quasi_linear_summary(table, name, col)
-                except ValueError as exc:
-                    lines.append(f"| {name} | {col} | {exc} | | |")
-                    continue
-                summaries[f"{name}:{col}"] = q
-                lines.append(f"| {name} | {col} | {q['slope']:.4g} ± {q['slope_sigma']:.2g} | "
-                             f"{q['intercept']:.4g} ± {q['intercept_sigma']:.2g} | "
-                             f"{q['p_value'] if q['p_value'] is not None else '—'} |")
-                fig = plot_quasi_linear(table, name, col)
-                fig.savefig(tmp / "plots" / f"quasi_linear_{name}_{col}.png", dpi=110)
-        (tmp / "quasi_linear.json").write_text(
-            json.dumps(summaries, indent=2,
-                       default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)),
-            encoding="utf-8")
-        (tmp / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    lines = write_single_fits(table, model, out, overwrite=args.overwrite)
     print("\n".join(lines[2:2 + 2 + len(table)]))
     print(f"wrote {out}/ (single_fits.csv, quasi_linear.json, report.md, plots/)")
     return 0 if table["converged"].all() else 1
@@ -346,16 +305,10 @@ def _apply_bias_table(shots, args):
 def _calibrate(args) -> int:
     import math
 
-    from cadra.calibration.history import (
-        append_entry,
-        compare,
-        load_history,
-        save_bias_table,
-    )
-    from cadra.calibration.plots import plot_biases
+    from cadra.calibration.history import append_entry, compare, history_dir, load_history
+    from cadra.calibration.report import write_calibration
     from cadra.calibration.sphere import CalibrationError, estimate_station_biases
     from cadra.fitting import FitDataError
-    from cadra.io.atomic import atomic_output_dir
 
     out = Path(args.output)
     if _exists(out, args, "calibrate"):
@@ -374,13 +327,9 @@ def _calibrate(args) -> int:
         return _refused("calibrate", exc)
     table = est.to_table(note=args.note or "")
     comparison = compare(table, history, threshold_sigma=args.threshold_sigma)
-    with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
-        save_bias_table(table, tmp / "bias_table.csv")
-        comparison.to_csv(tmp / "comparison.csv", index=False)
-        plot_biases(table, history).savefig(tmp / "biases.png", dpi=110)
-        (tmp / "report.md").write_text(
-            _calibration_report(est, table, comparison, history, hist_warnings, args),
-            encoding="utf-8")
+    write_calibration(est, table, comparison, history, out, warnings=hist_warnings,
+                      appended_to=None if args.no_history else history_dir(root, facility),
+                      overwrite=args.overwrite)
     if not args.no_history:
         path = append_entry(table, root)
         print(f"appended to {path}")
@@ -400,49 +349,6 @@ def _calibrate(args) -> int:
         print(f"warning: {w}")
     print(f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
     return 0
-
-
-def _calibration_report(est, table, comparison, history, hist_warnings, args) -> str:
-    lines = [f"# Sphere calibration: facility {est.facility}", "",
-             f"Shots: {', '.join(est.shots)} (speeds "
-             f"{', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s). {est.method}.",
-             f"chi^2/dof after correction: {est.chi2:.1f}/{est.dof} = "
-             f"{est.chi2 / max(est.dof, 1):.3f}. Timing biases "
-             f"{'estimated' if est.timing_estimated else 'not estimated'}.", "",
-             "Biases are relative: per channel they have no component along a polynomial in "
-             "the stations' x (degree 1 for y, z; 2 for x and time), which the shots' own "
-             "initial state and drag law cannot be told apart from (docs/calibration.md).", "",
-             "| station | x (mm) | y (mm) | z (mm) | time (µs) |", "|---|---|---|---|---|"]
-    for k, st in enumerate(table.stations):
-        cells = []
-        for c, f in enumerate((1e3, 1e3, 1e3, 1e6)):
-            b, sg = table.bias[k, c], table.sigma[k, c]
-            cells.append("—" if not sg == sg else f"{b * f:+.4f} ± {sg * f:.4f}")
-        lines.append(f"| {st} | " + " | ".join(cells) + " |")
-    lines += ["", "## Residual rms per shot (µm), before → after the correction", "",
-              "| shot | x | y | z |", "|---|---|---|---|"]
-    for sid in est.shots:
-        b, a = est.shot_rms_before[sid], est.shot_rms_after[sid]
-        lines.append(f"| {sid} | " + " | ".join(f"{b[c] * 1e6:.2f} → {a[c] * 1e6:.2f}"
-                                              for c in "xyz") + " |")
-    lines += ["", f"## Comparison with the station history ({len(history)} earlier "
-              "entries)", ""]
-    if len(history):
-        moved = comparison[comparison["moved_family"].astype(bool)] \
-            if "moved_family" in comparison else comparison.iloc[0:0]
-        lines.append(f"{len(moved)} station channel(s) moved significantly (family-wise test; "
-                     "per-test z in comparison.csv).")
-        for _, row in moved.iterrows():
-            lines.append(f"- station {row['station']} {row['channel']}: moved "
-                         f"{row['z_move']:+.1f} sigma")
-    else:
-        lines.append("No earlier entries.")
-    lines += ["", "![biases](biases.png)", ""]
-    for w in (*est.warnings, *hist_warnings):
-        lines.append(f"- warning: {w}")
-    if not args.no_history:
-        lines.append(f"- appended to the history under {Path(args.stations_root) / 'stations'}")
-    return "\n".join(lines) + "\n"
 
 
 def _diagnose(args) -> int:

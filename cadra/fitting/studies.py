@@ -583,6 +583,54 @@ def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
     return fig
 
 
+
+def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
+                      overwrite: bool = False) -> list[str]:
+    """Write seed 004 steps 1-2 to ``out_dir`` atomically: ``single_fits.csv``, the
+    quasi-linear trend of every free coefficient vs alpha_rms and sigma_rms
+    (``quasi_linear.json``, ``plots/quasi_linear_<coef>_<against>.png``) and ``report.md``.
+    Returns the report's lines."""
+    import json
+
+    from cadra.io.atomic import atomic_output_dir
+
+    against = [c for c in ("alpha_rms_deg", "sigma_rms_deg") if c in table]
+    names = model.free_names()
+    lines = [f"# Single fits with {model.name} (seed 004 step 1) and quasi-linear "
+             "trends (step 2)", "",
+             "| shot | status | chi2/dof | " + " | ".join(names) + " |",
+             "|---|---|---|" + "---|" * len(names)]
+    for _, row in table.iterrows():
+        cells = [f"{row[n]:.5g} ± {row[n + '_sigma']:.2g}" for n in names]
+        lines.append(f"| {row['shot_id']} | {row['status']} | "
+                     f"{row['reduced_chi2']:.3g} | " + " | ".join(cells) + " |")
+    lines += ["", "## Quasi-linear trends (weighted straight line vs amplitude)", "",
+              "| coefficient | against | slope ± σ | intercept ± σ | p (line) |",
+              "|---|---|---|---|---|"]
+    summaries = {}
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+        table.to_csv(tmp / "single_fits.csv", index=False)
+        (tmp / "plots").mkdir()
+        for name in names:
+            for col in against:
+                try:
+                    q = quasi_linear_summary(table, name, col)
+                except ValueError as exc:
+                    lines.append(f"| {name} | {col} | {exc} | | |")
+                    continue
+                summaries[f"{name}:{col}"] = q
+                lines.append(f"| {name} | {col} | {q['slope']:.4g} ± {q['slope_sigma']:.2g} | "
+                             f"{q['intercept']:.4g} ± {q['intercept_sigma']:.2g} | "
+                             f"{q['p_value'] if q['p_value'] is not None else '—'} |")
+                plot_quasi_linear(table, name, col).savefig(
+                    tmp / "plots" / f"quasi_linear_{name}_{col}.png", dpi=110)
+        (tmp / "quasi_linear.json").write_text(
+            json.dumps(summaries, indent=2,
+                       default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)),
+            encoding="utf-8")
+        (tmp / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return lines
+
 __all__ = [
     "LINE_P_THRESHOLD",
     "aero_angle_history",
@@ -597,4 +645,5 @@ __all__ = [
     "sigma_residual_rms_deg",
     "single_fit",
     "single_fits",
+    "write_single_fits",
 ]
