@@ -514,7 +514,7 @@ def compare(new: BiasTable, history: list[BiasTable], *, threshold_sigma: float 
 
     The z values assume the two estimates are independent (no shared shots; a warning in
     ``attrs["warnings"]`` otherwise) and ignore the correlation between stations that a
-    zero-sum constraint introduces.
+    gauge of the estimate introduces.
 
     Parameters
     ----------

@@ -16,14 +16,13 @@ the range, is the same as a change of each shot's initial position or velocity (
 section 8). Along the range (x) and in time it is worse: a bias pattern quadratic in the
 stations' x is the same as a change of the drag level (b = c x^2 looks like a deceleration
 2 c V^2, the same Delta C_D for every shot), and a quadratic timing pattern the same as a change
-of the drag's Mach slope. The estimate is therefore constrained, per channel, to have no
-component along a polynomial in the stations' x: degree 1 for y and z, degree 2 for x and time
-(:data:`UNOBSERVABLE_DEGREE`) -- approximately: the drag-absorbed pattern is only nearly
-quadratic. The estimator therefore does not impose these polynomials: it estimates every
-station's bias, takes the exact unobservable directions from the null space of the normal
-matrix, and reports the estimate in the *robust gauge* (:func:`robust_gauge`): the
-null-space component that puts the unbiased majority of the stations at ~0, so a biased
-station reads its full size.
+of the drag's Mach slope. These patterns are roughly polynomials in the stations' x (degree 1
+for y and z, 2 for x and time), but only roughly -- the drag-absorbed pattern is only nearly
+quadratic, and decelerating shots do not see a trend in x as a trend in time exactly. So the
+estimator imposes no polynomial: it estimates every station's bias, takes the unobservable
+directions from the null space of the normal matrix, and reports the estimate in the *robust
+gauge* (:func:`robust_gauge`): the null-space component that puts the unbiased majority of
+the stations at ~0, so a biased station reads its full size.
 
 Method: the sphere shots are fitted together (point mass: the 6-DOF code with the sphere
 model; each shot's position and velocity, one drag law C_D(M) shared by all, :mod:`cadra.fitting`);
@@ -61,7 +60,7 @@ class StationBiasEstimate:
     """Station biases from sphere shots (SI; channels :data:`BIAS_CHANNELS`).
 
     ``bias``/``sigma`` (n, 4); sigma NaN where a channel was not estimated (bias 0 there).
-    ``covariance`` is that of the free (constrained) parameters mapped to stations:
+    ``covariance`` is that of the estimate in the robust gauge, mapped to stations:
     (n*4, n*4) in station-major order. ``shot_rms_before``/``after``: per shot, residual rms of
     x, y, z (m) before and after correcting the data by the estimate.
     """
@@ -91,32 +90,6 @@ class StationBiasEstimate:
                          stations=self.stations.copy(), bias=self.bias.copy(),
                          sigma=self.sigma.copy(), shots=self.shots, method=self.method,
                          note=note)
-
-
-def constraint_basis(x_stations: np.ndarray, degree: int = 1) -> np.ndarray:
-    """(n, n - degree - 1) orthonormal basis of the biases with no component along a
-    polynomial of ``degree`` in the stations' x (1: zero mean and zero trend)."""
-    x = np.asarray(x_stations, dtype=float)
-    u = (x - x.mean()) / max(np.ptp(x), 1e-12)
-    C = np.column_stack([u**p for p in range(degree + 1)])
-    U, _, _ = np.linalg.svd(C, full_matrices=True)
-    return U[:, degree + 1:]
-
-
-#: polynomial degree over the stations that each bias channel cannot show (see module doc)
-UNOBSERVABLE_DEGREE = {"x": 2, "y": 1, "z": 1, "time": 2}
-
-
-def constrained_projection(bias: np.ndarray, x_stations: np.ndarray) -> np.ndarray:
-    """What the calibration can see of ``bias`` (n, 4: x, y, z, time): each channel minus its
-    least-squares polynomial over the stations' x of degree :data:`UNOBSERVABLE_DEGREE` (an
-    injected bias is recovered as this)."""
-    bias = np.asarray(bias, dtype=float)
-    out = np.empty_like(bias)
-    for c, name in enumerate(BIAS_CHANNELS[:bias.shape[1]]):
-        Q = constraint_basis(x_stations, UNOBSERVABLE_DEGREE[name])
-        out[:, c] = Q @ (Q.T @ bias[:, c])
-    return out
 
 
 #: relative eigenvalue (scaled normal matrix) below which a bias direction counts as
@@ -390,6 +363,5 @@ def apply_bias_table(shot: ShotData, table, *, min_significance: float | None = 
 
 
 __all__ = ["BIAS_CHANNELS", "CalibrationError", "StationBiasEstimate", "apply_bias_table",
-           "check_sphere_shot", "constraint_basis", "constrained_projection",
-           "estimate_station_biases"]
+           "check_sphere_shot", "estimate_station_biases", "robust_gauge"]
 
