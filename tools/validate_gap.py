@@ -64,8 +64,7 @@ def make_case(name, rng, spec, model_file_dir):
     from cadra.dynamics.effects import Effects
     from cadra.gap.candidates import aero_candidates, augmented_model
 
-    I_yy = 8.3709e-6 if spec.model.get("name") == "M2" else float(
-        np.asarray(spec.inertia_model_kg_m2)[1][1])
+    I_yy = float(np.asarray(spec.inertia_model_kg_m2)[1][1])   # the shot's own, kg m^2
     if name == "cg":
         d = _draw(rng, 1e-4, 3e-4)
         axis = int(rng.integers(2))

@@ -513,8 +513,8 @@ def compare(new: BiasTable, history: list[BiasTable], *, threshold_sigma: float 
     list candidates, ``moved_family`` to decide that the facility changed.
 
     The z values assume the two estimates are independent (no shared shots; a warning in
-    ``attrs["warnings"]`` otherwise) and ignore the correlation between stations that a
-    gauge of the estimate introduces.
+    ``attrs["warnings"]`` otherwise) and ignore the correlation between stations that the
+    estimate's gauge introduces.
 
     Parameters
     ----------

@@ -401,20 +401,13 @@ def quasi_linear_summary(table: pd.DataFrame, coefficient: str = "Cmq_0",
     return out
 
 
-class _Figures:
-    """``subplots`` on a fresh :class:`matplotlib.figure.Figure`: no pyplot state, so no figure
-    is kept alive (or counted) after the caller drops it."""
+def _figure(*args, figsize, **kw):
+    """A fresh :class:`matplotlib.figure.Figure` and its axes (``Figure.subplots``): no pyplot
+    state, so nothing is kept alive or counted after the caller drops the figure."""
+    from matplotlib.figure import Figure
 
-    @staticmethod
-    def subplots(*args, figsize=None, constrained_layout=False, **kw):
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=figsize, layout="constrained" if constrained_layout else None)
-        return fig, fig.subplots(*args, **kw)
-
-
-def _pyplot():
-    return _Figures
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots(*args, **kw)
 
 
 def plot_quasi_linear(table: pd.DataFrame, coefficient: str = "Cmq_0",
@@ -425,10 +418,9 @@ def plot_quasi_linear(table: pd.DataFrame, coefficient: str = "Cmq_0",
     chi^2 p-value (:func:`quasi_linear_summary`, whose keywords ``summary_kw`` are passed on).
     Returns the figure (never shown).
     """
-    plt = _pyplot()
     s = quasi_linear_summary(table, coefficient, against, **summary_kw)
     if ax is None:
-        fig, ax = plt.subplots(figsize=(6.5, 4.5), constrained_layout=True)
+        fig, ax = _figure(figsize=(6.5, 4.5))
     else:
         fig = ax.figure
     ax.errorbar(s["x"], s["y"], yerr=s["sigma"], fmt="o", ms=5, capsize=3, color="C0",
@@ -533,7 +525,6 @@ def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
     panel, drawn there. A sequence of Axes: the rms panel and then the parameter panels, as
     many as given. Non-converged refits are drawn hollow. Returns the figure (never shown).
     """
-    plt = _pyplot()
     name = name or (str(table["held"].iloc[0]) if "held" in table and len(table) else "held")
     t = table.sort_values("value")
     x = t["value"].to_numpy(float)
@@ -546,8 +537,7 @@ def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
         n = 1 + len(params)
         ncol = min(n, 3)
         nrow = math.ceil(n / ncol)
-        fig, axs = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False,
-                                constrained_layout=True)
+        fig, axs = _figure(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
         axes = list(axs.ravel())
         for a in axes[n:]:
             a.set_visible(False)
