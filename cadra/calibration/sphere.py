@@ -43,7 +43,7 @@ import numpy as np
 
 from cadra.aero import AeroModel, load_bundled_model
 from cadra.fitting import FitOptions, ShotData, fit_shots
-from cadra.fitting.sensitivity import predict_states, predict_with_jacobian
+from cadra.fitting.sensitivity import predict_with_jacobian
 
 #: bias channels: position x, y, z (m) and spark time (s)
 BIAS_CHANNELS = ("x", "y", "z", "time")
@@ -199,12 +199,10 @@ def _joint_fit(shots: list[ShotData], model: AeroModel, options: FitOptions):
     program = res.model.compile()
     out = []
     for s, sf in zip(shots, res.shots, strict=True):
-        pred, J = predict_with_jacobian(sf.state, sf.t0_s, s.t_s, s.rigid.phys(), program,
-                                        res.model.values(), s.rigid.ref_from_cg_body_m(),
-                                        np.arange(6), res.model.free_indices(),
-                                        options.integration)
-        states = predict_states(sf.state, sf.t0_s, s.t_s, s.rigid.phys(), program,
-                                res.model.values(), options.integration)
+        pred, J, states = predict_with_jacobian(
+            sf.state, sf.t0_s, s.t_s, s.rigid.phys(), program, res.model.values(),
+            s.rigid.ref_from_cg_body_m(), np.arange(6), res.model.free_indices(),
+            options.integration, with_states=True)
         out.append((pred, J, states[:, 3:6]))
     return res, out
 

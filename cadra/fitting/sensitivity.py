@@ -155,8 +155,8 @@ def predict(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray, prog
 def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,
                           program, params: np.ndarray, ref_from_cg_body_m: np.ndarray,
                           local_free: np.ndarray, aero_free: np.ndarray,
-                          integ: Integration = Integration(), phys_dirs=None
-                          ) -> tuple[np.ndarray, np.ndarray]:
+                          integ: Integration = Integration(), phys_dirs=None,
+                          with_states: bool = False):
     """Prediction (n, 5) and Jacobian (n, 5, n_local + n_aero + n_phys) by complex step.
 
     ``local_free`` are indices into :data:`LOCAL_NAMES` (corrections at ``y0``),
@@ -164,7 +164,8 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     ``phys`` vector (the effects of :mod:`cadra.dynamics.layout`: cg offset, wind, density
     gradient, inertia; a product of inertia is a direction with two entries). Columns in
     that order. (A cg offset also moves the observed reference point; that part is not in a
-    ``phys`` column -- callers add it.)
+    ``phys`` column -- callers add it.) ``with_states``: also return the (n, 13) states (the
+    real part of any run: no extra integration).
     """
     local_free = np.asarray(local_free, dtype=int)
     aero_free = np.asarray(aero_free, dtype=int)
@@ -172,8 +173,9 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
                  else np.atleast_2d(np.asarray(phys_dirs, dtype=float)))
     m = local_free.size + aero_free.size + phys_dirs.shape[0]
     if m == 0:
-        return predict(y0, t0, times, phys, program, params, ref_from_cg_body_m, integ), \
-            np.zeros((len(times), 5, 0))
+        states = predict_states(y0, t0, times, phys, program, params, integ)
+        out = (observables(states, ref_from_cg_body_m), np.zeros((len(times), 5, 0)))
+        return (*out, states) if with_states else out
     times = np.ascontiguousarray(times, dtype=float)
     Y0 = np.tile(np.asarray(y0, dtype=np.complex128), (m, 1))
     PARAMS = np.tile(np.asarray(params, dtype=np.complex128), (m, 1))
@@ -196,5 +198,5 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     states = _run(Y0, t0, times, PHYS, program, PARAMS, integ)
     obs = observables(states, ref_from_cg_body_m)          # (m, n, 5) complex
     pred = obs[0].real.copy()
-    jac = np.moveaxis(obs.imag / EPS, 0, -1)                # (n, 5, m)
-    return pred, np.ascontiguousarray(jac)
+    jac = np.ascontiguousarray(np.moveaxis(obs.imag / EPS, 0, -1))   # (n, 5, m)
+    return (pred, jac, states[0].real.copy()) if with_states else (pred, jac)

@@ -36,7 +36,6 @@ from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import (
     LOCAL_NAMES,
     Integration,
-    predict_states,
     predict_with_jacobian,
 )
 from cadra.gap.candidates import Candidate, augmented_model, library
@@ -76,10 +75,10 @@ def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
         local = np.array([LOCAL_NAMES.index(n) for n in sf.local_free], dtype=int)
         phys = sd.rigid.phys()
         ref = sd.rigid.ref_from_cg_body_m()
-        pred, J = predict_with_jacobian(sf.state, sf.t0_s, sd.t_s, phys, program, params, ref,
-                                        local, aero_free, integ, phys_dirs=phys_dirs)
+        pred, J, states = predict_with_jacobian(sf.state, sf.t0_s, sd.t_s, phys, program,
+                                                params, ref, local, aero_free, integ,
+                                                phys_dirs=phys_dirs, with_states=True)
         n_fit = local.size + aero_free.size
-        states = predict_states(sf.state, sf.t0_s, sd.t_s, phys, program, params, integ)
         R = rotation_fb_batch(states[:, 6:10])
         cols = {}
         at = n_fit
