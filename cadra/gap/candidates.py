@@ -38,10 +38,9 @@ from cadra.dynamics.layout import (
 class Candidate:
     """One candidate effect (see module doc).
 
-    ``phys_dirs`` (k, N_PHYS) for a dynamics effect; ``terms`` {coefficient: expression} with
-    ``new_params`` for an aero effect; ``station``/``measure`` ("position", "timing",
-    "scale") for a measurement effect. ``scale`` is a typical size of each parameter (its
-    unit's natural step, used to report and to condition).
+    ``phys_dirs`` (k, N_PHYS) for a dynamics effect; ``terms`` {coefficient: expression} in the
+    new parameters ``params`` for an aero effect; ``station``/``measure`` ("position_x",
+    "position_y", "position_z", "timing", "scale") for a measurement effect.
     """
 
     name: str
