@@ -91,6 +91,25 @@ def test_noise_free_flat_light_floor():
             assert np.abs(E[:, 2]).max() < 1e-3
 
 
+
+def test_edge_profile_tracks_the_fringe():
+    """The edge model's fitted width is the blur's (optics 0.7 px with the pixel box:
+    sqrt(0.49 + 1/12) = 0.757 px) whatever the diffraction fringe, and its fringe amplitude
+    follows the render's: ~0 without one, growing with it (its shape is the model's own, so
+    not the renderer's number exactly)."""
+    amp = {}
+    for fringe in (0.0, 0.1, 0.2):
+        rng = np.random.default_rng(505)
+        case = random_view_case(M2, rng, RenderConfig(diffraction_fringe=fringe))
+        fit = measure_case(case, M2)
+        s0, a0, s4, a4 = fit.edge_profile
+        assert abs(s0 - 0.757) < 0.04, (fringe, fit.edge_profile)
+        assert abs(s4) < 0.03 and abs(a4) < 0.02
+        amp[fringe] = a0
+    assert abs(amp[0.0]) < 0.02
+    assert 0.05 < amp[0.1] < 0.12
+    assert amp[0.2] > amp[0.1] + 0.04
+
 def test_cone_with_sharp_corners():
     """A sharp cone: corners are left out of the fit; the rest still gives the pose."""
     body = cone(0.02, math.radians(10))

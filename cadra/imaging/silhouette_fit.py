@@ -4,10 +4,16 @@ Stage one's two methods (seed 004, "Data Reduction and Analysis"; docs/stage1.md
 
 (a) **Least squares** (:func:`fit_silhouette`): the body's exact outline (:mod:`cadra.body`) is
     placed at a trial pose; pixels in a band around it are grouped into short contour
-    *segments*; in each segment a blurred-edge model ``I = L (1 - g) + D g``,
+    *segments*; in each segment a blurred-edge model ``I = L (1 - g) + D g + a L h``,
     ``g = Phi((delta - d) / s)`` (d = the pixel centre's signed distance from the outline,
-    + outside; L, D the local bright and dark levels; s the edge width, one per image) gives
-    the segment's edge offset ``delta`` along the outward normal, with its variance (stage A).
+    + outside; L, D the local bright and dark levels; s the edge width) gives the segment's
+    edge offset ``delta`` along the outward normal, with its variance (stage A). ``a L h`` is
+    the diffraction fringe (:func:`_edge_profile`): a bright band outside the edge and a dark
+    one inside, the second derivative of a blurred step. The edge width and the fringe
+    amplitude are fitted per image, each as ``x0 + x4 cos(4 theta)`` (theta the normal's
+    angle to the pixel grid): the profile across an edge depends on that angle at fourth
+    order (a square pixel projects onto the normal as a box along an axis, a triangle along a
+    diagonal).
     The pose correction then follows from all offsets by weighted least squares (stage B)::
 
         delta_k = n_k . (dr + dphi x (x_k - r_ref)) - c kappa_k
@@ -73,6 +79,9 @@ class FitSettings:
     outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
     hac_lags: int = 3               # Newey-West lags over contour-ordered segments
     fit_curvature_bias: bool = True
+    fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
+    cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
+    warm_rounds: int = 2            # stage-A outer rounds warm-started from the last pose
 
 
 @dataclass(frozen=True, eq=False)
@@ -273,30 +282,54 @@ def _band_collect(best, sd, edge, tt, band2, u_lo, v_lo, W):
 # =============================================================================== stage A
 
 
+#: Normalization of the fringe profile: ``h`` peaks at +-1 (at one fringe width from the edge).
+PHI1 = math.exp(-0.5) / SQRT2PI
+
+
 @numba.njit(cache=True)
-def _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, reuse):
-    """Gauss-Newton normal equations per segment for (L, D, delta) with edge width s, and
-    the global width's gradient terms. Returns (sum w r^2, sum w Js r, sum w Js^2).
-    ``reuse``: take each pixel's edge profile ``g`` and its derivative ``p`` from ``G``, ``P``
-    (filled by the noise-model pass at the same state) instead of computing them."""
+def _edge_profile(x, s, ratio):
+    """The edge model's shape at ``x = delta - d`` (px) for edge width ``s``: the step
+    ``g = Phi(x / s)``, its derivative ``p = phi(x / s)`` (per unit x / s), the fringe
+    ``h = -z_f phi(z_f) / phi(1)`` with ``z_f = x / (ratio s)`` (+1 at one fringe width
+    outside the edge, -1 inside: the second derivative of a blurred step, scaled), and
+    ``hp = dh / dz_f``."""
+    z = x / s
+    g = 0.5 * math.erfc(-z / math.sqrt(2.0))
+    p = math.exp(-0.5 * z * z) / SQRT2PI
+    zf = z / ratio
+    pf = math.exp(-0.5 * zf * zf) / SQRT2PI
+    return g, p, -zf * pf / PHI1, -(1.0 - zf * zf) * pf / PHI1
+
+
+@numba.njit(cache=True)
+def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P, Hh, Hp,
+                   reuse, want_global):
+    """Gauss-Newton normal equations per segment for (L, D, delta), and for the image's
+    global edge profile ``prof = (s0, a0, s4, a4)`` (segment q's width ``s0 + s4 c4[q]``, its
+    fringe amplitude ``a0 + a4 c4[q]``) into ``Hg`` (4x4) and ``bg``. Returns sum w r^2.
+    ``reuse``: take each pixel's profile values from ``G, P, Hh, Hp`` (filled by the
+    noise-model pass at the same state) instead of computing them; ``want_global``: fill
+    ``Hg, bg`` too (only the profile step needs them)."""
     A[:] = 0.0
     b[:] = 0.0
+    Hg[:] = 0.0
+    bg[:] = 0.0
     chi2 = 0.0
-    gs = 0.0
-    hs = 0.0
     for j in range(I.shape[0]):
         kk = k[j]
-        z = (delta[kk] - d[j]) / s
+        s = prof[0] + prof[2] * c4[kk]
+        a = prof[1] + prof[3] * c4[kk]
+        x = delta[kk] - d[j]
         if reuse:
-            g = G[j]
-            p = P[j]
+            g, p, h, hp = G[j], P[j], Hh[j], Hp[j]
         else:
-            g = 0.5 * math.erfc(-z / math.sqrt(2.0))
-            p = math.exp(-0.5 * z * z) / SQRT2PI
-        r = I[j] - (L[kk] * (1.0 - g) + D[kk] * g)
-        c0 = 1.0 - g
+            g, p, h, hp = _edge_profile(x, s, ratio)
+        Lk = L[kk]
+        Dk = D[kk]
+        r = I[j] - (Lk * (1.0 - g) + Dk * g + a * Lk * h)
+        c0 = 1.0 - g + a * h
         c1 = g
-        c2 = (D[kk] - L[kk]) * p / s
+        c2 = ((Dk - Lk) * p + a * Lk * hp / ratio) / s
         ww = w[j]
         A[kk, 0, 0] += ww * c0 * c0
         A[kk, 0, 1] += ww * c0 * c1
@@ -307,15 +340,25 @@ def _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, reuse):
         b[kk, 0] += ww * c0 * r
         b[kk, 1] += ww * c1 * r
         b[kk, 2] += ww * c2 * r
-        js = -c2 * z
         chi2 += ww * r * r
-        gs += ww * js * r
-        hs += ww * js * js
+        if not want_global:
+            continue
+        # global profile: d/ds = -c2 x / s, d/da = L h; the cos(4 theta) parts times c4
+        js = -c2 * x / s
+        ja = Lk * h
+        jv = (js, ja, js * c4[kk], ja * c4[kk])
+        for i0 in range(4):
+            bg[i0] += ww * jv[i0] * r
+            for i1 in range(i0, 4):
+                Hg[i0, i1] += ww * jv[i0] * jv[i1]
+    for i0 in range(4):
+        for i1 in range(i0):
+            Hg[i0, i1] = Hg[i1, i0]
     for kk in range(A.shape[0]):
         A[kk, 1, 0] = A[kk, 0, 1]
         A[kk, 2, 0] = A[kk, 0, 2]
         A[kk, 2, 1] = A[kk, 1, 2]
-    return chi2, gs, hs
+    return chi2
 
 
 def _ridge(A: np.ndarray) -> None:
@@ -348,10 +391,30 @@ def _solve3_ridge(A, b):
 
 
 @numba.njit(cache=True)
-def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
+def _profile_step(prof, Hg, bg):
+    """Damped, bounded Gauss-Newton step of the global edge profile ``(s0, a0, s4, a4)``."""
+    Hr = Hg.copy()
+    tr = Hg[0, 0] + Hg[1, 1] + Hg[2, 2] + Hg[3, 3]
+    for i in range(4):
+        Hr[i, i] += 1e-9 * tr + 1e-15
+    st = np.linalg.solve(Hr, bg)
+    for i in range(4):
+        if not math.isfinite(st[i]):
+            return
+    # damped and bounded: a strong fringe is nearly the shape of a width change, and a full
+    # step can throw the width (and every offset) far off
+    s = prof[0]
+    prof[0] = min(max(s + 0.5 * st[0], max(0.8 * s, 0.2)), min(1.25 * s, 5.0))
+    prof[1] = min(max(prof[1] + 0.5 * st[1], -0.5), 0.5)
+    prof[2] = min(max(prof[2] + 0.5 * st[2], -0.2 * prof[0]), 0.2 * prof[0])
+    prof[3] = min(max(prof[3] + 0.5 * st[3], -0.5), 0.5)
+
+
+@numba.njit(cache=True)
+def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D0):
     """Stage A's iterations in one compiled loop (see :func:`_stage_a`): per-segment levels
-    and offsets by Gauss-Newton, the damped global edge width, the noise model, and each
-    offset's formal variance."""
+    and offsets by Gauss-Newton, the damped global edge profile (width and fringe), the noise
+    model, and each offset's formal variance."""
     n = I.shape[0]
     L = np.full(K, L0)
     D = np.full(K, D0)
@@ -372,7 +435,7 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
         if cntD[q] > 0:
             D[q] = sumD[q] / cntD[q]
     delta = np.zeros(K)
-    s = s0
+    prof = prof0.copy()
     w = np.ones(n)
     coef = coef_in.copy()
     if has_coef:
@@ -382,37 +445,42 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
                              0.2 * max(coef[0] + 0.5 * coef[1] + 0.25 * coef[2], 1e-12))
     A = np.empty((K, 3, 3))
     b = np.empty((K, 3))
-    model = np.empty(n)
+    Hg = np.empty((4, 4))
+    bg = np.empty(4)
     G = np.empty(n)
     P = np.empty(n)
-    reuse = False   # G, P hold the current state's profile (after a noise-model pass)
+    Hh = np.empty(n)
+    Hp = np.empty(n)
+    reuse = False   # G, P, Hh, Hp hold the current state's profile (after a noise-model pass)
     chi2 = 0.0
     for outer in range(n_outer):
         for _ in range(2):
-            _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, reuse)
+            _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
+                           G, P, Hh, Hp, reuse, False)
             reuse = False
             for q in range(K):
                 st = _solve3_ridge(A[q], b[q])
                 L[q] += st[0]
                 D[q] += st[1]
                 delta[q] += min(max(st[2], -1.5), 1.5)
-        _, gs, hs = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, False)
-        if hs > 0.0 and math.isfinite(gs / hs):
-            # damped and bounded: a strong diffraction fringe is nearly the shape of a width
-            # change, and a full step can throw the width (and every offset) far off
-            s = min(max(s + 0.5 * gs / hs, max(0.8 * s, 0.2)), min(1.25 * s, 5.0))
+        _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
+                       G, P, Hh, Hp, False, True)
+        _profile_step(prof, Hg, bg)
         if outer == 0 or outer == n_outer - 1:
             # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
             N = np.zeros((3, 3))
             rhs = np.zeros(3)
             mean_r2 = 0.0
             for j in range(n):
-                z = (delta[k[j]] - d[j]) / s
-                g = 0.5 * math.erfc(-z / math.sqrt(2.0))
+                kk = k[j]
+                s = prof[0] + prof[2] * c4[kk]
+                a = prof[1] + prof[3] * c4[kk]
+                g, p, h, hp = _edge_profile(delta[kk] - d[j], s, ratio)
                 G[j] = g
-                P[j] = math.exp(-0.5 * z * z) / SQRT2PI
-                m = L[k[j]] * (1.0 - g) + D[k[j]] * g
-                model[j] = m
+                P[j] = p
+                Hh[j] = h
+                Hp[j] = hp
+                m = L[kk] * (1.0 - g) + D[kk] * g + a * L[kk] * h
                 r2 = (I[j] - m) ** 2
                 mean_r2 += r2
                 x0, x1, x2 = 1.0, m, m * m
@@ -431,10 +499,13 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
             coef = _solve3_ridge(N, rhs)
             floor = max(0.2 * mean_r2 / n, 1e-12)   # no pixel weighs > 5x the average
             for j in range(n):
-                m = model[j]
+                kk = k[j]
+                m = (L[kk] * (1.0 - G[j]) + D[kk] * G[j]
+                     + (prof[1] + prof[3] * c4[kk]) * L[kk] * Hh[j])
                 w[j] = 1.0 / max(coef[0] + coef[1] * m + coef[2] * m * m, floor)
             reuse = True
-    chi2, _, _ = _gn_accumulate(I, d, k, w, L, D, delta, s, A, b, G, P, reuse)
+    chi2 = _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
+                          G, P, Hh, Hp, reuse, False)
     scale = chi2 / max(n - 3 * K, 1)
     var_delta = np.empty(K)
     e3 = np.zeros(3)
@@ -446,7 +517,7 @@ def _segment_fit(I, d, k, K, s0, coef_in, has_coef, n_outer, L0, D0):
         # a segment whose edge ran off or lost its contrast carries no information
         if abs(delta[q]) > 2.0 or contrast[q] < 0.3 * typical or not var_delta[q] > 0.0:
             var_delta[q] = np.inf
-    return L, D, delta, var_delta, s, coef, w, chi2
+    return L, D, delta, var_delta, prof, coef, w, chi2
 
 
 @dataclass(frozen=True, eq=False)
@@ -464,6 +535,7 @@ class EdgeSegments:
     edge_sigma_px: float
     resid_rms: float
     noise_coef: np.ndarray    # variance model v0 + v1 m + v2 m^2 (m = model intensity)
+    profile: np.ndarray       # global edge profile (s0, a0, s4, a4), see _gn_accumulate
     pixels: dict = field(default_factory=dict)   # per-pixel arrays for the centroid method
 
 
@@ -489,7 +561,7 @@ def _segment_geometry(d, k, K, w, L, D, delta, s, e, t, normal, p0, dv, kap_px):
             acc[5] / acc[0])
 
 
-def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: float,
+def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, profile0: np.ndarray,
              noise_coef=None):
     lin, d, e, t = _band_pixels(geo, settings.band_px, img.shape)
     if len(lin) == 0:
@@ -532,9 +604,16 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
     D0 = float(np.median(I_u[in_m])) if in_m.any() else 0.0
     has = noise_coef is not None
     coef_in = np.asarray(noise_coef, float) if has else np.zeros(3)
-    L, D, delta, var_delta, s, coef, w, chi2 = _segment_fit(
-        np.ascontiguousarray(I_u, dtype=np.float64), np.ascontiguousarray(d_u), k, K,
-        float(edge_sigma0), coef_in, has, 2, L0, D0)
+    # each segment's normal angle to the pixel grid, for the profile's cos(4 theta) terms
+    e_u = e[use]
+    c4 = np.cos(4.0 * np.arctan2(np.bincount(k, geo.normal[e_u, 1], minlength=K),
+                                 np.bincount(k, geo.normal[e_u, 0], minlength=K)))
+    # a cold start (no noise model yet) needs more rounds for the global profile to settle
+    L, D, delta, var_delta, prof, coef, w, chi2 = _segment_fit(
+        np.ascontiguousarray(I_u, dtype=np.float64), np.ascontiguousarray(d_u), k, K, c4,
+        np.asarray(profile0, float).copy(), float(settings.fringe_width_ratio), coef_in, has,
+        settings.warm_rounds if has else settings.cold_rounds, L0, D0)
+    s = float(prof[0])
     npix = len(I_u)
     # segment geometry, weighted by the pixels' information about delta
     nx, ny, fx, fy, kap = _segment_geometry(d_u, k, K, w, L, D, delta, s, e[use], t[use],
@@ -545,7 +624,7 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, edge_sigma0: fl
                                                                                   ny / nn]),
                         foot_px=np.column_stack([fx, fy]), kappa=kap, bright=L, dark=D,
                         index=segs, edge_sigma_px=s, resid_rms=float(math.sqrt(chi2 / npix)),
-                        noise_coef=np.asarray(coef), pixels=pixels)
+                        noise_coef=np.asarray(coef), profile=prof, pixels=pixels)
 
 
 # =============================================================================== stage B
@@ -595,6 +674,7 @@ class ViewFit:
     centroid_pose: tuple[float, float, float]
     warnings: tuple[str, ...] = ()
     noise_coef: np.ndarray | None = None
+    edge_profile: tuple[float, float, float, float] | None = None  # (s0, a0, s4, a4)
 
 
 def _pose_px(template: Template, pose, M) -> tuple[np.ndarray, float]:
@@ -608,11 +688,14 @@ def _pose_px(template: Template, pose, M) -> tuple[np.ndarray, float]:
 def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarray,
                    pose0: tuple[float, float, float], *, exclude: np.ndarray | None = None,
                    settings: FitSettings | None = None, edge_sigma0: float = 0.9,
-                   noise_coef: np.ndarray | None = None, centroid: bool = True) -> ViewFit:
+                   noise_coef: np.ndarray | None = None,
+                   edge_profile0: tuple[float, float, float, float] | None = None,
+                   centroid: bool = True) -> ViewFit:
     """Least-squares silhouette fit (method a) from ``pose0``; see the module docstring.
 
     ``img`` float (H, W) in [0, 1]; ``exclude`` True on pixels not to use (wires, other
-    clutter known in advance); ``edge_sigma0`` and ``noise_coef`` (the image's noise model,
+    clutter known in advance); ``edge_sigma0`` (or the whole edge profile ``edge_profile0``,
+    :attr:`ViewFit.edge_profile`) and ``noise_coef`` (the image's noise model,
     :attr:`ViewFit.noise_coef`) warm-start a refit; ``centroid=False`` skips method (b)
     (an intermediate fit). Never raises for bad data: ``ok`` False
     with a reason.
@@ -630,6 +713,8 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
     fit_c = settings.fit_curvature_bias
     nan3 = np.full((3, 3), np.nan)
     H, W = img.shape
+    profile = (np.array(edge_profile0, float) if edge_profile0 is not None
+               else np.array([edge_sigma0, 0.0, 0.0, 0.0]))
     converged = False
     seg = None
     cov = nan3
@@ -647,10 +732,10 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
             return _failed(f"model mostly out of frame ({outside:.0%} of its outline)", pose,
                            outside)
         geo = _outline_geometry(poly, settings.corner_clear_px)
-        seg = _stage_a(img, geo, settings, exclude, edge_sigma0, noise_coef)
+        seg = _stage_a(img, geo, settings, exclude, profile, noise_coef)
         if seg is None:
             return _failed("too few usable edge segments", pose, outside)
-        edge_sigma0 = seg.edge_sigma_px
+        profile = seg.profile
         noise_coef = seg.noise_coef
         ref_px = apply_affine(Minv, pose[:2])
         lever = apply_affine(M, seg.foot_px) - pose[:2]            # plane, m
@@ -744,7 +829,8 @@ def fit_silhouette(img: np.ndarray, template: Template, image_to_plane: np.ndarr
         offset_rms_px=float(np.sqrt(np.mean(resid ** 2))), n_segments=len(seg.delta_px),
         n_rejected=n_rej, iterations=it, converged=converged, outline_outside_frac=outside,
         centroid_ref_px=cen[0], centroid_axis_px_rad=cen[1], centroid_pose=cen[2],
-        warnings=tuple(warnings), noise_coef=seg.noise_coef)
+        warnings=tuple(warnings), noise_coef=seg.noise_coef,
+        edge_profile=tuple(float(x) for x in seg.profile))
 
 
 def _failed(reason: str, pose, outside: float) -> ViewFit:

@@ -172,6 +172,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     fit = fit_silhouette(img, template, affine, pose0, exclude=mask, settings=settings_used,
                          edge_sigma0=prev.fit.edge_sigma_px if prev is not None else 0.9,
                          noise_coef=prev.fit.noise_coef if prev is not None else None,
+                         edge_profile0=prev.fit.edge_profile if prev is not None else None,
                          centroid=final)
     if not fit.ok:
         return fit, fit.reason, wires, affine, ()
