@@ -79,6 +79,9 @@ class FitResult:
     warnings: tuple[str, ...]
     elapsed_s: float
     options: dict = field(default_factory=dict)
+    extras: tuple = ()               # the fit's extra unknowns (cadra.fitting.extras.Extra)
+    extra_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    extra_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __bool__(self) -> bool:
         return self.status == "converged"
@@ -112,10 +115,18 @@ class FitResult:
         R[~np.isfinite(R)] = 0.0
         return R
 
+    @property
+    def extra_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.extras)
+
     def value(self, name: str) -> float:
+        if name in self.extra_names:
+            return float(self.extra_values[self.extra_names.index(name)])
         return self.model.parameter(name).value
 
     def sigma(self, name: str) -> float:
+        if name in self.extra_names:
+            return float(self.extra_sigma[self.extra_names.index(name)])
         return float(self.aero_sigma[self.aero_names.index(name)])
 
     def rms(self) -> dict:
@@ -242,13 +253,15 @@ def _near_singular(N: np.ndarray, names: list[str], n_aero: int) -> list[dict]:
 
 def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, states,
                  aero_idx: np.ndarray, status: str, message: str, history, warnings,
-                 iterations: int, t_start: float, options, lam) -> FitResult:
+                 iterations: int, t_start: float, options, lam, extras=(),
+                 extra_values=None) -> FitResult:
     """Assemble the :class:`FitResult` at the solver's final point (see module doc)."""
     na = aero_idx.size
+    ns = na + len(extras)
     names_aero = [model.parameters[i].name for i in aero_idx]
     fitted = model.with_values({n: float(params[i]) for n, i in zip(names_aero, aero_idx,
                                                                     strict=True)})
-    names = list(names_aero)
+    names = list(names_aero) + [e.name for e in extras]
     offsets = []
     for st in states:
         offsets.append(len(names))
@@ -269,7 +282,7 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
         if have_jac:
             Jfull = np.zeros((int(st.mask.sum()), P))
             Jw = st.jac[st.mask] / sd.sigma[st.mask][:, None]
-            Jfull[:, :na] = Jw[:, nl:nl + na]
+            Jfull[:, :ns] = Jw[:, nl:nl + ns]
             Jfull[:, off:off + nl] = Jw[:, :nl]
             N += Jfull.T @ Jfull
             chan = np.nonzero(st.mask)[1]
@@ -329,6 +342,9 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
         n_free=n_free, iterations=iterations, history=tuple(history),
         residuals=pd.DataFrame(rows), near_singular=tuple(near), warnings=tuple(warnings),
         elapsed_s=time.perf_counter() - t_start,
+        extras=tuple(extras),
+        extra_values=np.array(extra_values if extra_values is not None else [], dtype=float),
+        extra_sigma=sig[na:ns].copy(),
         options={"max_iterations": options.max_iterations,
                  "step_tol_sigma": options.step_tol_sigma,
                  "integration": options.integration.__dict__, "final_lambda": lam})

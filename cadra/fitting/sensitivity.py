@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cadra.dynamics.integrate import propagate_batch
-from cadra.dynamics.layout import N_STATE
+from cadra.dynamics.layout import N_STATE, P_CG_OFFSET
 from cadra.dynamics.observe import observe
 from cadra.dynamics.setup import plane_code
 
@@ -163,9 +163,10 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     ``aero_free`` indices into ``params``, ``phys_dirs`` (k, N_PHYS) directions in the
     ``phys`` vector (the effects of :mod:`cadra.dynamics.layout`: cg offset, wind, density
     gradient, inertia; a product of inertia is a direction with two entries). Columns in
-    that order. (A cg offset also moves the observed reference point; that part is not in a
-    ``phys`` column -- callers add it.) ``with_states``: also return the (n, 13) states (the
-    real part of any run: no extra integration).
+    that order. A direction that moves the cg offset also moves the observed reference point
+    (``ref_from_cg -= offset``, per run: :func:`cadra.fitting.extras.shot_ref`).
+    ``with_states``: also return the (n, 13) states (the real part of any run: no extra
+    integration).
     """
     local_free = np.asarray(local_free, dtype=int)
     aero_free = np.asarray(aero_free, dtype=int)
@@ -196,7 +197,12 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     for row, direction in enumerate(phys_dirs, start=local_free.size + aero_free.size):
         PHYS[row] += 1j * EPS * direction
     states = _run(Y0, t0, times, PHYS, program, PARAMS, integ)
-    obs = observables(states, ref_from_cg_body_m)          # (m, n, 5) complex
+    cg = slice(P_CG_OFFSET, P_CG_OFFSET + 3)
+    if np.any(phys_dirs[:, cg]):
+        refs = np.asarray(ref_from_cg_body_m)[None, :] - (PHYS[:, cg] - np.asarray(phys)[cg])
+        obs = np.stack([observables(states[i], refs[i]) for i in range(m)])
+    else:
+        obs = observables(states, ref_from_cg_body_m)      # (m, n, 5) complex
     pred = obs[0].real.copy()
     jac = np.ascontiguousarray(np.moveaxis(obs.imag / EPS, 0, -1))   # (n, 5, m)
     return (pred, jac, states[0].real.copy()) if with_states else (pred, jac)

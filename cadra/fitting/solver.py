@@ -32,12 +32,14 @@ import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.fitting.data import ShotData
+from cadra.fitting.extras import Extra, add_station_terms, shot_phys, shot_ref, station_columns
 from cadra.fitting.sensitivity import (
     LOCAL_NAMES,
     N_LOCAL,
     Integration,
     apply_local,
-    predict,
+    observables,
+    predict_states,
     predict_with_jacobian,
 )
 
@@ -186,7 +188,8 @@ def _step(per, Ca, ga, ds, da, lam, rcond):
 
 
 def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np.ndarray], *,
-        options: FitOptions = FitOptions(), local_free: Sequence[np.ndarray] | None = None):
+        options: FitOptions = FitOptions(), local_free: Sequence[np.ndarray] | None = None,
+        extras: Sequence[Extra] = ()):
     """Fit the free parameters of ``model`` and each shot's initial state to the measurements.
 
     Parameters
@@ -199,6 +202,9 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     options : convergence control and integration settings.
     local_free : per shot, indices into :data:`LOCAL_NAMES` to fit (default
         :func:`default_local_free`).
+    extras : further shared unknowns, started at their ``value`` (unmodelled effects made
+        free: physics directions and station terms, :mod:`cadra.fitting.extras`); they sit
+        beside the free aero parameters in the shared block.
 
     Returns
     -------
@@ -217,7 +223,14 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     program = model.compile()
     params = model.values()
     aero_idx = model.free_indices()
+    extras = tuple(extras)
+    if len({e.name for e in extras}) != len(extras) or any(e.name in model.names
+                                                            for e in extras):
+        raise ValueError("fit: extra unknowns need names of their own")
+    xvals = np.array([e.value for e in extras], dtype=float)
+    ne = len(extras)
     na = aero_idx.size
+    ns = na + ne                # shared unknowns: free aero parameters, then the extras
     lo = np.array([model.parameters[i].min for i in aero_idx])
     hi = np.array([model.parameters[i].max for i in aero_idx])
     integ = options.integration
@@ -233,7 +246,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         states.append(_ShotState(sd, y0.copy(), lf, float(sd.t_s[sd.epoch_index]),
                                  sd.rigid.phys(), sd.rigid.ref_from_cg_body_m(), sd.mask))
     n_obs = sum(st.mask.sum() for st in states)
-    n_free = na + sum(st.local_free.size for st in states)
+    n_free = ns + sum(st.local_free.size for st in states)
     warnings: list[str] = []
     message = ""
     if n_obs < n_free:
@@ -241,16 +254,36 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                    "free parameters (hold some, or add stations or shots); not fitted")
         warnings.append(message)
 
-    def evaluate_jac(p):
+    def evaluate_jac(p, xv):
         for st in states:
-            st.pred, st.jac = predict_with_jacobian(
-                st.y_nom, st.t0, st.data.t_s, st.phys, program, p, st.ref, st.local_free,
-                aero_idx, integ)
+            sid = st.data.shot_id
+            phys = shot_phys(st.phys, extras, xv, sid)
+            ref = shot_ref(st.ref, st.phys, phys)
+            on = [j for j, e in enumerate(extras) if e.is_phys and e.applies(sid)]
+            dirs = np.array([extras[j].phys_direction for j in on]) if on else None
+            pred, jac, y = predict_with_jacobian(
+                st.y_nom, st.t0, st.data.t_s, phys, program, p, ref, st.local_free,
+                aero_idx, integ, phys_dirs=dirs, with_states=True)
+            if ne:
+                base = st.local_free.size + na
+                full = np.zeros(jac.shape[:2] + (base + ne,))
+                full[:, :, :base] = jac[:, :, :base]
+                full[:, :, base + np.array(on, dtype=int)] = jac[:, :, base:]
+                full[:, :, base:] += station_columns(extras, sid, st.data.stations, pred, y)
+                jac = full
+                pred = add_station_terms(pred, extras, xv, sid, st.data.stations, y)
+            st.pred, st.jac = pred, jac
         return _chi2(states, [st.pred for st in states])
 
-    def evaluate(p, ys):
-        return [predict(y, st.t0, st.data.t_s, st.phys, program, p, st.ref, integ)
-                for st, y in zip(states, ys, strict=True)]
+    def evaluate(p, xv, ys):
+        out = []
+        for st, y0 in zip(states, ys, strict=True):
+            sid = st.data.shot_id
+            phys = shot_phys(st.phys, extras, xv, sid)
+            y = predict_states(y0, st.t0, st.data.t_s, phys, program, p, integ)
+            pred = observables(y, shot_ref(st.ref, st.phys, phys))
+            out.append(add_station_terms(pred, extras, xv, sid, st.data.stations, y))
+        return out
 
     history = []
     status = "failed"
@@ -262,16 +295,18 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
 
         bar = tqdm(total=options.max_iterations, desc="cadra2 fit", unit="it", leave=False)
     try:
-        chi2 = evaluate_jac(params)
+        chi2 = evaluate_jac(params, xvals)
         if n_obs < n_free:
             history.append(chi2)
             return build_result(shots, model, params, states, aero_idx, "failed", message,
-                                history, warnings, iterations, t_start, options, lam)
+                                history, warnings, iterations, t_start, options, lam,
+                                extras, xvals)
         if not math.isfinite(chi2):
             message = ("the starting point gives a non-finite prediction (the trajectory "
                        "diverges or tumbles); better starting values are needed")
             return build_result(shots, model, params, states, aero_idx, status, message,
-                                history, warnings, iterations, t_start, options, lam)
+                                history, warnings, iterations, t_start, options, lam,
+                                extras, xvals)
         history.append(chi2)
         while True:
             if iterations >= options.max_iterations:
@@ -283,19 +318,20 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(chi2=f"{chi2:.4g}", lam=f"{lam:.1e}")
-            blocks = _blocks(states, na)
-            per, Ca, ga = _normal_equations(blocks, na)
+            blocks = _blocks(states, ns)
+            per, Ca, ga = _normal_equations(blocks, ns)
             ds, da = _scales(per, Ca)
             # Gauss-Newton step size (lambda ~ 0): the convergence test
             _, gn_a, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
             # active set: a parameter at a bound whose step points outward is frozen for
             # this iteration (its column is dropped), so neither the step nor the convergence
-            # test pushes against the bound
+            # test pushes against the bound (the extras are unbounded)
             pa = params[aero_idx]
-            blocked = ((pa <= lo) & (gn_a < 0)) | ((pa >= hi) & (gn_a > 0))
+            blocked = np.zeros(ns, dtype=bool)
+            blocked[:na] = ((pa <= lo) & (gn_a[:na] < 0)) | ((pa >= hi) & (gn_a[:na] > 0))
             if blocked.any():
                 blocks = [(Js, np.where(blocked, 0.0, Ja), r) for Js, Ja, r in blocks]
-                per, Ca, ga = _normal_equations(blocks, na)
+                per, Ca, ga = _normal_equations(blocks, ns)
                 ds, da = _scales(per, Ca)
                 _, _, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
             dof = max(n_obs - n_free, 1)
@@ -309,21 +345,22 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             while lam <= options.lambda_max:
                 dls, dap, _ = _step(per, Ca, ga, ds, da, lam, options.rcond)
                 p_try = params.copy()
-                p_try[aero_idx] = np.clip(params[aero_idx] + dap, lo, hi)
+                p_try[aero_idx] = np.clip(params[aero_idx] + dap[:na], lo, hi)
+                x_try = xvals + dap[na:]
                 ys = []
                 for st, dl in zip(states, dls, strict=True):
                     u = np.zeros(N_LOCAL)
                     u[st.local_free] = dl
                     ys.append(apply_local(st.y_nom, u))
                 try:
-                    chi2_try = _chi2(states, evaluate(p_try, ys))
+                    chi2_try = _chi2(states, evaluate(p_try, x_try, ys))
                 except (FloatingPointError, ZeroDivisionError):
                     chi2_try = math.inf
                 if chi2_try < chi2:
-                    params = p_try
+                    params, xvals = p_try, x_try
                     for st, y in zip(states, ys, strict=True):
                         st.y_nom = y
-                    chi2 = evaluate_jac(params)
+                    chi2 = evaluate_jac(params, xvals)
                     history.append(chi2)
                     lam = max(lam / 10.0, 1e-12)
                     accepted = True
@@ -348,7 +385,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         if bar is not None:
             bar.close()
     return build_result(shots, model, params, states, aero_idx, status, message, history,
-                        warnings, iterations, t_start, options, lam)
+                        warnings, iterations, t_start, options, lam, extras, xvals)
 
 
 __all__ = ["STATUSES", "FitOptions", "LOCAL_NAMES", "default_local_free", "fit"]

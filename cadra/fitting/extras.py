@@ -1,0 +1,126 @@
+"""Extra unknowns of a fit beyond the aerodynamic model: unmodelled effects made free.
+
+An :class:`Extra` is one scalar unknown shared by the shots it applies to, of one of two kinds:
+
+- **physics**: a direction in the simulator's ``phys`` vector (:mod:`cadra.dynamics.layout`:
+  cg offset, inertia tensor, wind, density gradient); the shot's ``phys`` is the nominal one
+  plus ``value * direction``, so the fit integrates the same 6-DOF code the simulator does
+  with the effect switched on, and its sensitivity is a complex-step column like any other.
+  A cg offset also moves the observed reference point (``ref_from_cg -= offset``), which
+  :func:`cadra.fitting.sensitivity.predict_with_jacobian` applies per run.
+- **station**: a term added to what stage one measured at one station (a facility effect, the
+  same in every shot through that station):
+
+  ============  ========================================  =========  =====================
+  ``measure``   added to the prediction                   unit       column
+  ============  ========================================  =========  =====================
+  position_x    ``b`` to x (y, z likewise)                m          1
+  timing        ``v dt`` to x, y, z (spark fired ``dt``   s          cg velocity
+                after its recorded time)
+  scale         ``s (y, z)`` to y, z (image scale off     --         predicted y, z
+                about the range axis)
+  ============  ========================================  =========  =====================
+
+  Timing: the attitude's change over ``dt`` (rate x tens of ns, ~1e-6 rad) and the
+  velocity's dependence on the other unknowns (``dt`` times it) are left out; both are far
+  below stage one's precision. Scale: the x part (about the station's optical centre, where
+  the model is) is left out for the same reason.
+
+Pure data: a tuple of extras ships to a scheduler like the rest of the fit's inputs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET
+
+MEASURES = ("position_x", "position_y", "position_z", "timing", "scale")
+
+
+@dataclass(frozen=True)
+class Extra:
+    """One extra unknown (module doc). ``shots``: the shot ids it applies to (None: all)."""
+
+    name: str
+    phys_direction: tuple[float, ...] | None = None
+    station: int | None = None
+    measure: str = ""
+    shots: tuple[str, ...] | None = None
+    value: float = 0.0
+
+    def __post_init__(self):
+        if (self.phys_direction is None) == (self.station is None):
+            raise ValueError(f"extra {self.name!r}: give a phys direction or a station, "
+                             "not both or neither")
+        if self.phys_direction is not None:
+            d = tuple(float(v) for v in self.phys_direction)
+            if len(d) != N_PHYS or not np.all(np.isfinite(d)) or not any(d):
+                raise ValueError(f"extra {self.name!r}: phys direction must be {N_PHYS} "
+                                 "finite numbers, not all zero")
+            object.__setattr__(self, "phys_direction", d)
+        elif self.measure not in MEASURES:
+            raise ValueError(f"extra {self.name!r}: measure must be one of {MEASURES}")
+        if not np.isfinite(self.value):
+            raise ValueError(f"extra {self.name!r}: value must be finite")
+        if self.shots is not None:
+            object.__setattr__(self, "shots", tuple(str(s) for s in self.shots))
+
+    @property
+    def is_phys(self) -> bool:
+        return self.phys_direction is not None
+
+    def applies(self, shot_id: str) -> bool:
+        return self.shots is None or shot_id in self.shots
+
+
+def shot_phys(phys: np.ndarray, extras: Sequence[Extra], values, shot_id: str) -> np.ndarray:
+    """The shot's ``phys`` with the physics extras at ``values`` added."""
+    out = np.array(phys, dtype=float)
+    for e, v in zip(extras, values, strict=True):
+        if e.is_phys and e.applies(shot_id):
+            out += float(v) * np.asarray(e.phys_direction)
+    return out
+
+
+def shot_ref(ref: np.ndarray, phys_nominal: np.ndarray, phys: np.ndarray) -> np.ndarray:
+    """Reference point from the cg (body axes) when ``phys`` moves the cg off the nominal one
+    (``ref`` belongs to ``phys_nominal``)."""
+    cg = slice(P_CG_OFFSET, P_CG_OFFSET + 3)
+    return np.asarray(ref) - (np.asarray(phys)[cg] - np.asarray(phys_nominal)[cg])
+
+
+def station_columns(extras: Sequence[Extra], shot_id: str, stations: np.ndarray,
+                    pred: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """(n, 5, len(extras)) d(prediction)/d(value) of the station extras (0 for the others and
+    for extras that do not apply to the shot)."""
+    n = len(stations)
+    C = np.zeros((n, 5, len(extras)))
+    for j, e in enumerate(extras):
+        if e.is_phys or not e.applies(shot_id):
+            continue
+        rows = np.flatnonzero(np.asarray(stations) == e.station)
+        if e.measure.startswith("position_"):
+            C[rows, "xyz".index(e.measure[-1]), j] = 1.0
+        elif e.measure == "timing":
+            C[rows, :3, j] = states[rows, 3:6]
+        else:
+            C[rows, 1:3, j] = pred[rows, 1:3]
+    return C
+
+
+def add_station_terms(pred: np.ndarray, extras: Sequence[Extra], values, shot_id: str,
+                      stations: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """``pred`` with the station extras at ``values`` added (the terms of the module doc;
+    linear in the values, so ``pred + C @ values`` with :func:`station_columns`)."""
+    if not any(not e.is_phys for e in extras):
+        return pred
+    C = station_columns(extras, shot_id, stations, pred, states)
+    return pred + C @ np.asarray(values, dtype=float)
+
+
+__all__ = ["MEASURES", "Extra", "add_station_terms", "shot_phys", "shot_ref",
+           "station_columns"]

@@ -1,0 +1,116 @@
+"""Extra unknowns of a fit (cadra.fitting.extras): unmodelled effects made free.
+
+Truth: a shot simulated WITH a lateral cg offset and measured with a station's position
+bias and a timing bias added exactly; fitted from the true state with the effects' parameters
+started at 0, the fit must land on the injected values (noise-free: to rounding of the
+integration), and the cg-offset column must carry the observed reference point's shift.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cadra.dynamics.effects import Effects
+from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET
+from cadra.fitting import shot_data_from_truth
+from cadra.fitting.extras import Extra
+from cadra.fitting.sensitivity import predict, predict_with_jacobian
+from cadra.fitting.solver import fit
+from cadra.simulate import load_shot_spec, simulate_shot
+
+CG_Z = 2e-4          # m, body z
+BIAS_Y = 3e-6        # m, station 6 y
+DT = 1e-7            # s, station 10
+
+
+def _dir(i):
+    d = np.zeros(N_PHYS)
+    d[i] = 1.0
+    return tuple(d)
+
+
+@pytest.fixture(scope="module")
+def case():
+    spec = load_shot_spec("sample_shots/specs/m2_2429.toml")
+    sim = simulate_shot(replace(spec, effects=Effects(cg_offset_body_m=(0.0, 0.0, CG_Z))))
+    nominal = sim.rigid.with_effects(Effects())
+    sd = shot_data_from_truth(sim.truth, nominal, "M2-2429", "capsule",
+                              sigma_position_m=2.8e-7, sigma_angle_rad=np.radians(0.0012))
+    meas = sd.meas.copy()
+    i6 = int(np.flatnonzero(sd.stations == 6)[0])
+    i10 = int(np.flatnonzero(sd.stations == 10)[0])
+    meas[i6, 1] += BIAS_Y
+    meas[i10, :3] += sim.truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()[i10] * DT
+    sd = replace(sd, meas=meas)
+    # the true state at the middle station's time, about the TRUE cg: the fit's start
+    t = sim.truth.iloc[sd.epoch_index]
+    y0 = np.array([t.x_cg_m, t.y_cg_m, t.z_cg_m, t.vx_m_s, t.vy_m_s, t.vz_m_s,
+                   t.q0, t.q1, t.q2, t.q3, t.p_rad_s, t.q_rad_s, t.r_rad_s])
+    return sim, sd, y0
+
+
+def test_fit_recovers_cg_offset_station_bias_and_timing(case):
+    sim, sd, y0 = case
+    extras = [Extra("cg_y", phys_direction=_dir(P_CG_OFFSET + 1)),
+              Extra("cg_z", phys_direction=_dir(P_CG_OFFSET + 2)),
+              Extra("st6_y", station=6, measure="position_y"),
+              Extra("st10_dt", station=10, measure="timing")]
+    res = fit([sd], sim.model.with_values({}), [y0], extras=extras)
+    assert res.converged, res.message
+    assert res.value("cg_y") == pytest.approx(0.0, abs=1e-9)
+    assert res.value("cg_z") == pytest.approx(CG_Z, rel=1e-4)
+    assert res.value("st6_y") == pytest.approx(BIAS_Y, rel=1e-3)
+    assert res.value("st10_dt") == pytest.approx(DT, rel=1e-3)
+    # noise-free data, the model that made them: the residual is at the integration floor
+    assert res.reduced_chi2 < 1e-4
+    # sigmas exist, are finite and positive, and sit in the covariance's order
+    for n in ("cg_y", "cg_z", "st6_y", "st10_dt"):
+        assert 0 < res.sigma(n) < np.inf
+        assert n in res.param_names
+
+
+def test_cg_offset_column_moves_the_observed_reference_point(case):
+    """Complex-step column of a cg-offset direction = central difference of the prediction
+    with the offset applied both to the dynamics and to the reference point."""
+    sim, sd, y0 = case
+    program = sim.model.compile()
+    params = sim.model.values()
+    phys = sd.rigid.phys()
+    ref = sd.rigid.ref_from_cg_body_m()
+    d = np.array(_dir(P_CG_OFFSET + 1))
+    _, J = predict_with_jacobian(y0, sd.t_s[sd.epoch_index], sd.t_s, phys, program, params,
+                                 ref, [], [], phys_dirs=d[None, :])
+    h = 1e-5            # the offset's effect is smooth: central-difference error ~h^2
+    e = np.array([0.0, h, 0.0])
+    t0 = sd.t_s[sd.epoch_index]
+
+    def fd(shift_ref):
+        up = predict(y0, t0, sd.t_s, phys + h * d, program, params, ref - shift_ref * e)
+        dn = predict(y0, t0, sd.t_s, phys - h * d, program, params, ref + shift_ref * e)
+        return (up - dn) / (2 * h)
+
+    scale = np.abs(J[:, :, 0]).max(axis=0)           # per channel
+    # (the adaptive integrator's step choices make the difference quotient noisy at ~5e-4)
+    assert np.all(np.abs(J[:, :, 0] - fd(1.0)) <= 2e-3 * scale)
+    # without the reference point's shift the positions would be off by ~1 m per m
+    assert np.abs(J[:, :3, 0] - fd(0.0)[:, :3]).max() > 0.5
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"phys_direction": _dir(0), "station": 3, "measure": "position_x"},   # both kinds
+    {},                                                                     # neither
+    {"station": 3, "measure": "rotation"},                                 # unknown measure
+    {"phys_direction": (0.0,) * N_PHYS},                                   # zero direction
+])
+def test_bad_extras_refused(kwargs):
+    with pytest.raises(ValueError):
+        Extra("e", **kwargs)
+
+
+def test_extra_named_like_a_model_parameter_refused(case):
+    sim, sd, y0 = case
+    with pytest.raises(ValueError, match="names of their own"):
+        fit([sd], sim.model, [y0], extras=[Extra("CD_A1", station=2, measure="position_x")])
