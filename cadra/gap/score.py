@@ -23,21 +23,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
 from cadra.aero import AeroModel
-from cadra.dynamics.observe import rotation_fb_batch
-from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.data import ShotData
+from cadra.fitting.extras import Extra, add_station_terms, shot_phys, shot_ref, station_columns
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import (
     LOCAL_NAMES,
     Integration,
     predict_with_jacobian,
 )
+from cadra.fitting.solver import FitOptions
 from cadra.gap.candidates import Candidate, augmented_model, library
 
 
@@ -54,41 +55,55 @@ class GapDiagnosis:
     unexplained: bool
     where: pd.DataFrame              # per shot, station, channel: normalized residual after
     verdict: str
+    fit_after: FitResult | None = None   # the fit with the added effects (the last refit)
 
 
 def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
              cands: Sequence[Candidate], integ: Integration):
-    """Per shot: weighted residual, fit Jacobian and each candidate's columns (unweighted
-    rows are masked and divided by sigma)."""
+    """Per shot: weighted residual, the fit's Jacobian (locals, free aero parameters, the
+    fit's extras) and each candidate's columns (unweighted rows masked, divided by sigma).
+    A dynamics candidate has its parameters per shot: its columns for other shots are 0."""
     fitted = result.model
     program = fitted.compile()
     params = fitted.values()
     aero_free = fitted.free_indices()
+    ids = [sf.shot_id for sf in result.shots]
+    fit_extras = tuple(result.extras)
+    xv = np.asarray(result.extra_values, dtype=float)
     phys_cands = [c for c in cands if c.kind == "dynamics"]
-    phys_dirs = (np.concatenate([c.phys_dirs for c in phys_cands]) if phys_cands
-                 else None)
     aero_cands = [c for c in cands if c.kind == "aero"]
+    meas_cands = [c for c in cands if c.kind == "measurement"]
     by_id = {s.shot_id: s for s in shots}
     out = []
-    for sf in result.shots:
+    for k_shot, sf in enumerate(result.shots):
         sd = by_id[sf.shot_id]
+        sid = sd.shot_id
         local = np.array([LOCAL_NAMES.index(n) for n in sf.local_free], dtype=int)
-        phys = sd.rigid.phys()
-        ref = sd.rigid.ref_from_cg_body_m()
-        pred, J, states = predict_with_jacobian(sf.state, sf.t0_s, sd.t_s, phys, program,
-                                                params, ref, local, aero_free, integ,
-                                                phys_dirs=phys_dirs, with_states=True)
-        n_fit = local.size + aero_free.size
-        R = rotation_fb_batch(states[:, 6:10])
+        phys0 = sd.rigid.phys()
+        ref0 = sd.rigid.ref_from_cg_body_m()
+        phys = shot_phys(phys0, fit_extras, xv, sid)
+        ref = shot_ref(ref0, phys0, phys)
+        on = [j for j, e in enumerate(fit_extras) if e.is_phys and e.applies(sid)]
+        dirs = [fit_extras[j].phys_direction for j in on]
+        for c in phys_cands:
+            dirs += list(c.phys_dirs)
+        pred, J, states = predict_with_jacobian(
+            sf.state, sf.t0_s, sd.t_s, phys, program, params, ref, local, aero_free, integ,
+            phys_dirs=np.array(dirs) if dirs else None, with_states=True)
+        n_base = local.size + aero_free.size
+        # the fit's own extras: physics columns from the runs, station columns analytic
+        Jx = np.zeros(J.shape[:2] + (len(fit_extras),))
+        Jx[:, :, on] = J[:, :, n_base:n_base + len(on)]
+        Jx += station_columns(fit_extras, sid, sd.stations, pred, states)
+        pred = add_station_terms(pred, fit_extras, xv, sid, sd.stations, states)
+        Jfit = np.concatenate([J[:, :, :n_base], Jx], axis=2)
         cols = {}
-        at = n_fit
+        at = n_base + len(on)
         for c in phys_cands:
             k = c.phys_dirs.shape[0]
-            C = J[:, :, at:at + k].copy()
-            if c.name == "lateral cg offset":
-                # the observed reference point is seen from the true cg: ref - cg shifts by -d
-                for j, axis in enumerate((1, 2)):
-                    C[:, :3, j] -= R[:, :, axis]
+            C = np.zeros(J.shape[:2] + (len(_param_names(c, ids)),))
+            j0 = 0 if len(ids) == 1 else k_shot * k
+            C[:, :, j0:j0 + k] = J[:, :, at:at + k]
             cols[c.name] = C
             at += k
         for c in aero_cands:
@@ -97,37 +112,24 @@ def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
             _, Ja = predict_with_jacobian(sf.state, sf.t0_s, sd.t_s, phys, aug.compile(),
                                           aug.values(), ref, [], idx, integ)
             cols[c.name] = Ja
-        v = states[:, 3:6]
-        for c in cands:
-            if c.kind != "measurement":
-                continue
-            C = np.zeros((len(sd.t_s), 5, c.n_params))
-            rows = np.flatnonzero(sd.stations == c.station)
-            for i in rows:
-                if c.measure.startswith("position_"):
-                    C[i, "xyz".index(c.measure[-1]), 0] = 1.0
-                elif c.measure == "timing":
-                    C[i, :3, 0] = v[i]
-                elif c.measure == "scale":
-                    C[i, 0, 0] = pred[i, 0] - np.median(sd.meas[sd.stations == c.station, 0])
-                    C[i, 1, 0] = pred[i, 1]
-                    C[i, 2, 0] = pred[i, 2]
-            cols[c.name] = C
+        for c in meas_cands:
+            cols[c.name] = station_columns(_extras(c, ids), sid, sd.stations, pred, states)
         mask = sd.mask
         w = 1.0 / sd.sigma[mask]
         r = ((sd.meas - pred)[mask]) * w
-        Jfit = J[:, :, :n_fit][mask] * w[:, None]
-        out.append({"shot": sd, "fit": sf, "r": r, "J": Jfit, "local": local.size,
+        out.append({"shot": sd, "fit": sf, "r": r, "J": Jfit[mask] * w[:, None],
+                    "local": local.size,
                     "cols": {k: C[mask] * w[:, None] for k, C in cols.items()},
                     "mask": mask})
     return out
 
 
-def _stack(per_shot, n_aero):
-    """Dense block-arrow Jacobian of the fit (locals per shot, shared aero) and residual."""
+def _stack(per_shot, n_shared, result=None):
+    """Dense block-arrow Jacobian of the fit (locals per shot, shared aero and extras) and
+    the weighted residual."""
     n_loc = sum(p["local"] for p in per_shot)
     rows = sum(p["r"].size for p in per_shot)
-    J = np.zeros((rows, n_loc + n_aero))
+    J = np.zeros((rows, n_loc + n_shared))
     r = np.zeros(rows)
     at = col = 0
     for p in per_shot:
@@ -172,125 +174,239 @@ def score(Q, r, C, n_obs, n_free):
             "dbic": -dchi2 / max(s2, 1.0) + k * math.log(n_obs), "Cp": Cp}
 
 
-def _refit_aero(result: FitResult, shots, cand: Candidate, start_values) -> FitResult | None:
-    """The fit redone with ``cand``'s terms (their parameters free, started at the score
-    estimate), from the fitted states; None if it does not converge."""
-    from cadra.fitting.solver import FitOptions, fit
+#: candidates whose physics breaks the body's axial symmetry: on a body whose roll angle the
+#: fit does not free (a symmetric body: its roll is unobservable), the roll is freed with them,
+#: since the asymmetry's orientation is then what the data see
+_ASYMMETRIC = ("lateral cg offset", "inertia asymmetry", "products of inertia")
+#: refit chi^2 within this of the best: "the data cannot tell them apart" (with collinear
+#: columns); a likelihood ratio below e^2 ~ 7
+ALIAS_DCHI2 = 4.0
+#: canonical correlation of the projected columns above which two candidates are aliases
+ALIAS_CORRELATION = 0.95
+#: a candidate is refitted nonlinearly only if its linear score's uncorrected p-value is below
+#: this (far above any significance level used: a pre-filter, not a test)
+REFIT_P = 0.05
+#: convergence control of the candidate refits (they start next to their solution)
+REFIT_OPTIONS = FitOptions(max_iterations=25)
 
-    aug = augmented_model(result.model, cand).with_values(
-        dict(zip(cand.params, (float(v) for v in start_values), strict=True)))
+
+def _param_names(c: Candidate, shot_ids: Sequence[str]) -> tuple[str, ...]:
+    """The candidate's parameter names in a fit of ``shot_ids``: a dynamics (body or
+    atmosphere) effect has its own parameters per shot (``name@shot`` when there are
+    several shots); aero and station effects are shared."""
+    if c.kind != "dynamics" or len(shot_ids) == 1:
+        return c.params
+    return tuple(f"{p}@{sid}" for sid in shot_ids for p in c.params)
+
+
+def _extras(c: Candidate, shot_ids: Sequence[str]) -> list[Extra]:
+    if c.kind == "dynamics":
+        out = []
+        for sid in shot_ids:
+            for p, d in zip(c.params, c.phys_dirs, strict=True):
+                out.append(Extra(p if len(shot_ids) == 1 else f"{p}@{sid}",
+                                 phys_direction=tuple(d), shots=(sid,)))
+        return out
+    if c.kind == "measurement":
+        return [Extra(c.params[0], station=c.station, measure=c.measure)]
+    return []
+
+
+def refit_with(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],
+               options=None) -> FitResult | None:
+    """``result``'s fit redone with the candidates' terms added (their parameters free,
+    started at 0; the fit's own extras kept, started at their values), from the fitted
+    states; None if the refit raises."""
+    from cadra.fitting.solver import fit
+
     by_id = {s.shot_id: s for s in shots}
-    local = [np.array([LOCAL_NAMES.index(n) for n in sf.local_free]) for sf in result.shots]
+    ids = [sf.shot_id for sf in result.shots]
+    model = result.model
+    extras: list[Extra] = [replace(e, value=float(v)) for e, v in
+                           zip(result.extras, result.extra_values, strict=True)]
+    for c in cands:
+        if c.kind == "aero":
+            model = augmented_model(model, c)
+        else:
+            extras += _extras(c, ids)
+    rot_x = LOCAL_NAMES.index("rot_x_rad")
+    local = []
+    for sf in result.shots:
+        lf = {LOCAL_NAMES.index(n) for n in sf.local_free}
+        if any(c.name in _ASYMMETRIC for c in cands) and by_id[sf.shot_id].has_angles:
+            lf.add(rot_x)
+        local.append(np.array(sorted(lf), dtype=int))
     try:
-        res = fit([by_id[sf.shot_id] for sf in result.shots], aug,
-                  [sf.state for sf in result.shots], options=FitOptions(),
-                  local_free=local)
+        return fit([by_id[i] for i in ids], model, [sf.state for sf in result.shots],
+                   options=options or REFIT_OPTIONS, local_free=local, extras=extras)
     except (ValueError, FloatingPointError):
         return None
-    return res if res else None
+
+
+def _sizes(fit_res: FitResult, c: Candidate, shot_ids) -> tuple[list, list, list]:
+    names = _param_names(c, shot_ids)
+    return (list(names), [fit_res.value(n) for n in names], [fit_res.sigma(n) for n in names])
+
+
+def _canonical_corr(A: np.ndarray, B: np.ndarray) -> float:
+    """Largest canonical correlation between the column spans of A and B."""
+    qa, qb = _orth(A), _orth(B)
+    if qa.shape[1] == 0 or qb.shape[1] == 0:
+        return 0.0
+    return float(np.linalg.svd(qa.T @ qb, compute_uv=False).max())
+
+
+def _test(chi2_base, chi2_new, k, n_obs, n_free):
+    """F test and BIC change of ``k`` added parameters that took chi^2 from base to new."""
+    dchi2 = max(chi2_base - chi2_new, 0.0)
+    dof_after = max(n_obs - n_free - k, 1)
+    s2 = max(chi2_new / dof_after, 1e-300)
+    F = (dchi2 / k) / s2
+    return {"dchi2": dchi2, "F": F, "p": float(stats.f.sf(F, k, dof_after)),
+            "dbic": -dchi2 / max(s2, 1.0) + k * math.log(n_obs)}
 
 
 def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel | None = None,
                  *, candidates: Sequence[Candidate] | None = None, alpha: float = 0.01,
-                 max_effects: int = 3, integ: Integration | None = None) -> GapDiagnosis:
-    """Rank the candidate effects for a converged fit and add the significant ones greedily
-    (module doc). ``model`` is the fitted model (default ``result.model``)."""
+                 max_effects: int = 3, integ: Integration | None = None,
+                 refit_physics: int = 4, refit_measurement: int = 3,
+                 progress: bool = False) -> GapDiagnosis:
+    """Rank the candidate effects for a fit and add the significant ones greedily.
+
+    Each round: every candidate is scored linearly against the current fit (module doc);
+    then the ``refit_physics`` best dynamics/aero candidates and the ``refit_measurement``
+    best measurement candidates (by linear chi^2 drop, among those with an uncorrected linear
+    p-value below :data:`REFIT_P`) are refitted nonlinearly (:func:`refit_with`: the whole
+    fit redone with the candidate free); candidates are ranked by the refit's chi^2 drop where
+    there is one, else the linear one (F test, Bonferroni-adjusted p-value: half of ``alpha``
+    shared by the physics candidates, half by the station ones; BIC beside it). The best is
+    added when its adjusted p-value is below ``alpha`` and its BIC improves;
+    candidates the data cannot tell from it (collinear columns, refit chi^2 within
+    :data:`ALIAS_DCHI2`) are named beside it as aliases. What remains is tested against the
+    noise floor. ``model`` is the fitted model (default ``result.model``)."""
     integ = integ or Integration()
     model = model or result.model
     shots = list(shots)
+    ids = [sf.shot_id for sf in result.shots]
     stations = sorted({int(st) for s in shots for st in s.stations})
     mach = float(np.mean([np.median(np.linalg.norm(np.diff(s.meas[:, :3], axis=0), axis=1)
                                     / np.diff(s.t_s)) / s.rigid.speed_of_sound_m_s
                           for s in shots]))
     cands = list(candidates) if candidates is not None else library(model, stations, mach)
-    per = _columns(result, shots, model, cands, integ)
-    J, r = _stack(per, result.model.free_indices().size)
-    n_obs = r.size
-    n_free = J.shape[1]
-    Q = _orth(J)
-    sig_all = np.concatenate([p["shot"].sigma[p["mask"]] for p in per])
-    chan_all = np.concatenate([np.nonzero(p["mask"])[1] for p in per])
-    stat_all = np.concatenate([np.broadcast_to(p["shot"].stations[:, None],
-                                               p["mask"].shape)[p["mask"]] for p in per])
-    shot_all = np.concatenate([np.full(int(p["mask"].sum()), p["shot"].shot_id) for p in per])
-
-    def rms_by_channel(res_w):
-        out = {}
-        for j, ch in enumerate(CHANNELS):
-            sel = chan_all == j
-            out[ch] = float(np.sqrt(np.mean((res_w[sel] * sig_all[sel]) ** 2))) if sel.any() \
-                else math.nan
-        return out
-
-    rms_before = rms_by_channel(r)
-    dof0 = n_obs - n_free
-    rchi0 = float(r @ r) / max(dof0, 1)
-    threshold = alpha / max(len(cands), 1)
-    added = []
+    # weighted Bonferroni (family-wise error alpha): half of alpha for the physics
+    # candidates (dynamics, aero: few), half for the per-station measurement ones (many), so
+    # the many station candidates do not dilute the test of the few physical ones
+    n_phys = sum(c.kind != "measurement" for c in cands)
+    n_meas = len(cands) - n_phys
+    halves = 2 if n_phys and n_meas else 1
+    threshold = {kind: alpha / halves / max(n, 1) for kind, n in
+                 (("physics", n_phys), ("measurement", n_meas))}
+    added: list[dict] = []
     ranking = None
-    resid = r.copy()
-    basis = Q
-    n_used = n_free
+    current = result
     remaining = list(cands)
-    for round_ in range(max_effects):
-        rows = []
-        for c in remaining:
-            sc = score(basis, resid, _cand_matrix(per, c.name), n_obs, n_used)
-            if sc is None:
-                continue
-            rows.append({"candidate": c.name, "kind": c.kind, "params": ", ".join(c.params),
-                         "dchi2": sc["dchi2"], "F": sc["F"], "p_value": sc["p"],
-                         "dbic": sc["dbic"],
-                         "size": "; ".join(f"{n} = {d:.4g} ± {s:.2g}" for n, d, s in
-                                           zip(c.params, sc["delta"], sc["sigma"],
-                                               strict=False)),
-                         "_sc": sc, "_c": c})
-        if not rows:
-            break
-        table = pd.DataFrame(rows).sort_values("p_value", kind="stable").reset_index(drop=True)
-        if ranking is None:
-            ranking = table.drop(columns=["_sc", "_c"])
-        best = table.iloc[0]
-        if not (best["p_value"] < threshold and best["dbic"] < 0):
-            break
-        sc, c = best["_sc"], best["_c"]
-        resid = resid - sc["Cp"] @ sc["delta"]
-        basis = _orth(np.column_stack([basis, sc["Cp"]]))
-        n_used += sc["k"]
-        added.append({"effect": c.name, "kind": c.kind, "params": c.params,
-                      "size": [float(v) for v in sc["delta"]],
-                      "sigma": [float(v) for v in sc["sigma"]], "p_value": float(sc["p"]),
-                      "dchi2": float(sc["dchi2"]), "round": round_ + 1})
-        remaining = [x for x in remaining if x.name != c.name]
-    rms_after = rms_by_channel(resid)
-    dof1 = n_obs - n_used
-    rchi1 = float(resid @ resid) / max(dof1, 1)
-    if len(added) == 1 and added[0]["kind"] == "aero":
-        # confirm a lone aero effect by a nonlinear refit with the augmented model (the score
-        # step is one Gauss-Newton step; a large missing term needs the full fit)
-        refit = _refit_aero(result, shots, next(c for c in cands
-                                                if c.name == added[0]["effect"]),
-                            added[0]["size"])
-        if refit is not None:
-            rr = refit.residuals
-            added[0]["size"] = [refit.value(n) for n in added[0]["params"]]
-            added[0]["sigma"] = [refit.sigma(n) for n in added[0]["params"]]
-            added[0]["refit"] = True
-            rms_after = {ch: float(np.sqrt(np.mean(rr.loc[rr["channel"] == ch, "residual"]
-                                                   ** 2)))
-                         if (rr["channel"] == ch).any() else math.nan for ch in CHANNELS}
-            rchi1 = refit.reduced_chi2
-            resid_map = {(a, b, c): v for a, b, c, v in
-                         zip(rr["shot_id"], rr["station"], rr["channel"], rr["normalized"],
-                             strict=True)}
-            resid = np.array([resid_map.get((sh, int(st), CHANNELS[ch]), 0.0)
-                              for sh, st, ch in zip(shot_all, stat_all, chan_all,
-                                                    strict=True)])
-    # still above the noise floor? chi^2 test of what remains
-    p_floor = float(stats.chi2.sf(float(resid @ resid), max(dof1, 1)))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(desc="cadra2 diagnose", unit="refit", leave=False)
+    try:
+        for round_ in range(max_effects):
+            per = _columns(current, shots, current.model, remaining, integ)
+            J, r = _stack(per, current.model.free_indices().size + len(current.extras),
+                          current)
+            n_obs, n_free = r.size, J.shape[1]
+            Q = _orth(J)
+            lin = {}
+            for c in remaining:
+                sc = score(Q, r, _cand_matrix(per, c.name), n_obs, n_free)
+                if sc is not None:
+                    lin[c.name] = sc
+            if not lin:
+                break
+            # refitted: the refit_physics physics and refit_measurement measurement
+            # candidates with the largest linear chi^2 drop, if that drop is not plainly noise
+            # (uncorrected p < REFIT_P); a large nonlinear effect still makes its candidate's
+            # linear drop large, if not exact
+            to_refit = []
+            for is_meas, n_refit in ((False, refit_physics), (True, refit_measurement)):
+                pool = [c for c in remaining if (c.kind == "measurement") == is_meas
+                        and c.name in lin and lin[c.name]["p"] < REFIT_P]
+                pool.sort(key=lambda c, lin=lin: -lin[c.name]["dchi2"])
+                to_refit += pool[:n_refit]
+            rows = []
+            for c in remaining:
+                if c.name not in lin:
+                    continue
+                sc = lin[c.name]
+                k = len(_param_names(c, ids))
+                row = {"candidate": c.name, "kind": c.kind,
+                       "params": ", ".join(_param_names(c, ids)),
+                       "dchi2_linear": sc["dchi2"], "_c": c, "_refit": None}
+                test = {"dchi2": sc["dchi2"], "F": sc["F"], "p": sc["p"], "dbic": sc["dbic"]}
+                size = [(n, d, e) for n, d, e in zip(_param_names(c, ids), sc["delta"],
+                                                     sc["sigma"], strict=False)]
+                if c in to_refit:
+                    rf = refit_with(current, shots, [c])
+                    if bar is not None:
+                        bar.update(1)
+                    if rf is not None and rf.status != "failed" and math.isfinite(rf.chi2):
+                        test = _test(current.chi2, rf.chi2, k, n_obs, n_free)
+                        size = list(zip(*_sizes(rf, c, ids), strict=True))
+                        row["_refit"] = rf
+                row.update({"dchi2": test["dchi2"], "F": test["F"], "p_value": test["p"],
+                            "dbic": test["dbic"], "refit": row["_refit"] is not None,
+                            "size": "; ".join(f"{n} = {v:.4g} ± {e:.2g}" for n, v, e in size),
+                            "_size": size})
+                rows.append(row)
+            table = pd.DataFrame(rows)
+            # rank by the Bonferroni-adjusted p-value (p over its kind's level, times alpha)
+            table["p_adjusted"] = [min(1.0, p * alpha / threshold[
+                "measurement" if k == "measurement" else "physics"])
+                for p, k in zip(table["p_value"], table["kind"], strict=True)]
+            table = table.sort_values(["p_adjusted", "dchi2"], ascending=[True, False],
+                                      kind="stable").reset_index(drop=True)
+            best = table.iloc[0]
+            # aliases: collinear with the best in this round's linear columns, and a refit
+            # chi^2 drop within ALIAS_DCHI2 of the best's
+            Cb = _cand_matrix(per, best["candidate"])
+            Cb = Cb - Q @ (Q.T @ Cb)
+            aliases = []
+            for _, row in table.iloc[1:].iterrows():
+                if row["dchi2"] < best["dchi2"] - ALIAS_DCHI2:
+                    continue
+                Cj = _cand_matrix(per, row["candidate"])
+                if _canonical_corr(Cb, Cj - Q @ (Q.T @ Cj)) >= ALIAS_CORRELATION:
+                    aliases.append(row["candidate"])
+            table["alias_of_best"] = table["candidate"].isin(aliases)
+            if ranking is None:
+                ranking = table.drop(columns=["_c", "_refit", "_size"])
+            if not (best["p_adjusted"] < alpha and best["dbic"] < 0):
+                break
+            c = best["_c"]
+            rf = best["_refit"]
+            names, vals, sigs = zip(*best["_size"], strict=True)
+            added.append({"effect": c.name, "kind": c.kind, "params": tuple(names),
+                          "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
+                          "p_value": float(best["p_value"]), "dchi2": float(best["dchi2"]),
+                          "round": round_ + 1, "refit": rf is not None,
+                          "aliases": tuple(aliases)})
+            remaining = [x for x in remaining if x.name != c.name]
+            if rf is None:
+                break       # a linear-only addition: no fit to go on from
+            current = rf
+    finally:
+        if bar is not None:
+            bar.close()
+    # residuals before / after, per channel, and the noise-floor test of what remains
+    rms_before = result.rms()
+    rms_after = current.rms()
+    rchi0, rchi1 = result.reduced_chi2, current.reduced_chi2
+    rr = current.residuals
+    where = pd.DataFrame({"shot_id": rr["shot_id"], "station": rr["station"],
+                          "channel": rr["channel"], "normalized": rr["normalized"]})
+    p_floor = float(stats.chi2.sf(current.chi2, max(current.dof, 1)))
     unexplained = p_floor < alpha
-    where = pd.DataFrame({"shot_id": shot_all, "station": stat_all,
-                          "channel": [CHANNELS[j] for j in chan_all], "normalized": resid})
     if unexplained:
         worst = (where.assign(sq=where["normalized"] ** 2)
                  .groupby(["station", "channel"])["sq"].mean().sort_values(ascending=False))
@@ -300,9 +416,13 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                    + f"unexplained: the residual stays above the noise floor (chi^2/dof = "
                    f"{rchi1:.2f}, p = {p_floor:.1e}); it lies mostly at {top}")
     elif added:
-        verdict = "; ".join(f"{a['effect']}: " + ", ".join(
-            f"{n} = {v:.4g} ± {s:.2g}" for n, v, s in zip(a["params"], a["size"], a["sigma"],
-                                                        strict=False)) for a in added)
+        verdict = "; ".join(
+            f"{a['effect']}"
+            + (f" (or, indistinguishable on these data, {' / '.join(a['aliases'])})"
+               if a["aliases"] else "") + ": "
+            + ", ".join(f"{n} = {v:.4g} ± {s:.2g}" for n, v, s in
+                        zip(a["params"], a["size"], a["sigma"], strict=False))
+            for a in added)
         verdict += f" (chi^2/dof {rchi0:.2f} -> {rchi1:.2f})"
     else:
         verdict = (f"no significant unmodelled effect (chi^2/dof = {rchi0:.2f}; best "
@@ -311,7 +431,8 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     return GapDiagnosis(ranking=ranking if ranking is not None else pd.DataFrame(),
                         added=tuple(added), rms_before=rms_before, rms_after=rms_after,
                         reduced_chi2_before=rchi0, reduced_chi2_after=rchi1,
-                        unexplained=bool(unexplained), where=where, verdict=verdict)
+                        unexplained=bool(unexplained), where=where, verdict=verdict,
+                        fit_after=current)
 
 
-__all__ = ["GapDiagnosis", "diagnose_gap", "score"]
+__all__ = ["GapDiagnosis", "diagnose_gap", "refit_with", "score"]
