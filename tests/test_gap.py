@@ -126,3 +126,84 @@ def test_diagnose_cli(tmp_path, spec):
     report = (out / "report.md").read_text()
     assert "lateral cg offset" in report.split("## How much")[0]
     assert (out / "ranking.csv").is_file() and (out / "where.csv").is_file()
+    for name in ("where_sequence.csv", "where_frequency.csv", "where_stage_one.csv",
+                 "where.png"):
+        assert (out / name).is_file(), name
+    assert "## Where the fit as given misses" in report
+
+
+# ---- "where" tests (cadra.gap.where) against hand-made residuals of known structure ----
+
+def _table(values_by_shot, channel="z"):
+    import pandas as pd
+
+    rows = []
+    for shot, vals in values_by_shot.items():
+        for k, v in enumerate(vals):
+            rows.append({"shot_id": shot, "station": k + 1, "channel": channel,
+                         "normalized": float(v), "t_s": 0.001 * k})
+    return pd.DataFrame(rows)
+
+
+def test_runs_test_counts_runs_and_flags_a_systematic_pattern():
+    from cadra.gap.where import runs_test, sequence_tests
+
+    runs, z, p = runs_test(np.array([1, 2, -1, -3, -2, 4, 5, -1]))
+    assert runs == 4
+    # hand formula: n1 = n2 = 4: mean 5, variance 2*16*(32-8)/(64*7) = 12/7
+    assert z == pytest.approx((4 - 5) / np.sqrt(12 / 7))
+    # a slow drift (one sign change in 16) is flagged; white noise mostly is not
+    drift = np.linspace(-3, 3, 16)
+    seq = sequence_tests(_table({"A": drift}))
+    assert seq.loc[0, "runs"] == 2 and seq.loc[0, "runs_p"] < 0.01
+    assert seq.loc[0, "lag1_autocorrelation"] > 0.7
+    rng = np.random.default_rng(0)
+    flagged = [sequence_tests(_table({"A": rng.standard_normal(16)})).loc[0, "runs_p"] < 0.01
+               for _ in range(400)]
+    assert np.mean(flagged) < 0.03
+
+
+def test_frequency_content_finds_a_residual_at_the_pitch_frequency():
+    from cadra.gap.where import frequency_content
+
+    t = 0.001 * np.arange(16)
+    rng = np.random.default_rng(1)
+    r = 2.0 * np.sin(2 * np.pi * 60.0 * t + 0.4) + rng.standard_normal(16)
+    table = _table({"A": r})
+    fr = frequency_content(table, {"A": {"pitch": 60.0, "yaw": 23.0}})
+    pitch = fr[fr["motion"] == "pitch"].iloc[0]
+    assert pitch["p_value"] < 1e-3
+    assert pitch["amplitude_sigma"] == pytest.approx(2.0, abs=0.8)
+
+
+def test_cross_shot_tells_a_repeated_misfit_from_one_that_varies():
+    from cadra.gap.where import cross_shot
+
+    rng = np.random.default_rng(2)
+    shots = {f"S{k}": rng.standard_normal(16) for k in range(5)}
+    for v in shots.values():
+        v[6] += 3.0                      # station 7: the same misfit in every shot
+    shots["S0"][10] += 8.0               # station 11: one shot only
+    cs = cross_shot(_table(shots)).set_index("station")
+    assert cs.loc[7, "p_repeat"] < 1e-6 and cs.loc[7, "p_scatter"] > 0.01
+    assert cs.loc[11, "p_scatter"] < 1e-6
+
+
+def test_motion_frequency_matches_the_fitted_pitch_period(spec):
+    """The dominant frequency of the fitted theta history matches linear theory's
+    omega^2 = -Cm_alpha q S d / I of the same shot to a few percent."""
+    from cadra.gap.where import motion_frequencies
+
+    res, sd = _fit(spec)
+    f = motion_frequencies(res, [sd])[sd.shot_id]
+    sim = simulate_shot(spec)
+    t = sim.truth
+    theta = np.radians(t["theta_deg"].to_numpy())
+    # count the truth's zero crossings of the detrended theta over the record
+    th = theta - np.polyval(np.polyfit(t["t_s"], theta, 2), t["t_s"])
+    dense_t = np.linspace(t["t_s"].min(), t["t_s"].max(), 2000)
+    dense = np.interp(dense_t, t["t_s"], th)
+    crossings = np.count_nonzero(np.diff(np.sign(dense)) != 0)
+    f_truth = crossings / 2 / (dense_t[-1] - dense_t[0])
+    assert f["pitch"] == pytest.approx(f_truth, rel=0.25)
+    assert np.isnan(f["roll"])          # M2 does not roll

@@ -355,6 +355,8 @@ def _diagnose(args) -> int:
     from cadra.fitting import FitDataError, FitOptions, fit_shots
     from cadra.gap.report import write_diagnosis
     from cadra.gap.score import diagnose_gap
+    from cadra.gap.where import where_analysis
+    from cadra.io.trajectory import load_trajectory
     from cadra.simulate import SpecError, resolve_model
 
     out = Path(args.output)
@@ -368,13 +370,23 @@ def _diagnose(args) -> int:
         if not result:
             raise ValueError(f"the fit did not converge ({result.message}): nothing to "
                              "diagnose")
-        dg = diagnose_gap(result, shots, alpha=args.alpha)
+        dg = diagnose_gap(result, shots, alpha=args.alpha, progress=True)
+        stage_one = {}
+        for k, (sd, item) in enumerate(zip(shots, args.trajectories, strict=True)):
+            traj, _ = _trajectory_and_shot(item, args.shot[k] if args.shot else None)
+            table = load_trajectory(traj).table
+            if "x_consistency" in table:
+                stage_one[sd.shot_id] = table
+        tables = where_analysis(result, shots, result.residuals, stage_one or None)
     except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
         return _refused("diagnose", exc)
-    write_diagnosis(dg, result, out, overwrite=args.overwrite)
+    write_diagnosis(dg, result, out, overwrite=args.overwrite, where_tables=tables)
     print(dg.verdict)
-    print(dg.ranking.head(8)[["candidate", "dchi2", "p_value", "size"]].to_string(index=False))
-    print(f"wrote {out}/ (report.md, ranking.csv, where.csv)")
+    print(dg.ranking.head(8)[["candidate", "dchi2", "p_adjusted", "size"]]
+          .to_string(index=False))
+    for line in tables["findings"]:
+        print(f"where: {line}")
+    print(f"wrote {out}/ (report.md, ranking.csv, where*.csv, where.png)")
     return 0
 
 

@@ -15,7 +15,7 @@ _UNIT = {"x": ("µm", 1e6), "y": ("µm", 1e6), "z": ("µm", 1e6),
          "theta": ("deg", 180 / math.pi), "psi": ("deg", 180 / math.pi)}
 
 
-def summary_markdown(dg, result) -> str:
+def summary_markdown(dg, result, where_tables=None) -> str:
     """One page: what (verdict), how much (rms before -> after per channel), where, details."""
     L = ["# Gap diagnosis", "", f"**{dg.verdict}**", "",
          f"Fit: {result.status}, {len(result.shots)} shot(s), chi^2/dof "
@@ -46,20 +46,69 @@ def summary_markdown(dg, result) -> str:
           "| station | channel | rms / σ |", "|---|---|---|"]
     for (st, ch), v in worst.head(6).items():
         L.append(f"| {st} | {ch} | {math.sqrt(v):.2f} |")
+    if where_tables is not None:
+        L += ["", "## Where the fit as given misses (tests on its normalized residual)", ""]
+        L += [f"- {x}" for x in where_tables["findings"]] or ["- no significant runs, "
+                                                             "autocorrelation, motion-frequency "
+                                                             "or cross-shot pattern"]
+        L += ["", "rms / σ per channel: " + ", ".join(
+            f"{r['channel']} {r['rms_normalized']:.2f}"
+            for _, r in where_tables["by_channel"].iterrows()),
+              "", "Tables: where_sequence.csv (runs, lag-1 autocorrelation), "
+              "where_frequency.csv (pitch / yaw / roll content), where_cross_shot.csv, "
+              "where_by_station.csv, where_stage_one.csv (when stage one's files are given); "
+              "plot: where.png."]
     L += ["", "## Ranking (first round, best first)", "",
-          "| candidate | Δχ² | p (F test) | ΔBIC | size ± σ |", "|---|---|---|---|---|"]
+          "| candidate | Δχ² | p (adjusted) | ΔBIC | refit | size ± σ |",
+          "|---|---|---|---|---|---|"]
     for _, row in dg.ranking.head(15).iterrows():
-        L.append(f"| {row['candidate']} | {row['dchi2']:.1f} | {row['p_value']:.2g} | "
-                 f"{row['dbic']:.1f} | {row['size']} |")
+        alias = " (alias of the first)" if row.get("alias_of_best", False) else ""
+        L.append(f"| {row['candidate']}{alias} | {row['dchi2']:.1f} | "
+                 f"{row['p_adjusted']:.2g} | {row['dbic']:.1f} | "
+                 f"{'yes' if row['refit'] else 'linear'} | {row['size']} |")
     return "\n".join(L) + "\n"
 
 
-def write_diagnosis(dg, result, out_dir: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """report.md (one page first), ranking.csv, where.csv; atomically."""
+def plot_where(dg, result, path) -> None:
+    """Normalized residual per station and channel (mean over shots), before and after the
+    effects were added: where the gap lies, at a glance."""
+    from matplotlib.figure import Figure
+
+    before = result.residuals.groupby(["station", "channel"])["normalized"].mean().unstack()
+    after = dg.where.groupby(["station", "channel"])["normalized"].mean().unstack()
+    chans = [c for c in CHANNELS if c in before.columns]
+    fig = Figure(figsize=(9, 4.5), layout="constrained")
+    axes = fig.subplots(1, 2, sharey=True)
+    lim = max(3.0, float(np.nanmax(np.abs(before[chans].to_numpy()))))
+    for ax, table, title in ((axes[0], before, "fit as given"),
+                             (axes[1], after, "after the effects added")):
+        data = table.reindex(columns=chans).to_numpy(float)
+        im = ax.imshow(data, aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim,
+                       extent=(-0.5, len(chans) - 0.5, table.index.max() + 0.5,
+                               table.index.min() - 0.5))
+        ax.set_xticks(range(len(chans)), chans)
+        ax.set_title(title)
+        ax.set_xlabel("channel")
+    axes[0].set_ylabel("station")
+    fig.colorbar(im, ax=axes, label="mean residual / σ")
+    fig.suptitle("Where the residual lies")
+    fig.savefig(path, dpi=110)
+
+
+def write_diagnosis(dg, result, out_dir: str | os.PathLike, *, overwrite: bool = False,
+                    where_tables: dict | None = None) -> Path:
+    """report.md (one page first), ranking.csv, where.csv (residual after the effects), the
+    "where" tables of the fit as given (``where_tables``, :func:`cadra.gap.where.where_analysis`)
+    and where.png; atomically."""
     out_dir = Path(out_dir)
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         dg.ranking.to_csv(tmp / "ranking.csv", index=False)
         dg.where.assign(normalized=np.round(dg.where["normalized"], 6)).to_csv(
             tmp / "where.csv", index=False)
-        (tmp / "report.md").write_text(summary_markdown(dg, result), encoding="utf-8")
+        for key, table in (where_tables or {}).items():
+            if key != "findings" and key != "by_channel":
+                table.to_csv(tmp / f"where_{key}.csv", index=False)
+        plot_where(dg, result, tmp / "where.png")
+        (tmp / "report.md").write_text(summary_markdown(dg, result, where_tables),
+                                       encoding="utf-8")
     return out_dir
