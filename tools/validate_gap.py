@@ -16,9 +16,11 @@ no effect to find.
 Sizes (physically realistic; each trial also checks that its effect *matters*: the fit
 without it has a residual rms at least 20 % above the clean fit's in some channel, or moves an
 aero coefficient by more than its sigma -- the rate is printed): cg offset 0.1-0.3 mm;
-Iyy - Izz 0.05-0.2 % of Iyy (M1, swinging +-40 deg); one product of inertia 1-3 % of Iyy; density gradient
-1-3e-3 per m (2-7 % over the range); cross-flow 0.5-1.5 m/s; C_m += a s^3 with a s_max^3 = (0.1-0.3) |Cm_A1| s_max (s_max the
-shot's largest |s|),
+Iyy - Izz 0.05-0.2 % of Iyy (M1, swinging +-40 deg); one product of inertia 3-8 % of Iyy;
+density gradient 1-3e-3 per m (2-7 % over the range); cross-flow 0.5-1.5 m/s;
+C_m += a s^3 with a s_max^3 = (0.07-0.15) |Cm_A1| s_max (s_max the shot's largest |s|;
+larger destabilizing terms change the motion so much that even the true model, fitted from
+linear-theory starts, lands in another basin),
 C_mq += (30-80) s^2 with s = sin(alpha) - sin(alpha_ref); C_m += (0.05-0.15)(M - M_nom);
 station position bias 2-5 um in y or z; timing bias 50-150 ns at one station of three sphere
 shots; optical scale 3-8e-4 at one station of three M2 shots; angle biases 0.01-0.03 deg.
@@ -94,7 +96,7 @@ def make_case(name, rng, spec, model_file_dir):
         return (replace(spec, effects=Effects(inertia_delta_body_kg_m2=dI)), None,
                 "inertia asymmetry", {"Iyy_minus_Izz_kg_m2": d}, None)
     if name == "products":
-        a = _draw(rng, 0.01, 0.03) * I_yy
+        a = _draw(rng, 0.03, 0.08) * I_yy
         k = int(rng.integers(3))
         pairs = [(0, 1), (0, 2), (1, 2)]
         dI = np.zeros((3, 3))
@@ -118,7 +120,7 @@ def make_case(name, rng, spec, model_file_dir):
     if name in ("cm3", "cmq2", "cmM"):
         base = load_bundled_model("m1_m110" if name in M1_CASES else "m2_m070")
         cands = {c.name: c for c in aero_candidates(base, 1.10 if name in M1_CASES else 0.70)}
-        cname, pname, lo, hi = {"cm3": ("higher-order Cm", "gap_Cm3", 0.1, 0.3),
+        cname, pname, lo, hi = {"cm3": ("higher-order Cm", "gap_Cm3", 0.07, 0.15),
                                 "cmq2": ("alpha-dependent Cmq", "gap_Cmq2", 30.0, 80.0),
                                 "cmM": ("Mach dependence of Cm", "gap_CmM", 0.05, 0.15)}[name]
         v = _draw(rng, lo, hi)
@@ -232,7 +234,8 @@ def run_trial(case, rng, tmpdir):
               zip(res.aero_names, res.aero_values, clean.aero_sigma, strict=True)
               if math.isfinite(s) and s > 0]
     out = {"case": case, "shot": "+".join(names), "seconds": secs, "verdict": dg.verdict,
-           "converged": bool(res),
+           "converged": bool(res), "fit_status": res.status,
+           "after_status": dg.fit_after.status if dg.fit_after is not None else "-",
            "matters": bool(max(ratios0) >= 1.2 or (shifts and max(shifts) > 1.0))}
     first = dg.added[0] if dg.added else None
     if expected is not None:
@@ -274,6 +277,8 @@ def main(argv=None) -> int:
     parser.add_argument("--trials", type=int, default=20)
     parser.add_argument("--seed", type=int, default=6)
     parser.add_argument("--cases", default=",".join(CASES))
+    parser.add_argument("--verbose", action="store_true",
+                        help="also list trials whose size or shrink ratio fails")
     args = parser.parse_args(argv)
     from tqdm import tqdm
 
@@ -300,10 +305,15 @@ def main(argv=None) -> int:
                         f"{np.mean([r['matters'] for r in rows]):.2f}")
             print(f"{case:16s} {line}")
             for r in rows:
+                if args.verbose and case not in ("null", "out_of_library") and r["top1"] and (
+                        not r["size_ok"] or r["shrink_ratio"] > 1.1):
+                    print(f"    {r['shot']} (size ok {r['size_ok']}, shrink "
+                          f"{r['shrink_ratio']:.3f}, fit {r['fit_status']}, after "
+                          f"{r['after_status']}): {r['verdict'][:200]}")
                 if (case not in ("null", "out_of_library") and not r["top1"]) or (
                         case == "null" and not r["clean"]) or (
                         case == "out_of_library" and not r["where_ok"]):
-                    print(f"    {r['shot']}: {r['verdict'][:160]}")
+                    print(f"    {r['shot']} (fit {r['fit_status']}): {r['verdict'][:160]}")
     eff = [c for c in cases if c not in ("null", "out_of_library")]
     summary = {
         "trials_per_case": args.trials,

@@ -1,8 +1,8 @@
-"""Which unmodelled effect? Gauss-Newton score tests over the candidate library.
+"""Which unmodelled effect? Score tests and nonlinear refits over the candidate library.
 
-At a converged fit, each candidate's sensitivity columns C (per measurement, weighted) are
-projected orthogonal to the fit's own Jacobian J (every shot's initial state and the free
-aero parameters): ``C_perp = (I - P_J) C``. The weighted residual ``r`` regressed on
+At a fit, each candidate's sensitivity columns C (per measurement, weighted) are projected
+orthogonal to the fit's own Jacobian J (every shot's initial state, the free aero parameters,
+the effects already added): ``C_perp = (I - P_J) C``. The weighted residual ``r`` regressed on
 ``C_perp`` gives, without refitting (DESIGN.md section 9):
 
 - the chi^2 the candidate would remove, ``dchi2 = |P_Cperp r|^2`` (exact for an effect that
@@ -12,11 +12,13 @@ aero parameters): ``C_perp = (I - P_J) C``. The weighted residual ``r`` regresse
 - an F test of the added parameters (robust to a sigma scale that is off, as stage one's
   are by ~15 %) and the BIC change ``-dchi2/s^2 + k ln n``.
 
-:func:`diagnose_gap` ranks every candidate, adds the best one if it is significant
-(F-test p-value below ``alpha`` / number of candidates, Bonferroni), re-scores the rest against
-the augmented fit, and repeats until nothing is significant; what then remains is compared with
-the noise floor, and if it is still above it the gap is reported as unexplained, with the
-stations and channels where it lies.
+The leading candidates are then refitted for real (:func:`refit_with`: the whole fit redone
+with the candidate's parameters free), since a large effect is far from linear.
+:func:`diagnose_gap` ranks the candidates, adds the best one if it is significant (weighted
+Bonferroni), names the candidates the data cannot tell from it, goes on from its refit, and
+repeats until nothing is significant; what then remains is compared with the noise floor, and
+if it is still above it the gap is reported as unexplained, with the stations and channels
+where it lies (docs/gap.md).
 """
 
 from __future__ import annotations
@@ -186,7 +188,7 @@ ALIAS_CORRELATION = 0.95
 #: a candidate is refitted nonlinearly only if its linear score's uncorrected p-value is below
 #: this (far above any significance level used: a pre-filter, not a test)
 REFIT_P = 0.05
-#: convergence control of the candidate refits (they start next to their solution)
+#: convergence control of the station candidates' refits (linear effects: they settle fast)
 REFIT_OPTIONS = FitOptions(max_iterations=25)
 
 
@@ -243,6 +245,37 @@ def refit_with(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Can
         return None
 
 
+def _fresh_aero_fit(result: FitResult, shots: Sequence[ShotData],
+                    cand: Candidate) -> FitResult | None:
+    """The fit with ``cand``'s aero terms, from automatic starting values (not from
+    ``result``); None if it fails."""
+    from cadra.fitting import fit_shots
+
+    by_id = {s.shot_id: s for s in shots}
+    try:
+        res, _ = fit_shots([by_id[sf.shot_id] for sf in result.shots],
+                           augmented_model(result.model, cand))
+    except (ValueError, FloatingPointError):
+        return None
+    return res if res.status != "failed" and math.isfinite(res.chi2) else None
+
+
+def _finish(rf: FitResult, shots: Sequence[ShotData]) -> FitResult | None:
+    """Continue a refit that ran out of iterations, with the default options."""
+    from cadra.fitting.solver import fit
+
+    by_id = {s.shot_id: s for s in shots}
+    extras = [replace(e, value=float(v)) for e, v in zip(rf.extras, rf.extra_values,
+                                                         strict=True)]
+    local = [np.array([LOCAL_NAMES.index(n) for n in sf.local_free]) for sf in rf.shots]
+    try:
+        return fit([by_id[sf.shot_id] for sf in rf.shots], rf.model,
+                   [sf.state for sf in rf.shots], options=FitOptions(), local_free=local,
+                   extras=extras)
+    except (ValueError, FloatingPointError):
+        return None
+
+
 def _sizes(fit_res: FitResult, c: Candidate, shot_ids) -> tuple[list, list, list]:
     names = _param_names(c, shot_ids)
     return (list(names), [fit_res.value(n) for n in names], [fit_res.sigma(n) for n in names])
@@ -269,12 +302,13 @@ def _test(chi2_base, chi2_new, k, n_obs, n_free):
 def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel | None = None,
                  *, candidates: Sequence[Candidate] | None = None, alpha: float = 0.01,
                  max_effects: int = 3, integ: Integration | None = None,
-                 refit_physics: int = 4, refit_measurement: int = 3,
+                 refit_physics: int = 3, refit_measurement: int = 3,
                  progress: bool = False) -> GapDiagnosis:
     """Rank the candidate effects for a fit and add the significant ones greedily.
 
     Each round: every candidate is scored linearly against the current fit (module doc);
-    then the ``refit_physics`` best dynamics/aero candidates and the ``refit_measurement``
+    then the ``refit_physics`` best dynamics and aero candidates (each kind: a large aero
+    term's linear score is easily outranked by a dynamics one's) and the ``refit_measurement``
     best measurement candidates (by linear chi^2 drop, among those with an uncorrected linear
     p-value below :data:`REFIT_P`) are refitted nonlinearly (:func:`refit_with`: the whole
     fit redone with the candidate free); candidates are ranked by the refit's chi^2 drop where
@@ -329,8 +363,9 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
             # (uncorrected p < REFIT_P); a large nonlinear effect still makes its candidate's
             # linear drop large, if not exact
             to_refit = []
-            for is_meas, n_refit in ((False, refit_physics), (True, refit_measurement)):
-                pool = [c for c in remaining if (c.kind == "measurement") == is_meas
+            for kinds, n_refit in ((("dynamics",), refit_physics), (("aero",), refit_physics),
+                                   (("measurement",), refit_measurement)):
+                pool = [c for c in remaining if c.kind in kinds
                         and c.name in lin and lin[c.name]["p"] < REFIT_P]
                 pool.sort(key=lambda c, lin=lin: -lin[c.name]["dchi2"])
                 to_refit += pool[:n_refit]
@@ -347,7 +382,17 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 size = [(n, d, e) for n, d, e in zip(_param_names(c, ids), sc["delta"],
                                                      sc["sigma"], strict=False)]
                 if c in to_refit:
-                    rf = refit_with(current, shots, [c])
+                    # physics refits get the full iteration budget: a large effect takes a
+                    # while to settle, and a half-settled refit would lose the ranking
+                    rf = refit_with(current, shots, [c], None if c.kind == "measurement"
+                                    else FitOptions())
+                    if c.kind == "aero" and not current.extras:
+                        # an aero term also gets a fit from scratch (linear-theory start):
+                        # the fit without it may sit in a basin (a max(...) branch, terms
+                        # bent to mimic the missing one) that a refit from there cannot leave
+                        fresh = _fresh_aero_fit(current, shots, c)
+                        if fresh is not None and (rf is None or fresh.chi2 < rf.chi2):
+                            rf = fresh
                     if bar is not None:
                         bar.update(1)
                     if rf is not None and rf.status != "failed" and math.isfinite(rf.chi2):
@@ -385,6 +430,16 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 break
             c = best["_c"]
             rf = best["_refit"]
+            if rf is not None and rf.status != "converged":
+                # the refits run a short iteration budget; the one added is finished properly
+                more = _finish(rf, shots)
+                if more is not None and more.chi2 <= rf.chi2:
+                    rf = more
+                    k = len(_param_names(c, ids))
+                    t = _test(current.chi2, rf.chi2, k, n_obs, n_free)
+                    best = best.copy()
+                    best["dchi2"], best["p_value"] = t["dchi2"], t["p"]
+                    best["_size"] = list(zip(*_sizes(rf, c, ids), strict=True))
             names, vals, sigs = zip(*best["_size"], strict=True)
             added.append({"effect": c.name, "kind": c.kind, "params": tuple(names),
                           "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
