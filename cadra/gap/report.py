@@ -36,6 +36,10 @@ def summary_markdown(dg, result, where_tables=None) -> str:
         for a in dg.added:
             size = "; ".join(f"{n} = {v:.4g} ± {s:.2g}" for n, v, s in
                              zip(a["params"], a["size"], a["sigma"], strict=False))
+            if a.get("refit_status", "converged") != "converged":
+                size += f" (refit {a['refit_status'].replace('_', ' ')}: size poorly determined)"
+            if a.get("aliases"):
+                size += f"; indistinguishable here: {', '.join(a['aliases'])}"
             L.append(f"| {a['round']} | {a['effect']} | {size} | {a['p_value']:.2g} | "
                      f"{a['dchi2']:.1f} |")
     else:

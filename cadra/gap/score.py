@@ -183,6 +183,8 @@ _ASYMMETRIC = ("lateral cg offset", "inertia asymmetry", "products of inertia")
 #: refit chi^2 within this of the best: "the data cannot tell them apart" (with collinear
 #: columns); a likelihood ratio below e^2 ~ 7
 ALIAS_DCHI2 = 4.0
+#: how a refit that did not converge ended, for the verdict
+_HOW = {"stalled": "stalled", "max_iterations": "ran out of iterations", "linear": "was not run"}
 #: canonical correlation of the projected columns above which two candidates are aliases
 ALIAS_CORRELATION = 0.95
 #: a candidate is refitted nonlinearly only if its linear score's uncorrected p-value is below
@@ -445,6 +447,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                           "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
                           "p_value": float(best["p_value"]), "dchi2": float(best["dchi2"]),
                           "round": round_ + 1, "refit": rf is not None,
+                          "refit_status": rf.status if rf is not None else "linear",
                           "aliases": tuple(aliases)})
             remaining = [x for x in remaining if x.name != c.name]
             if rf is None:
@@ -477,6 +480,9 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                if a["aliases"] else "") + ": "
             + ", ".join(f"{n} = {v:.4g} ± {s:.2g}" for n, v, s in
                         zip(a["params"], a["size"], a["sigma"], strict=False))
+            + ("" if a["refit_status"] == "converged" else
+               f" [size poorly determined: the refit {_HOW.get(a['refit_status'], 'failed')}; "
+               "its sigma is a linearization and may be far too small]")
             for a in added)
         verdict += f" (chi^2/dof {rchi0:.2f} -> {rchi1:.2f})"
     else:
