@@ -269,9 +269,10 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                 full = np.zeros(jac.shape[:2] + (base + ne,))
                 full[:, :, :base] = jac[:, :, :base]
                 full[:, :, base + np.array(on, dtype=int)] = jac[:, :, base:]
-                full[:, :, base:] += station_columns(extras, sid, st.data.stations, pred, y)
+                C = station_columns(extras, sid, st.data.stations, pred, y)
+                full[:, :, base:] += C
                 jac = full
-                pred = add_station_terms(pred, extras, xv, sid, st.data.stations, y)
+                pred = pred + C @ xv
             st.pred, st.jac = pred, jac
         return _chi2(states, [st.pred for st in states])
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from cadra.fitting.data import CHANNELS
+from cadra.gap.where import by_group
 from cadra.io.atomic import atomic_output_dir
 
 _UNIT = {"x": ("µm", 1e6), "y": ("µm", 1e6), "z": ("µm", 1e6),
@@ -44,12 +45,11 @@ def summary_markdown(dg, result, where_tables=None) -> str:
                      f"{a['dchi2']:.1f} |")
     else:
         L.append("None.")
-    worst = (dg.where.assign(sq=dg.where["normalized"] ** 2)
-             .groupby(["station", "channel"])["sq"].mean().sort_values(ascending=False))
+    worst = by_group(dg.where, ["station", "channel"]).head(6)
     L += ["", "## Where the remaining residual lies (largest normalized rms)", "",
           "| station | channel | rms / σ |", "|---|---|---|"]
-    for (st, ch), v in worst.head(6).items():
-        L.append(f"| {st} | {ch} | {math.sqrt(v):.2f} |")
+    for r in worst.itertuples():
+        L.append(f"| {r.station} | {r.channel} | {r.rms_normalized:.2f} |")
     if where_tables is not None:
         L += ["", "## Where the fit as given misses (tests on its normalized residual)", ""]
         L += [f"- {x}" for x in where_tables["findings"]] or ["- no significant runs, "

@@ -33,7 +33,7 @@ from scipy import stats
 
 from cadra.aero import AeroModel
 from cadra.fitting.data import ShotData
-from cadra.fitting.extras import Extra, add_station_terms, shot_phys, shot_ref, station_columns
+from cadra.fitting.extras import Extra, shot_phys, shot_ref, station_columns
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import (
     LOCAL_NAMES,
@@ -42,6 +42,7 @@ from cadra.fitting.sensitivity import (
 )
 from cadra.fitting.solver import FitOptions
 from cadra.gap.candidates import Candidate, augmented_model, library
+from cadra.gap.where import by_group
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,8 +61,8 @@ class GapDiagnosis:
     fit_after: FitResult | None = None   # the fit with the added effects (the last refit)
 
 
-def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
-             cands: Sequence[Candidate], integ: Integration):
+def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],
+             integ: Integration):
     """Per shot: weighted residual, the fit's Jacobian (locals, free aero parameters, the
     fit's extras) and each candidate's columns (unweighted rows masked, divided by sigma).
     A dynamics candidate has its parameters per shot: its columns for other shots are 0."""
@@ -96,8 +97,9 @@ def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
         # the fit's own extras: physics columns from the runs, station columns analytic
         Jx = np.zeros(J.shape[:2] + (len(fit_extras),))
         Jx[:, :, on] = J[:, :, n_base:n_base + len(on)]
-        Jx += station_columns(fit_extras, sid, sd.stations, pred, states)
-        pred = add_station_terms(pred, fit_extras, xv, sid, sd.stations, states)
+        Cx = station_columns(fit_extras, sid, sd.stations, pred, states)
+        Jx += Cx
+        pred = pred + Cx @ xv
         Jfit = np.concatenate([J[:, :, :n_base], Jx], axis=2)
         cols = {}
         at = n_base + len(on)
@@ -126,7 +128,7 @@ def _columns(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
     return out
 
 
-def _stack(per_shot, n_shared, result=None):
+def _stack(per_shot, n_shared):
     """Dense block-arrow Jacobian of the fit (locals per shot, shared aero and extras) and
     the weighted residual."""
     n_loc = sum(p["local"] for p in per_shot)
@@ -262,22 +264,6 @@ def _fresh_aero_fit(result: FitResult, shots: Sequence[ShotData],
     return res if res.status != "failed" and math.isfinite(res.chi2) else None
 
 
-def _finish(rf: FitResult, shots: Sequence[ShotData]) -> FitResult | None:
-    """Continue a refit that ran out of iterations, with the default options."""
-    from cadra.fitting.solver import fit
-
-    by_id = {s.shot_id: s for s in shots}
-    extras = [replace(e, value=float(v)) for e, v in zip(rf.extras, rf.extra_values,
-                                                         strict=True)]
-    local = [np.array([LOCAL_NAMES.index(n) for n in sf.local_free]) for sf in rf.shots]
-    try:
-        return fit([by_id[sf.shot_id] for sf in rf.shots], rf.model,
-                   [sf.state for sf in rf.shots], options=FitOptions(), local_free=local,
-                   extras=extras)
-    except (ValueError, FloatingPointError):
-        return None
-
-
 def _sizes(fit_res: FitResult, c: Candidate, shot_ids) -> tuple[list, list, list]:
     names = _param_names(c, shot_ids)
     return (list(names), [fit_res.value(n) for n in names], [fit_res.sigma(n) for n in names])
@@ -348,9 +334,8 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
         bar = tqdm(desc="cadra2 diagnose", unit="refit", leave=False)
     try:
         for round_ in range(max_effects):
-            per = _columns(current, shots, current.model, remaining, integ)
-            J, r = _stack(per, current.model.free_indices().size + len(current.extras),
-                          current)
+            per = _columns(current, shots, remaining, integ)
+            J, r = _stack(per, current.model.free_indices().size + len(current.extras))
             n_obs, n_free = r.size, J.shape[1]
             Q = _orth(J)
             lin = {}
@@ -434,7 +419,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
             rf = best["_refit"]
             if rf is not None and rf.status != "converged":
                 # the refits run a short iteration budget; the one added is finished properly
-                more = _finish(rf, shots)
+                more = refit_with(rf, shots, [], FitOptions())
                 if more is not None and more.chi2 <= rf.chi2:
                     rf = more
                     k = len(_param_names(c, ids))
@@ -466,10 +451,9 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     p_floor = float(stats.chi2.sf(current.chi2, max(current.dof, 1)))
     unexplained = p_floor < alpha
     if unexplained:
-        worst = (where.assign(sq=where["normalized"] ** 2)
-                 .groupby(["station", "channel"])["sq"].mean().sort_values(ascending=False))
-        top = ", ".join(f"station {st} {ch} ({math.sqrt(v):.1f} sigma rms)"
-                        for (st, ch), v in worst.head(3).items())
+        worst = by_group(where, ["station", "channel"]).head(3)
+        top = ", ".join(f"station {r.station} {r.channel} ({r.rms_normalized:.1f} sigma rms)"
+                        for r in worst.itertuples())
         verdict = (("after " + ", ".join(a["effect"] for a in added) + ": " if added else "")
                    + f"unexplained: the residual stays above the noise floor (chi^2/dof = "
                    f"{rchi1:.2f}, p = {p_floor:.1e}); it lies mostly at {top}")
