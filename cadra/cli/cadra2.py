@@ -165,21 +165,24 @@ def _fit(args) -> int:
     return 0
 
 
-def _load_shots(args):
+def _load_shots(args, return_paths: bool = False):
+    """The shots named on the command line (and, with ``return_paths``, their trajectory
+    files)."""
     import math
 
     from cadra.fitting import load_shot_data
 
     if args.shot and len(args.shot) != len(args.trajectories):
         raise ValueError("give one --shot per trajectory file (same order), or none")
-    shots = []
+    shots, paths = [], []
     for k, item in enumerate(args.trajectories):
         traj, shot_path = _trajectory_and_shot(item, args.shot[k] if args.shot else None)
         shots.append(load_shot_data(
             shot_path, traj, sigma_t_s=args.sigma_time_s,
             min_sigma={"position_m": args.min_sigma_position_m,
                        "angle_rad": math.radians(args.min_sigma_angle_deg)}))
-    return shots
+        paths.append(traj)
+    return (shots, paths) if return_paths else shots
 
 
 def _single(args) -> int:
@@ -364,7 +367,7 @@ def _diagnose(args) -> int:
         return 1
     try:
         model = _apply_holds(resolve_model(args.model), args)
-        shots = _load_shots(args)
+        shots, trajs = _load_shots(args, return_paths=True)
         result, _ = fit_shots(shots, model,
                               options=FitOptions(max_iterations=args.max_iterations))
         if not result:
@@ -372,8 +375,7 @@ def _diagnose(args) -> int:
                              "diagnose")
         dg = diagnose_gap(result, shots, alpha=args.alpha, progress=True)
         stage_one = {}
-        for k, (sd, item) in enumerate(zip(shots, args.trajectories, strict=True)):
-            traj, _ = _trajectory_and_shot(item, args.shot[k] if args.shot else None)
+        for sd, traj in zip(shots, trajs, strict=True):
             table = load_trajectory(traj).table
             if "x_consistency" in table:
                 stage_one[sd.shot_id] = table
