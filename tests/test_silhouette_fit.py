@@ -192,3 +192,31 @@ def test_band_pixels_match_brute_force_nearest_edge():
               + (vs[:, None] - a[None, :, 1] - t2 * dv[None, :, 1]) ** 2).min(axis=1)
         n_in += int((d2 <= band * band).sum())
     assert n_in == len(lin)
+
+
+@pytest.mark.parametrize("shadow_level", [0.0, 0.25])
+def test_dark_level_models_meet_targets(shadow_level):
+    """Both dark-level models (tied to the bright level image-wide, the default; or free per
+    segment) meet the sphere target on renders with an opaque shadow and a translucent one,
+    and the two agree to well within the target."""
+    from cadra.imaging.silhouette_fit import FitSettings
+
+    cfg = RenderConfig(shadow_level=shadow_level)
+    rng = np.random.default_rng(5)
+    E = {"tied": [], "segment": []}
+    for _ in range(8):
+        case = random_view_case(SPHERE, rng, cfg)
+        for mode in E:
+            fit = measure_case(case, SPHERE, settings=FitSettings(dark_level=mode))
+            assert fit.ok and fit.converged, fit.reason
+            E[mode].append(case_errors(case, fit, SPHERE)[0])
+    for mode, e in E.items():
+        assert max(_rms(np.array(e))) <= TARGET["sphere"][0], mode
+    assert np.max(np.abs(np.array(E["tied"]) - np.array(E["segment"]))) < 0.005
+
+
+def test_fit_settings_refuse_an_unknown_dark_level():
+    from cadra.imaging.silhouette_fit import FitSettings
+
+    with pytest.raises(ValueError, match="dark_level"):
+        FitSettings(dark_level="global")

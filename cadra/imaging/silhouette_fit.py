@@ -6,7 +6,9 @@ Stage one's two methods (seed 004, "Data Reduction and Analysis"; docs/stage1.md
     placed at a trial pose; pixels in a band around it are grouped into short contour
     *segments*; in each segment a blurred-edge model ``I = L (1 - g) + D g + a L h``,
     ``g = Phi((delta - d) / s)`` (d = the pixel centre's signed distance from the outline,
-    + outside; L, D the local bright and dark levels; s the edge width) gives the segment's
+    + outside; L the local bright level, D the dark level, tied to it image-wide as
+    ``D = r L + c`` by default (``FitSettings.dark_level``: a free D per segment costs each
+    offset ~12 % of its sigma); s the edge width) gives the segment's
     edge offset ``delta`` along the outward normal, with its variance (stage A). ``a L h`` is
     the diffraction fringe (:func:`_edge_profile`): a bright band outside the edge and a dark
     one inside, the second derivative of a blurred step. The edge width and the fringe
@@ -82,6 +84,12 @@ class FitSettings:
     fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
     warm_rounds: int = 2            # stage-A outer rounds warm-started from the last pose
+    dark_level: str = "tied"        # "tied": D = r L + c image-wide; "segment": D per segment
+
+    def __post_init__(self):
+        if self.dark_level not in ("tied", "segment"):
+            raise ValueError(f"FitSettings.dark_level: expected 'tied' or 'segment', got "
+                             f"{self.dark_level!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -303,13 +311,15 @@ def _edge_profile(x, s, ratio):
 
 @numba.njit(cache=True)
 def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P, Hh, Hp,
-                   reuse, want_global):
+                   reuse, want_global, tied, rc):
     """Gauss-Newton normal equations per segment for (L, D, delta), and for the image's
     global edge profile ``prof = (s0, a0, s4, a4)`` (segment q's width ``s0 + s4 c4[q]``, its
     fringe amplitude ``a0 + a4 c4[q]``) into ``Hg`` (4x4) and ``bg``. Returns sum w r^2.
     ``reuse``: take each pixel's profile values from ``G, P, Hh, Hp`` (filled by the
     noise-model pass at the same state) instead of computing them; ``want_global``: fill
-    ``Hg, bg`` too (only the profile step needs them)."""
+    ``Hg, bg`` too (only the profile step needs them). ``tied``: the dark level is not a
+    segment's own unknown but ``D = rc[0] L + rc[1]`` (image-wide ``rc``, two more global
+    unknowns: ``Hg`` is then 6x6); the D row of each segment's system is left empty."""
     A[:] = 0.0
     b[:] = 0.0
     Hg[:] = 0.0
@@ -329,6 +339,9 @@ def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P,
         r = I[j] - (Lk * (1.0 - g) + Dk * g + a * Lk * h)
         c0 = 1.0 - g + a * h
         c1 = g
+        if tied:
+            c0 += rc[0] * g
+            c1 = 0.0
         c2 = ((Dk - Lk) * p + a * Lk * hp / ratio) / s
         ww = w[j]
         A[kk, 0, 0] += ww * c0 * c0
@@ -346,15 +359,18 @@ def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P,
         # global profile: d/ds = -c2 x / s, d/da = L h; the cos(4 theta) parts times c4
         js = -c2 * x / s
         ja = Lk * h
-        jv = (js, ja, js * c4[kk], ja * c4[kk])
-        for i0 in range(4):
+        jv = (js, ja, js * c4[kk], ja * c4[kk], Lk * g, g)
+        ng = Hg.shape[0]
+        for i0 in range(ng):
             bg[i0] += ww * jv[i0] * r
-            for i1 in range(i0, 4):
+            for i1 in range(i0, ng):
                 Hg[i0, i1] += ww * jv[i0] * jv[i1]
-    for i0 in range(4):
+    for i0 in range(Hg.shape[0]):
         for i1 in range(i0):
             Hg[i0, i1] = Hg[i1, i0]
     for kk in range(A.shape[0]):
+        if tied:
+            A[kk, 1, 1] = 1.0   # D is no segment unknown: its step solves to 0
         A[kk, 1, 0] = A[kk, 0, 1]
         A[kk, 2, 0] = A[kk, 0, 2]
         A[kk, 2, 1] = A[kk, 1, 2]
@@ -391,16 +407,23 @@ def _solve3_ridge(A, b):
 
 
 @numba.njit(cache=True)
-def _profile_step(prof, Hg, bg):
-    """Damped, bounded Gauss-Newton step of the global edge profile ``(s0, a0, s4, a4)``."""
+def _profile_step(prof, Hg, bg, rc):
+    """Damped, bounded Gauss-Newton step of the global edge profile ``(s0, a0, s4, a4)``
+    and, when ``Hg`` is 6x6, of the tied dark level's ``rc`` (full step: it is linear)."""
     Hr = Hg.copy()
-    tr = Hg[0, 0] + Hg[1, 1] + Hg[2, 2] + Hg[3, 3]
-    for i in range(4):
+    ng = Hg.shape[0]
+    tr = 0.0
+    for i in range(ng):
+        tr += Hg[i, i]
+    for i in range(ng):
         Hr[i, i] += 1e-9 * tr + 1e-15
     st = np.linalg.solve(Hr, bg)
-    for i in range(4):
+    for i in range(ng):
         if not math.isfinite(st[i]):
             return
+    if ng == 6:
+        rc[0] = min(max(rc[0] + st[4], -0.5), 0.95)
+        rc[1] = min(max(rc[1] + st[5], -0.5), 0.95)
     # damped and bounded: a strong fringe is nearly the shape of a width change, and a full
     # step can throw the width (and every offset) far off
     s = prof[0]
@@ -411,10 +434,11 @@ def _profile_step(prof, Hg, bg):
 
 
 @numba.njit(cache=True)
-def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D0):
+def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D0, tied):
     """Stage A's iterations in one compiled loop (see :func:`_stage_a`): per-segment levels
     and offsets by Gauss-Newton, the damped global edge profile (width and fringe), the noise
-    model, and each offset's formal variance."""
+    model, and each offset's formal variance. ``tied``: each segment's dark level is
+    ``D = r L + c`` with image-wide ``(r, c)`` (``FitSettings.dark_level``)."""
     n = I.shape[0]
     L = np.full(K, L0)
     D = np.full(K, D0)
@@ -434,6 +458,10 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
             L[q] = sumL[q] / cntL[q]
         if cntD[q] > 0:
             D[q] = sumD[q] / cntD[q]
+    rc = np.array([D0 / L0 if L0 > 0.0 else 0.0, 0.0])
+    if tied:
+        for q in range(K):
+            D[q] = rc[0] * L[q] + rc[1]
     delta = np.zeros(K)
     prof = prof0.copy()
     w = np.ones(n)
@@ -445,8 +473,9 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
                              0.2 * max(coef[0] + 0.5 * coef[1] + 0.25 * coef[2], 1e-12))
     A = np.empty((K, 3, 3))
     b = np.empty((K, 3))
-    Hg = np.empty((4, 4))
-    bg = np.empty(4)
+    ng = 6 if tied else 4
+    Hg = np.empty((ng, ng))
+    bg = np.empty(ng)
     G = np.empty(n)
     P = np.empty(n)
     Hh = np.empty(n)
@@ -456,16 +485,19 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
     for outer in range(n_outer):
         for _ in range(2):
             _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
-                           G, P, Hh, Hp, reuse, False)
+                           G, P, Hh, Hp, reuse, False, tied, rc)
             reuse = False
             for q in range(K):
                 st = _solve3_ridge(A[q], b[q])
                 L[q] += st[0]
-                D[q] += st[1]
+                D[q] = rc[0] * L[q] + rc[1] if tied else D[q] + st[1]
                 delta[q] += min(max(st[2], -1.5), 1.5)
         _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
-                       G, P, Hh, Hp, False, True)
-        _profile_step(prof, Hg, bg)
+                       G, P, Hh, Hp, False, True, tied, rc)
+        _profile_step(prof, Hg, bg, rc)
+        if tied:
+            for q in range(K):
+                D[q] = rc[0] * L[q] + rc[1]
         if outer == 0 or outer == n_outer - 1:
             # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
             N = np.zeros((3, 3))
@@ -505,8 +537,8 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
                 w[j] = 1.0 / max(coef[0] + coef[1] * m + coef[2] * m * m, floor)
             reuse = True
     chi2 = _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
-                          G, P, Hh, Hp, reuse, False)
-    scale = chi2 / max(n - 3 * K, 1)
+                          G, P, Hh, Hp, reuse, False, tied, rc)
+    scale = chi2 / max(n - (2 * K + 6 if tied else 3 * K), 1)
     var_delta = np.empty(K)
     e3 = np.zeros(3)
     e3[2] = 1.0
@@ -612,7 +644,8 @@ def _stage_a(img, geo: _Outline, settings: FitSettings, exclude, profile0: np.nd
     L, D, delta, var_delta, prof, coef, w, chi2 = _segment_fit(
         np.ascontiguousarray(I_u, dtype=np.float64), np.ascontiguousarray(d_u), k, K, c4,
         np.asarray(profile0, float).copy(), float(settings.fringe_width_ratio), coef_in, has,
-        settings.warm_rounds if has else settings.cold_rounds, L0, D0)
+        settings.warm_rounds if has else settings.cold_rounds, L0, D0,
+        settings.dark_level == "tied")
     s = float(prof[0])
     npix = len(I_u)
     # segment geometry, weighted by the pixels' information about delta
