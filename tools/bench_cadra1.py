@@ -2,14 +2,14 @@
 
 Usage::
 
-    python tools/bench_cadra1.py            # full run (~3-4 min on 2 cores)
+    python tools/bench_cadra1.py            # full run (~6-8 min on 2 cores)
     python tools/bench_cadra1.py --quick    # fewer cases, for a smoke test
 
 Sections (all on the M2 capsule, 3.556 cm = 280 px across, and a sphere of the same diameter):
 
 1. default realism, random subpixel positions and attitudes: bias and rms of the reference
    point (px, mm) and of the image axis angle (deg), the reported sigma and its ratio to the
-   actual error (>= 200 renders per body), the Cramer-Rao bound (cadra.imaging.crb) on a few
+   actual error (1000 renders per body), the Cramer-Rao bound (cadra.imaging.crb) on a few
    of the same cases and the ratio rms / bound;
 2. the pixel-level baseline (Otsu threshold + image moments, cadra.imaging.baseline) on the
    same images, and its error over CADRA's;
@@ -39,64 +39,58 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 SCALE_MM_PER_PX = 0.127
 
 
-def _cases(body, n, config, seed):
-    from cadra.imaging.synthetic import measure_case, random_view_case
+def _cases(body, n, config, seed, keep=0, baseline=False):
+    """Render and measure ``n`` random cases, one at a time (1000 renders of 512 x 512 do
+    not all fit in memory). Returns (errors, sigmas, baseline errors or None, fit times, the
+    first ``keep`` cases)."""
+    from cadra.imaging.synthetic import case_errors, measure_case, random_view_case
 
     rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(n):
+    E, S, B, T, kept = [], [], [], [], []
+    for i in range(n):
         case = random_view_case(body, rng, config)
         t0 = time.perf_counter()
         fit = measure_case(case, body)
-        dt = time.perf_counter() - t0
-        out.append((case, fit, dt))
-    return out
-
-
-def _errors(body, results):
-    """(errors, sigmas) arrays: u, v px (and axis angle deg for a non-sphere)."""
-    from cadra.imaging.synthetic import case_errors
-
-    E, S = [], []
-    for case, fit, _ in results:
+        T.append(time.perf_counter() - t0)
         e, s = case_errors(case, fit, body)
         E.append(e)
         S.append(s)
-    return np.array(E), np.array(S)
+        if baseline:
+            B.append(_baseline_error(body, case))
+        if i < keep:
+            kept.append(case)
+    return (np.array(E), np.array(S), np.array(B) if baseline else None, np.array(T), kept)
 
 
-def _baseline_errors(body, results):
+def _baseline_error(body, case):
+    """Error of the Otsu + moments baseline on one case: u, v px (and axis deg)."""
     from cadra.imaging.baseline import (
         otsu_moments,
         polygon_centroid_offset,
         reference_from_centroid,
     )
 
-    E = []
-    for case, _fit, _ in results:
-        b = otsu_moments(case.image_u8)
-        if body.kind == "sphere":
-            E.append([b.u_px - case.u_ref_px, b.v_px - case.v_ref_px])
-            continue
-        # the major axis of an M2 capsule runs across the body: the axis is 90 deg from it;
-        # pick the nose direction closest to the truth (generous to the baseline)
-        ang = b.angle_rad + math.pi / 2
-        if math.cos(ang - case.axis_angle_px_rad) < 0:
-            ang += math.pi
-        poly = case.scene.bodies[0]
-        off = polygon_centroid_offset(poly, (case.u_ref_px, case.v_ref_px),
-                                      case.axis_angle_px_rad)
-        u, v = reference_from_centroid(b.u_px, b.v_px, ang, off)
-        E.append([u - case.u_ref_px, v - case.v_ref_px,
-                  math.degrees(math.remainder(ang - case.axis_angle_px_rad, 2 * math.pi))])
-    return np.array(E)
+    b = otsu_moments(case.image_u8)
+    if body.kind == "sphere":
+        return [b.u_px - case.u_ref_px, b.v_px - case.v_ref_px]
+    # the major axis of an M2 capsule runs across the body: the axis is 90 deg from it;
+    # pick the nose direction closest to the truth (generous to the baseline)
+    ang = b.angle_rad + math.pi / 2
+    if math.cos(ang - case.axis_angle_px_rad) < 0:
+        ang += math.pi
+    poly = case.scene.bodies[0]
+    off = polygon_centroid_offset(poly, (case.u_ref_px, case.v_ref_px),
+                                  case.axis_angle_px_rad)
+    u, v = reference_from_centroid(b.u_px, b.v_px, ang, off)
+    return [u - case.u_ref_px, v - case.v_ref_px,
+            math.degrees(math.remainder(ang - case.axis_angle_px_rad, 2 * math.pi))]
 
 
-def _crb(body, results, k):
+def _crb(body, cases):
     from cadra.imaging.crb import pose_crb
 
     sig = []
-    for case, _, _ in results[:k]:
+    for case in cases:
         c = pose_crb(case.scene.bodies[0], (case.u_ref_px, case.v_ref_px), case.config,
                      motion_blur_px=case.scene.motion_blur_px, width_px=case.view.width_px,
                      height_px=case.view.height_px, fit_angle=body.kind != "sphere")
@@ -109,6 +103,13 @@ def _crb(body, results, k):
 
 def _rms(a):
     return np.sqrt(np.mean(np.square(a), axis=0))
+
+
+def _ratio_se(B, E, n_boot=400, seed=0):
+    """Bootstrap standard error of rms(B) / rms(E) per channel (renders resampled together)."""
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, len(E), (n_boot, len(E)))
+    return np.std([_rms(B[i]) / _rms(E[i]) for i in idx], axis=0)
 
 
 def accuracy(n_default, n_variant, n_crb):
@@ -127,21 +128,21 @@ def accuracy(n_default, n_variant, n_crb):
     }
     for name, body in bodies.items():
         t0 = time.perf_counter()
-        res = _cases(body, n_default, RenderConfig(), seed=11 if name == "sphere" else 12)
-        E, S = _errors(body, res)
-        B = _baseline_errors(body, res)
-        crb = _crb(body, res, n_crb)
+        E, S, B, T, kept = _cases(body, n_default, RenderConfig(),
+                                  seed=11 if name == "sphere" else 12, keep=n_crb,
+                                  baseline=True)
+        crb = _crb(body, kept)
         rms, bias = _rms(E), E.mean(axis=0)
-        r = {"n": len(res), "bias": bias.tolist(), "rms": rms.tolist(),
+        r = {"n": len(E), "bias": bias.tolist(), "rms": rms.tolist(),
              "sigma_rms": _rms(S).tolist(), "sigma_ratio": (_rms(S) / rms).tolist(),
              "crb": crb.tolist(), "crb_ratio": (rms / crb).tolist(),
              "baseline_rms": _rms(B).tolist(), "baseline_bias": B.mean(axis=0).tolist(),
              "baseline_ratio": (_rms(B) / rms).tolist(),
-             "ms_per_view": 1e3 * float(np.mean([d for *_, d in res])),
+             "baseline_ratio_se": _ratio_se(B, E).tolist(),
+             "ms_per_view": 1e3 * float(np.mean(T)),
              "seconds": time.perf_counter() - t0, "variants": {}}
         for vname, cfg in variants.items():
-            vres = _cases(body, n_variant, cfg, seed=21 if name == "sphere" else 22)
-            VE, VS = _errors(body, vres)
+            VE, VS, *_ = _cases(body, n_variant, cfg, seed=21 if name == "sphere" else 22)
             r["variants"][vname] = {"bias": VE.mean(axis=0).tolist(), "rms": _rms(VE).tolist(),
                                     "sigma_ratio": (_rms(VS) / _rms(VE)).tolist()}
         out[name] = r
@@ -201,7 +202,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer cases (smoke test)")
     args = ap.parse_args()
-    n_default, n_variant, n_crb = (30, 10, 2) if args.quick else (200, 50, 6)
+    # 1000 renders per body: the baseline ratio's standard error is then ~3 % (at 200 it was
+    # ~7 %, and one 200-render draw gave 9.5 where 1000 give 11)
+    n_default, n_variant, n_crb = (30, 10, 2) if args.quick else (1000, 50, 6)
     repo = Path(__file__).resolve().parents[1]
     t0 = time.perf_counter()
     acc = accuracy(n_default, n_variant, n_crb)
@@ -216,7 +219,7 @@ def main() -> int:
             print(f"  {c:9s} bias {r['bias'][i]:+.5f}  rms {r['rms'][i]:.5f}{mm}  "
                   f"CRB {r['crb'][i]:.5f}  rms/CRB {r['crb_ratio'][i]:.2f}  "
                   f"sigma/rms {r['sigma_ratio'][i]:.2f}  baseline rms {r['baseline_rms'][i]:.4f}"
-                  f" ({r['baseline_ratio'][i]:.0f}x)")
+                  f" ({r['baseline_ratio'][i]:.1f} +- {r['baseline_ratio_se'][i]:.1f}x)")
         for vname, v in r["variants"].items():
             print(f"  {vname:14s} rms " + " ".join(f"{x:.5f}" for x in v["rms"])
                   + "  bias " + " ".join(f"{x:+.5f}" for x in v["bias"])
@@ -245,6 +248,8 @@ def main() -> int:
         "crb_sphere_px": s["crb"], "crb_capsule": c["crb"],
         "crb_ratio_max": max(s["crb_ratio"] + c["crb_ratio"]),
         "baseline_ratio_min": min(s["baseline_ratio"] + c["baseline_ratio"]),
+        "baseline_ratio_min_se": (s["baseline_ratio_se"] + c["baseline_ratio_se"])[int(
+            np.argmin(s["baseline_ratio"] + c["baseline_ratio"]))],
         "sigma_ratio_min": min(s["sigma_ratio"] + c["sigma_ratio"]),
         "sigma_ratio_max": max(s["sigma_ratio"] + c["sigma_ratio"]),
         "renders_per_body": s["n"],
