@@ -114,3 +114,20 @@ def test_extra_named_like_a_model_parameter_refused(case):
     sim, sd, y0 = case
     with pytest.raises(ValueError, match="names of their own"):
         fit([sd], sim.model, [y0], extras=[Extra("CD_A1", station=2, measure="position_x")])
+
+
+def test_fit_shots_carries_extras_through_both_stages(case):
+    """From automatic starting values (linear-theory aero start, states from the data, the
+    film-sigma first stage and the real-sigma second), the extras still land on the truth."""
+    from cadra.fitting import fit_shots
+
+    sim, sd, _ = case
+    extras = [Extra("cg_z", phys_direction=_dir(P_CG_OFFSET + 2)),
+              Extra("st6_y", station=6, measure="position_y"),
+              Extra("st10_dt", station=10, measure="timing")]
+    res, _ = fit_shots([sd], sim.model, extras=extras)
+    assert res.converged, res.message
+    assert res.value("cg_z") == pytest.approx(CG_Z, rel=1e-3)
+    assert res.value("st6_y") == pytest.approx(BIAS_Y, rel=1e-2)
+    assert res.value("st10_dt") == pytest.approx(DT, rel=1e-2)
+    assert res.reduced_chi2 < 1e-3

@@ -34,7 +34,8 @@ from cadra.fitting.start import estimate_motion, initial_states, starting_model
 def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
               options: FitOptions | None = None, auto_start: bool = True,
               initial: Sequence | None = None,
-              continuation: dict | None = FILM_SIGMAS) -> tuple[FitResult, AeroModel]:
+              continuation: dict | None = FILM_SIGMAS, local_free=None,
+              extras: Sequence = ()) -> tuple[FitResult, AeroModel]:
     """Fit ``model`` to ``shots`` from automatic starting values.
 
     With ``auto_start`` the free parameters first move to the linear-theory targets
@@ -47,6 +48,9 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
     very steep chi^2 of micrometre data can otherwise walk into a region where a term of a
     ``max(...)`` form never acts (its parameter then has no effect and cannot come back);
     ``None`` fits with the real sigmas at once.
+
+    ``local_free`` and ``extras`` are passed to :func:`cadra.fitting.solver.fit` (each
+    stage; the second starts the extras at the first's values).
 
     Returns the result and the starting model (for the report's "initial value" column).
     """
@@ -61,16 +65,21 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
     start = starting_model(first_shots, model) if auto_start else model
     states = list(initial) if initial is not None else initial_states(
         first_shots, start, options.integration)
+    extras = list(extras)
     if staged:
-        first = fit(first_shots, start, states, options=options)
+        first = fit(first_shots, start, states, options=options, local_free=local_free,
+                    extras=extras)
         if first.status in ("converged", "max_iterations", "stalled") and np.all(
                 np.isfinite(first.aero_values)):
+            extras2 = [replace(e, value=float(v)) for e, v in
+                       zip(first.extras, first.extra_values, strict=True)]
             result = fit(shots, first.model, [sf.state for sf in first.shots],
-                         options=options)
+                         options=options, local_free=local_free, extras=extras2)
             return replace(result, iterations=first.iterations + result.iterations,
                            elapsed_s=first.elapsed_s + result.elapsed_s,
                            history=first.history + result.history), start
-    return fit(shots, start, states, options=options), start
+    return fit(shots, start, states, options=options, local_free=local_free,
+               extras=extras), start
 
 
 __all__ = ["CHANNELS", "FILM_SIGMAS", "LOCAL_NAMES", "FitDataError", "FitOptions",
