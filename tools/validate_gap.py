@@ -22,8 +22,10 @@ C_m += a s^3 with a s_max^3 = (0.07-0.15) |Cm_A1| s_max (s_max the shot's larges
 larger destabilizing terms change the motion so much that even the true model, fitted from
 linear-theory starts, lands in another basin),
 C_mq += (30-80) s^2 with s = sin(alpha) - sin(alpha_ref); C_m += (0.05-0.15)(M - M_nom);
-station position bias 2-5 um in y or z; timing bias 50-150 ns at one station of three sphere
-shots; optical scale 3-8e-4 at one station of three M2 shots; angle biases 0.01-0.03 deg.
+station position bias 2-5 um in y or z at one station of three M2 shots; timing bias 50-150
+ns at one station of three sphere shots; optical scale 3-8e-4 at one station of three M2
+shots (the M2 sets each launched at its own lateral offset, ``OFFSET_CASES``); angle biases
+0.01-0.03 deg.
 Random signs.
 
 Per case: top-1 rate (the injected effect ranks first; ``top1_alias`` also counts it when it is
@@ -64,7 +66,14 @@ M1_CASES = ("inertia_asym", "cmM")
 #: set); a station's scale error is the same as a z (or y) bias in one shot when the model
 #: flies near the axis in the other direction, and separates across shots at different
 #: positions (three M2 shots)
-SET_CASES = {"timing": ["sphere_1", "sphere_2", "sphere_3"], "scale": 3}
+SET_CASES = {"timing": ["sphere_1", "sphere_2", "sphere_3"], "scale": 3, "station_bias": 3}
+#: the seven M2 sample shots fly nearly the same path (y ~ 0, z within 10 % of each other at
+#: any station), so a station's z bias and its scale error stay aliased even across them:
+#: in the scale and station-bias sets each shot is launched at its own lateral offset, drawn
+#: uniformly within +-LATERAL_OFFSET_M in y and z (the dynamics do not depend on y and z, so
+#: that is the same path translated; a calibration campaign would vary the launch this way)
+OFFSET_CASES = ("scale", "station_bias")
+LATERAL_OFFSET_M = 0.02
 #: on a body of revolution the fit frees the roll angle with these effects, and the data see
 #: only their size across the axis, not their direction in the body (docs/gap.md)
 ROLL_INVARIANT = ("inertia_asym",)
@@ -173,12 +182,16 @@ def make_case(name, rng, spec, model_file_dir):
     raise ValueError(f"unknown case {name!r}")
 
 
-def _measure(sim, nominal, spec, seed, edit):
-    """Stage-one-like measurements of a simulated shot, with a measurement edit applied."""
+def _measure(sim, nominal, spec, seed, edit, offset=(0.0, 0.0)):
+    """Stage-one-like measurements of a simulated shot, with a measurement edit applied;
+    ``offset``: (y, z) m by which the whole path is translated (a lateral launch offset)."""
     from cadra.fitting import shot_data_from_truth
 
     sphere = sim.body.kind == "sphere"
-    sd = shot_data_from_truth(sim.truth, nominal, spec.shot_id, sim.body.kind,
+    truth = sim.truth.copy()
+    truth["y_m"] += offset[0]
+    truth["z_m"] += offset[1]
+    sd = shot_data_from_truth(truth, nominal, spec.shot_id, sim.body.kind,
                               sigma_position_m=SP_SPHERE if sphere else SP,
                               sigma_angle_rad=math.radians(SA_DEG),
                               rng=np.random.default_rng(seed))
@@ -188,10 +201,10 @@ def _measure(sim, nominal, spec, seed, edit):
     if isinstance(edit, tuple):
         kind, st, v = edit
         if kind == "timing":      # the spark fired v after its recorded time
-            meas[st, :3] += sim.truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()[st] * v
+            meas[st, :3] += truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()[st] * v
         else:                     # scale about the station's optical centre (x_station, 0, 0)
-            c = np.array([sim.truth["x_m"].iloc[st], 0.0, 0.0])
-            meas[st, :3] += v * (sim.truth[["x_m", "y_m", "z_m"]].to_numpy()[st] - c)
+            c = np.array([truth["x_m"].iloc[st], 0.0, 0.0])
+            meas[st, :3] += v * (truth[["x_m", "y_m", "z_m"]].to_numpy()[st] - c)
     else:
         meas = edit(meas)
     return replace(sd, meas=meas)
@@ -220,8 +233,10 @@ def run_trial(case, rng, tmpdir):
         sim = simulate_shot(se)
         clean_sim = simulate_shot(spec) if se is not spec else sim
         nominal = clean_sim.rigid.with_effects(Effects())
-        shots.append(_measure(sim, nominal, spec, seed, edit))
-        clean_shots.append(_measure(clean_sim, nominal, spec, seed, None))
+        offset = (tuple(rng.uniform(-LATERAL_OFFSET_M, LATERAL_OFFSET_M, 2))
+                  if case in OFFSET_CASES else (0.0, 0.0))
+        shots.append(_measure(sim, nominal, spec, seed, edit, offset))
+        clean_shots.append(_measure(clean_sim, nominal, spec, seed, None, offset))
         model = clean_sim.model
     t0 = time.perf_counter()
     res, _ = fit_shots(shots, model)
