@@ -435,11 +435,6 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 more = refit_with(rf, shots, [], FitOptions())
                 if more is not None and more.chi2 <= rf.chi2:
                     rf = more
-                    k = len(_param_names(c, ids))
-                    t = _test(current.chi2, rf.chi2, k, n_obs, n_free)
-                    best = best.copy()
-                    best["dchi2"], best["p_value"] = t["dchi2"], t["p"]
-                    best["_size"] = list(zip(*_sizes(rf, c, ids), strict=True))
             if rf is not None and c.kind != "aero" and stats.chi2.sf(
                     rf.chi2, max(rf.dof, 1)) < alpha:
                 # still above the noise floor: the fit may have stayed in the basin of the
@@ -447,11 +442,11 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 fresh = fresh_fit(current, shots, c)
                 if fresh is not None and fresh.chi2 < rf.chi2:
                     rf = fresh
-                    k = len(_param_names(c, ids))
-                    t = _test(current.chi2, rf.chi2, k, n_obs, n_free)
-                    best = best.copy()
-                    best["dchi2"], best["p_value"] = t["dchi2"], t["p"]
-                    best["_size"] = list(zip(*_sizes(rf, c, ids), strict=True))
+            if rf is not best["_refit"]:
+                t = _test(current.chi2, rf.chi2, len(_param_names(c, ids)), n_obs, n_free)
+                best = best.copy()
+                best["dchi2"], best["p_value"] = t["dchi2"], t["p"]
+                best["_size"] = list(zip(*_sizes(rf, c, ids), strict=True))
             names, vals, sigs = zip(*best["_size"], strict=True)
             added.append({"effect": c.name, "kind": c.kind, "params": tuple(names),
                           "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
