@@ -131,3 +131,28 @@ def test_fit_shots_carries_extras_through_both_stages(case):
     assert res.value("st6_y") == pytest.approx(BIAS_Y, rel=1e-2)
     assert res.value("st10_dt") == pytest.approx(DT, rel=1e-2)
     assert res.reduced_chi2 < 1e-3
+
+
+def test_held_extras_act_but_are_not_fitted(case):
+    """A held extra acts at its value (here the true cg offset and timing bias: the fit of
+    the free station bias is then exact) and is not an unknown: it has no column in the
+    covariance, the degrees of freedom count only the free unknowns, and the result lists it.
+    Held at a wrong value it leaves a misfit no free unknown can remove."""
+    sim, sd, y0 = case
+    free = Extra("st6_y", station=6, measure="position_y")
+    held = [Extra("cg_z", phys_direction=_dir(P_CG_OFFSET + 2), value=CG_Z, held=True),
+            Extra("st10_dt", station=10, measure="timing", value=DT, held=True)]
+    res = fit([sd], sim.model.with_values({}), [y0], extras=[free, *held])
+    assert res.converged, res.message
+    assert res.extra_names == ("st6_y",)
+    assert {e.name for e in res.held_extras} == {"cg_z", "st10_dt"}
+    assert res.value("cg_z") == CG_Z and res.sigma("cg_z") == 0.0
+    assert res.value("st6_y") == pytest.approx(BIAS_Y, rel=1e-3)
+    assert res.reduced_chi2 < 1e-4
+    assert "cg_z" not in res.param_names
+    full = fit([sd], sim.model.with_values({}), [y0],
+               extras=[free, *(replace(e, held=False) for e in held)])
+    assert res.n_free == full.n_free - 2
+    wrong = fit([sd], sim.model.with_values({}), [y0],
+                extras=[free, replace(held[0], value=0.0), held[1]])
+    assert wrong.reduced_chi2 > 1e3 * max(res.reduced_chi2, 1e-6)

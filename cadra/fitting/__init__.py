@@ -73,6 +73,7 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
                 np.isfinite(first.aero_values)):
             extras2 = [replace(e, value=float(v)) for e, v in
                        zip(first.extras, first.extra_values, strict=True)]
+            extras2 += list(first.held_extras)
             result = fit(shots, first.model, [sf.state for sf in first.shots],
                          options=options, local_free=local_free, extras=extras2)
             return replace(result, iterations=first.iterations + result.iterations,

@@ -26,6 +26,9 @@ An :class:`Extra` is one scalar unknown shared by the shots it applies to, of on
   below stage one's precision. Scale: the x part (about the station's optical centre, where
   the model is) is left out for the same reason.
 
+An extra marked ``held`` keeps its ``value``: it acts on the prediction but is not fitted (a
+point of a profile likelihood, :mod:`cadra.fitting.profile`).
+
 Pure data: a tuple of extras ships to a scheduler like the rest of the fit's inputs.
 """
 
@@ -43,7 +46,8 @@ MEASURES = ("position_x", "position_y", "position_z", "timing", "scale")
 
 @dataclass(frozen=True)
 class Extra:
-    """One extra unknown (module doc). ``shots``: the shot ids it applies to (None: all)."""
+    """One extra unknown (module doc). ``shots``: the shot ids it applies to (None: all);
+    ``held``: kept at ``value``, not fitted."""
 
     name: str
     phys_direction: tuple[float, ...] | None = None
@@ -51,6 +55,7 @@ class Extra:
     measure: str = ""
     shots: tuple[str, ...] | None = None
     value: float = 0.0
+    held: bool = False
 
     def __post_init__(self):
         if (self.phys_direction is None) == (self.station is None):

@@ -82,6 +82,7 @@ class FitResult:
     extras: tuple = ()               # the fit's extra unknowns (cadra.fitting.extras.Extra)
     extra_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     extra_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    held_extras: tuple = ()          # extras held at their values (not fitted)
 
     def __bool__(self) -> bool:
         return self.status == "converged"
@@ -122,11 +123,16 @@ class FitResult:
     def value(self, name: str) -> float:
         if name in self.extra_names:
             return float(self.extra_values[self.extra_names.index(name)])
+        for e in self.held_extras:
+            if e.name == name:
+                return float(e.value)
         return self.model.parameter(name).value
 
     def sigma(self, name: str) -> float:
         if name in self.extra_names:
             return float(self.extra_sigma[self.extra_names.index(name)])
+        if any(e.name == name for e in self.held_extras):
+            return 0.0
         return float(self.aero_sigma[self.aero_names.index(name)])
 
     def rms(self) -> dict:
@@ -254,7 +260,7 @@ def _near_singular(N: np.ndarray, names: list[str], n_aero: int) -> list[dict]:
 def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, states,
                  aero_idx: np.ndarray, status: str, message: str, history, warnings,
                  iterations: int, t_start: float, options, lam, extras=(),
-                 extra_values=None) -> FitResult:
+                 extra_values=None, held_extras=()) -> FitResult:
     """Assemble the :class:`FitResult` at the solver's final point (see module doc)."""
     na = aero_idx.size
     ns = na + len(extras)
@@ -344,7 +350,7 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
         elapsed_s=time.perf_counter() - t_start,
         extras=tuple(extras),
         extra_values=np.array(extra_values if extra_values is not None else [], dtype=float),
-        extra_sigma=sig[na:ns].copy(),
+        extra_sigma=sig[na:ns].copy(), held_extras=tuple(held_extras),
         options={"max_iterations": options.max_iterations,
                  "step_tol_sigma": options.step_tol_sigma,
                  "integration": options.integration.__dict__, "final_lambda": lam})

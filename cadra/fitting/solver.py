@@ -204,7 +204,8 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         :func:`default_local_free`).
     extras : further shared unknowns, started at their ``value`` (unmodelled effects made
         free: physics directions and station terms, :mod:`cadra.fitting.extras`); they sit
-        beside the free aero parameters in the shared block.
+        beside the free aero parameters in the shared block. A ``held`` extra acts at its
+        value and is not fitted (the result lists it in ``held_extras``).
 
     Returns
     -------
@@ -227,6 +228,9 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     if len({e.name for e in extras}) != len(extras) or any(e.name in model.names
                                                             for e in extras):
         raise ValueError("fit: extra unknowns need names of their own")
+    held = tuple(e for e in extras if e.held)
+    extras = tuple(e for e in extras if not e.held)
+    held_values = np.array([e.value for e in held], dtype=float)
     xvals = np.array([e.value for e in extras], dtype=float)
     ne = len(extras)
     na = aero_idx.size
@@ -243,8 +247,13 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         lf = np.asarray(local_free[k] if local_free is not None
                         else default_local_free(sd, model),
                         dtype=int)
+        # held extras: part of the shot's nominal physics (and reference point)
+        phys0 = sd.rigid.phys()
+        phys_held = shot_phys(phys0, held, held_values, sd.shot_id)
         states.append(_ShotState(sd, y0.copy(), lf, float(sd.t_s[sd.epoch_index]),
-                                 sd.rigid.phys(), sd.rigid.ref_from_cg_body_m(), sd.mask))
+                                 phys_held,
+                                 shot_ref(sd.rigid.ref_from_cg_body_m(), phys0, phys_held),
+                                 sd.mask))
     n_obs = sum(st.mask.sum() for st in states)
     n_free = ns + sum(st.local_free.size for st in states)
     warnings: list[str] = []
@@ -273,6 +282,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                 full[:, :, base:] += C
                 jac = full
                 pred = pred + C @ xv
+            pred = add_station_terms(pred, held, held_values, sid, st.data.stations, y)
             st.pred, st.jac = pred, jac
         return _chi2(states, [st.pred for st in states])
 
@@ -283,7 +293,8 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             phys = shot_phys(st.phys, extras, xv, sid)
             y = predict_states(y0, st.t0, st.data.t_s, phys, program, p, integ)
             pred = observables(y, shot_ref(st.ref, st.phys, phys))
-            out.append(add_station_terms(pred, extras, xv, sid, st.data.stations, y))
+            pred = add_station_terms(pred, extras, xv, sid, st.data.stations, y)
+            out.append(add_station_terms(pred, held, held_values, sid, st.data.stations, y))
         return out
 
     history = []
@@ -301,13 +312,13 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             history.append(chi2)
             return build_result(shots, model, params, states, aero_idx, "failed", message,
                                 history, warnings, iterations, t_start, options, lam,
-                                extras, xvals)
+                                extras, xvals, held)
         if not math.isfinite(chi2):
             message = ("the starting point gives a non-finite prediction (the trajectory "
                        "diverges or tumbles); better starting values are needed")
             return build_result(shots, model, params, states, aero_idx, status, message,
                                 history, warnings, iterations, t_start, options, lam,
-                                extras, xvals)
+                                extras, xvals, held)
         history.append(chi2)
         while True:
             if iterations >= options.max_iterations:
@@ -386,7 +397,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         if bar is not None:
             bar.close()
     return build_result(shots, model, params, states, aero_idx, status, message, history,
-                        warnings, iterations, t_start, options, lam, extras, xvals)
+                        warnings, iterations, t_start, options, lam, extras, xvals, held)
 
 
 __all__ = ["STATUSES", "FitOptions", "LOCAL_NAMES", "default_local_free", "fit"]

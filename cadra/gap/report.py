@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from cadra.fitting.data import CHANNELS
+from cadra.gap.score import size_text
 from cadra.gap.where import by_group
 from cadra.io.atomic import atomic_output_dir
 
@@ -35,10 +36,7 @@ def summary_markdown(dg, result, where_tables=None) -> str:
     if dg.added:
         L += ["| round | effect | size ± σ | p (F test) | Δχ² |", "|---|---|---|---|---|"]
         for a in dg.added:
-            size = "; ".join(f"{n} = {v:.4g} ± {s:.2g}" for n, v, s in
-                             zip(a["params"], a["size"], a["sigma"], strict=False))
-            if a.get("refit_status", "converged") != "converged":
-                size += f" (refit {a['refit_status'].replace('_', ' ')}: size poorly determined)"
+            size = size_text(a)
             if a.get("aliases"):
                 size += f"; indistinguishable here: {', '.join(a['aliases'])}"
             L.append(f"| {a['round']} | {a['effect']} | {size} | {a['p_value']:.2g} | "

@@ -34,6 +34,7 @@ from scipy import stats
 from cadra.aero import AeroModel
 from cadra.fitting.data import ShotData
 from cadra.fitting.extras import Extra, shot_phys, shot_ref, station_columns
+from cadra.fitting.profile import profile_parameter
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import (
     LOCAL_NAMES,
@@ -194,6 +195,24 @@ ALIAS_CORRELATION = 0.95
 REFIT_P = 0.05
 #: convergence control of the station candidates' refits (linear effects: they settle fast)
 REFIT_OPTIONS = FitOptions(max_iterations=25)
+#: an added effect whose refit did not converge gets a profile likelihood interval
+#: (:mod:`cadra.fitting.profile`) for each of its parameters when it has at most this many
+#: (each profile costs ~10-20 refits)
+PROFILE_MAX_PARAMS = 2
+
+
+def _profiles(rf: FitResult, shots: Sequence[ShotData], names) -> list:
+    """Two-sigma profile-likelihood intervals ``(lower, upper, settled)`` of ``names`` in
+    ``rf`` (``settled``: every held fit converged; None where a profile could not be run)."""
+    out = []
+    for n in names:
+        try:
+            p = profile_parameter(rf, shots, n)
+        except ValueError:
+            out.append(None)
+            continue
+        out.append((p.lower, p.upper, p.n_unsettled == 0))
+    return out
 
 
 def _param_names(c: Candidate, shot_ids: Sequence[str]) -> tuple[str, ...]:
@@ -301,11 +320,42 @@ def _test(chi2_base, chi2_new, k, n_obs, n_free):
             "dbic": -dchi2 / max(s2, 1.0) + k * math.log(n_obs)}
 
 
+def _fmt_interval(iv) -> str:
+    lo, hi = iv[:2]
+    return f"[{lo:.4g}, {hi:.4g}]".replace("inf", "open")
+
+
+def size_text(a: dict) -> str:
+    """An added effect's sizes for the verdict: value ± sigma, or, where the refit did not
+    converge, the profile interval (or the warning that the sigma may be far too small)."""
+    ivs = a.get("interval_2sigma")
+    parts = []
+    for k, (n, v, s) in enumerate(zip(a["params"], a["size"], a["sigma"], strict=False)):
+        if ivs is not None and ivs[k] is not None:
+            parts.append(f"{n} = {v:.4g} (2-sigma profile interval {_fmt_interval(ivs[k])})")
+        else:
+            parts.append(f"{n} = {v:.4g} ± {s:.2g}")
+    text = ", ".join(parts)
+    if a["refit_status"] != "converged":
+        how = _HOW.get(a["refit_status"], "failed")
+        ivs = [iv for iv in (ivs or []) if iv is not None]
+        if ivs and all(iv[2] for iv in ivs):
+            text += f" [the refit {how}: the size is poorly determined; the profile interval is"
+            text += " what the data allow]"
+        elif ivs:
+            text += (f" [size poorly determined: the refit {how}, and so did some of the "
+                     "profile's held fits: the interval may still be too narrow]")
+        else:
+            text += (f" [size poorly determined: the refit {how}; its sigma is a "
+                     "linearization and may be far too small]")
+    return text
+
+
 def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel | None = None,
                  *, candidates: Sequence[Candidate] | None = None, alpha: float = 0.01,
                  max_effects: int = 3, integ: Integration | None = None,
                  refit_physics: int = 3, refit_measurement: int = 3,
-                 progress: bool = False) -> GapDiagnosis:
+                 profile: bool = True, progress: bool = False) -> GapDiagnosis:
     """Rank the candidate effects for a fit and add the significant ones greedily.
 
     Each round: every candidate is scored linearly against the current fit (module doc);
@@ -319,7 +369,10 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     added when its adjusted p-value is below ``alpha`` and its BIC improves;
     candidates the data cannot tell from it (collinear columns, refit chi^2 within
     :data:`ALIAS_DCHI2`) are named beside it as aliases. What remains is tested against the
-    noise floor. ``model`` is the fitted model (default ``result.model``)."""
+    noise floor. An added effect whose refit did not converge (its sigma a linearization
+    at one point of a valley) gets, with ``profile``, a two-sigma profile-likelihood interval
+    per parameter (``interval_2sigma``; at most :data:`PROFILE_MAX_PARAMS` parameters).
+    ``model`` is the fitted model (default ``result.model``)."""
     integ = integ or Integration()
     model = model or result.model
     shots = list(shots)
@@ -448,8 +501,17 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 best["dchi2"], best["p_value"] = t["dchi2"], t["p"]
                 best["_size"] = list(zip(*_sizes(rf, c, ids), strict=True))
             names, vals, sigs = zip(*best["_size"], strict=True)
+            # a refit that did not converge: its sigma is a linearization at a point of a
+            # flat or curved valley; the profile likelihood is the honest interval
+            intervals = None
+            if (profile and rf is not None and rf.status != "converged"
+                    and len(names) <= PROFILE_MAX_PARAMS):
+                intervals = _profiles(rf, shots, names)
+                if bar is not None:
+                    bar.update(1)
             added.append({"effect": c.name, "kind": c.kind, "params": tuple(names),
                           "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
+                          "interval_2sigma": intervals,
                           "p_value": float(best["p_value"]), "dchi2": float(best["dchi2"]),
                           "round": round_ + 1, "refit": rf is not None,
                           "refit_status": rf.status if rf is not None else "linear",
@@ -482,12 +544,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
             f"{a['effect']}"
             + (f" (or, indistinguishable on these data, {' / '.join(a['aliases'])})"
                if a["aliases"] else "") + ": "
-            + ", ".join(f"{n} = {v:.4g} ± {s:.2g}" for n, v, s in
-                        zip(a["params"], a["size"], a["sigma"], strict=False))
-            + ("" if a["refit_status"] == "converged" else
-               f" [size poorly determined: the refit {_HOW.get(a['refit_status'], 'failed')}; "
-               "its sigma is a linearization and may be far too small]")
-            for a in added)
+            + size_text(a) for a in added)
         verdict += f" (chi^2/dof {rchi0:.2f} -> {rchi1:.2f})"
     else:
         verdict = (f"no significant unmodelled effect (chi^2/dof = {rchi0:.2f}; best "
@@ -500,4 +557,4 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                         fit_after=current)
 
 
-__all__ = ["GapDiagnosis", "diagnose_gap", "fresh_fit", "refit_with", "score"]
+__all__ = ["GapDiagnosis", "diagnose_gap", "fresh_fit", "refit_with", "score", "size_text"]
