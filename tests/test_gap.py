@@ -207,3 +207,54 @@ def test_motion_frequency_matches_the_fitted_pitch_period(spec):
     f_truth = crossings / 2 / (dense_t[-1] - dense_t[0])
     assert f["pitch"] == pytest.approx(f_truth, rel=0.25)
     assert np.isnan(f["roll"])          # M2 does not roll
+
+
+def _validator():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "tools" / "validate_gap.py"
+    spec = importlib.util.spec_from_file_location("validate_gap", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_validation_compares_roll_free_sizes_across_the_axis():
+    """A cg offset fitted with the roll free: the direction in the body is the fit's roll
+    frame, only the magnitude is the data's. 0.16 mm along z in truth, fitted 0.3 um y
+    (0.1 deg of roll) and 0.164 mm z: the magnitude is within 2 sigma, the y component alone
+    is not; a magnitude 3 sigma off fails either way. Profile intervals replace the sigma."""
+    vg = _validator()
+    groups = vg.ROLL_INVARIANT["cg"]
+    truth = {"cg_offset_y_m": 0.0, "cg_offset_z_m": 1.64e-4}
+    added = {"params": ("cg_offset_y_m", "cg_offset_z_m"), "size": [2.7e-7, 1.645e-4],
+             "sigma": [8.7e-8, 4.4e-6]}
+    assert vg.size_within_2sigma(added, truth, groups)
+    assert not vg.size_within_2sigma(added, truth, None)
+    far = dict(added, size=[2.7e-7, 1.64e-4 + 3 * 4.4e-6])
+    assert not vg.size_within_2sigma(far, truth, groups)
+    # one parameter, sign free (inertia asymmetry): the profile interval on the fitted sign
+    ia = {"params": ("Iyy_minus_Izz_kg_m2",), "size": [1.5e-8], "sigma": [5e-11],
+          "interval_2sigma": [(1.2e-8, 3.3e-7, False)]}
+    g = vg.ROLL_INVARIANT["inertia_asym"]
+    assert vg.size_within_2sigma(ia, {"Iyy_minus_Izz_kg_m2": -1.3e-8}, g)
+    assert not vg.size_within_2sigma(ia, {"Iyy_minus_Izz_kg_m2": -1.1e-8}, g)
+    # an effect that keeps its sign: the signed interval
+    d = {"params": ("drho",), "size": [2e-3], "sigma": [1e-6],
+         "interval_2sigma": [(1.9e-3, 2.1e-3, True)]}
+    assert vg.size_within_2sigma(d, {"drho": 2.05e-3})
+    assert not vg.size_within_2sigma(d, {"drho": -2.05e-3})
+
+
+def test_verdict_gives_the_profile_interval_and_says_when_it_is_unsure():
+    from cadra.gap.score import size_text
+
+    a = {"params": ("x",), "size": [1.0], "sigma": [0.001], "refit_status": "stalled",
+         "interval_2sigma": [(0.5, float("inf"), True)]}
+    text = size_text(a)
+    assert "profile interval [0.5, open]" in text and "what the data allow" in text
+    a["interval_2sigma"] = [(0.9, 1.1, False)]
+    assert "may still be too narrow" in size_text(a)
+    a["interval_2sigma"] = None
+    assert "± 0.001" in size_text(a) and "far too small" in size_text(a)

@@ -30,7 +30,8 @@ Random signs.
 
 Per case: top-1 rate (the injected effect ranks first; ``top1_alias`` also counts it when it is
 named as indistinguishable from the first), size within 2 sigma (every parameter of the
-effect; for ``ROLL_INVARIANT`` cases the size across the axis, since the fit frees the roll),
+effect; for ``ROLL_INVARIANT`` cases the sizes across the axis, since the fit frees the roll;
+within the diagnosis' profile-likelihood interval where it gave one),
 shrink ratio (after adding the effect, residual rms per channel / rms of a fit of the same
 shot and noise without the effect; max over channels), null: "no significant effect"; out of
 library: reported unexplained with an injected station/channel among the three named.
