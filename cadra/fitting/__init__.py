@@ -71,11 +71,9 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
                     extras=extras)
         if first.status in ("converged", "max_iterations", "stalled") and np.all(
                 np.isfinite(first.aero_values)):
-            extras2 = [replace(e, value=float(v)) for e, v in
-                       zip(first.extras, first.extra_values, strict=True)]
-            extras2 += list(first.held_extras)
             result = fit(shots, first.model, [sf.state for sf in first.shots],
-                         options=options, local_free=local_free, extras=extras2)
+                         options=options, local_free=local_free,
+                         extras=first.extras_at_values())
             return replace(result, iterations=first.iterations + result.iterations,
                            elapsed_s=first.elapsed_s + result.elapsed_s,
                            history=first.history + result.history), start

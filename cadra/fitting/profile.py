@@ -68,17 +68,14 @@ def _held_fit(prev: FitResult, shots_by_id: dict, name: str, value: float,
               options: FitOptions) -> FitResult | None:
     """``prev``'s fit redone with ``name`` held at ``value``, from ``prev``'s solution."""
     model = prev.model
-    extras = [replace(e, value=float(v)) for e, v in
-              zip(prev.extras, prev.extra_values, strict=True)]
-    extras += list(prev.held_extras)
+    extras = prev.extras_at_values()
     names = [e.name for e in extras]
     if name in names:
         k = names.index(name)
         extras[k] = replace(extras[k], value=float(value), held=True)
     else:
         model = model.with_values({name: float(value)}).with_vary({name: False})
-    local = [np.array([LOCAL_NAMES.index(n) for n in sf.local_free], dtype=int)
-             for sf in prev.shots]
+    local = [sf.local_free_indices for sf in prev.shots]
     rot_x = LOCAL_NAMES.index("rot_x_rad")
     starts = [0.0] + (list(ROLL_STARTS_RAD) if any(rot_x in lf for lf in local) else [])
     best = None
@@ -138,18 +135,27 @@ def profile_parameter(result: FitResult, shots: Sequence[ShotData], name: str, *
     threshold = level * max(1.0, result.reduced_chi2 if result.dof > 0 else 1.0)
     pts = [(v0, result.chi2)]
     n_fits = n_unsettled = 0
+
+    def held(prev, v):
+        """The held fit at ``v`` from ``prev``, recorded: (fit, dchi^2 from the fit) or
+        (None, inf) when it failed."""
+        nonlocal n_fits, n_unsettled
+        r = _held_fit(prev, by_id, name, v, options)
+        n_fits += 1
+        if r is None:
+            return None, math.inf
+        n_unsettled += r.status != "converged"
+        pts.append((v, r.chi2))
+        return r, r.chi2 - result.chi2
+
     for side in (-1.0, 1.0):
         prev, inside = result, (v0, 0.0)
         step = 2.0 * s0
         for _ in range(max_steps):
             v = v0 + side * step
-            r = _held_fit(prev, by_id, name, v, options)
-            n_fits += 1
+            r, d = held(prev, v)
             if r is None:
                 break
-            n_unsettled += r.status != "converged"
-            d = r.chi2 - result.chi2
-            pts.append((v, r.chi2))
             if d >= threshold:
                 # refine the crossing inside the bracket (secant in sqrt(dchi^2), kept off
                 # the bracket's ends), each fit warm-started from the bracket's inner end
@@ -159,13 +165,9 @@ def profile_parameter(result: FitResult, shots: Sequence[ShotData], name: str, *
                     lo_v, hi_v = sorted((inside[0], outside[0]))
                     w = hi_v - lo_v
                     vc = min(max(vc, lo_v + 0.1 * w), hi_v - 0.1 * w)
-                    rc = _held_fit(prev, by_id, name, vc, options)
-                    n_fits += 1
+                    rc, dc = held(prev, vc)
                     if rc is None:
                         break
-                    n_unsettled += rc.status != "converged"
-                    dc = rc.chi2 - result.chi2
-                    pts.append((vc, rc.chi2))
                     if dc >= threshold:
                         outside = (vc, dc)
                     else:

@@ -145,7 +145,7 @@ def shot_epoch_table(result: FitResult, shots: Sequence[ShotData]) -> list[dict]
         ref = sd.rigid.ref_from_cg_body_m()
         y = np.asarray(sf.state, dtype=float)
         obs0 = _epoch_observables(y, ref)
-        free = [LOCAL_NAMES.index(n) for n in sf.local_free]
+        free = list(sf.local_free_indices)
         J = np.zeros((5, len(free)))
         for c, k in enumerate(free):
             u = np.zeros(len(LOCAL_NAMES))

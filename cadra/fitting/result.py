@@ -54,6 +54,11 @@ class ShotFit:
     n_observations: int
     rms: dict                        # channel -> rms residual (SI)
 
+    @property
+    def local_free_indices(self) -> np.ndarray:
+        """``local_free`` as indices into :data:`LOCAL_NAMES` (what the solver takes)."""
+        return np.array([LOCAL_NAMES.index(n) for n in self.local_free], dtype=int)
+
 
 @dataclass(frozen=True, eq=False)
 class FitResult:
@@ -115,6 +120,14 @@ class FitResult:
             R = C / np.outer(d, d)
         R[~np.isfinite(R)] = 0.0
         return R
+
+    def extras_at_values(self) -> list:
+        """The fit's extras at their fitted values, then the held ones: what a fit continuing
+        from this one takes."""
+        from dataclasses import replace
+
+        return [replace(e, value=float(v)) for e, v in
+                zip(self.extras, self.extra_values, strict=True)] + list(self.held_extras)
 
     @property
     def extra_names(self) -> tuple[str, ...]:

@@ -82,7 +82,7 @@ def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candi
     for k_shot, sf in enumerate(result.shots):
         sd = by_id[sf.shot_id]
         sid = sd.shot_id
-        local = np.array([LOCAL_NAMES.index(n) for n in sf.local_free], dtype=int)
+        local = sf.local_free_indices
         phys0 = sd.rigid.phys()
         ref0 = sd.rigid.ref_from_cg_body_m()
         phys = shot_phys(phys0, fit_extras, xv, sid)
@@ -247,8 +247,7 @@ def refit_with(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Can
     by_id = {s.shot_id: s for s in shots}
     ids = [sf.shot_id for sf in result.shots]
     model = result.model
-    extras: list[Extra] = [replace(e, value=float(v)) for e, v in
-                           zip(result.extras, result.extra_values, strict=True)]
+    extras: list[Extra] = result.extras_at_values()
     for c in cands:
         if c.kind == "aero":
             model = augmented_model(model, c)
@@ -268,7 +267,7 @@ def _local_free(result: FitResult, by_id, cands: Sequence[Candidate]) -> list[np
     rot_x = LOCAL_NAMES.index("rot_x_rad")
     local = []
     for sf in result.shots:
-        lf = {LOCAL_NAMES.index(n) for n in sf.local_free}
+        lf = set(sf.local_free_indices.tolist())
         if any(c.name in _ASYMMETRIC for c in cands) and by_id[sf.shot_id].has_angles:
             lf.add(rot_x)
         local.append(np.array(sorted(lf), dtype=int))
