@@ -373,7 +373,7 @@ def _diagnose(args) -> int:
         if not result:
             raise ValueError(f"the fit did not converge ({result.message}): nothing to "
                              "diagnose")
-        dg = diagnose_gap(result, shots, alpha=args.alpha, progress=True)
+        dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=True)
         stage_one = {}
         for sd, traj in zip(shots, trajs, strict=True):
             table = load_trajectory(traj).table

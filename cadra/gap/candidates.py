@@ -70,14 +70,22 @@ def dynamics_candidates() -> list[Candidate]:
         Candidate("lateral cg offset", "dynamics", ("cg_offset_y_m", "cg_offset_z_m"),
                   "true cg off the nominal one across the axis (body y, z)",
                   np.array([_dir((P_CG_OFFSET + 1, 1.0)), _dir((P_CG_OFFSET + 2, 1.0))])),
-        Candidate("inertia asymmetry", "dynamics", ("Iyy_minus_Izz_kg_m2",),
-                  "transverse moments of inertia differ",
-                  np.array([_dir((I + 4, 0.5), (I + 8, -0.5))])),
-        Candidate("products of inertia", "dynamics",
-                  ("Ixy_kg_m2", "Ixz_kg_m2", "Iyz_kg_m2"),
-                  "inertia tensor not diagonal in body axes (mass asymmetry)",
-                  np.array([_dir((I + 1, 1.0), (I + 3, 1.0)), _dir((I + 2, 1.0), (I + 6, 1.0)),
+        # a body of revolution's transverse asymmetry as the pair (Iyy - Izz, Iyz) in the
+        # fit's body frame: the pair turns by 2 phi with the roll, so it spans every
+        # orientation of the transverse principal axes with the roll held, and the data are
+        # near linear in it (no saddle where a roll angle would see no gradient); the
+        # principal difference is sqrt((Iyy - Izz)^2 + 4 Iyz^2) (docs/gap.md)
+        Candidate("inertia asymmetry", "dynamics", ("Iyy_minus_Izz_kg_m2", "Iyz_kg_m2"),
+                  "transverse moments of inertia differ (principal difference "
+                  "sqrt((Iyy - Izz)^2 + 4 Iyz^2))",
+                  np.array([_dir((I + 4, 0.5), (I + 8, -0.5)),
                             _dir((I + 5, 1.0), (I + 7, 1.0))])),
+        # the products coupling roll with pitch and yaw (the body axis is not a principal
+        # axis); the pair turns with the roll, so it too spans every orientation
+        Candidate("products of inertia", "dynamics", ("Ixy_kg_m2", "Ixz_kg_m2"),
+                  "the body axis is not a principal axis of inertia (mass asymmetry)",
+                  np.array([_dir((I + 1, 1.0), (I + 3, 1.0)),
+                            _dir((I + 2, 1.0), (I + 6, 1.0))])),
         Candidate("density gradient", "dynamics", ("drho_dx_over_rho_per_m",),
                   "air density varies along the range", np.array([_dir((P_RHO_GRAD, 1.0))])),
         Candidate("cross-flow", "dynamics", ("wind_y_m_s", "wind_z_m_s"),
