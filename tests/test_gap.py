@@ -234,12 +234,24 @@ def test_validation_compares_roll_free_sizes_across_the_axis():
     assert not vg.size_within_2sigma(added, truth, None)
     far = dict(added, size=[2.7e-7, 1.64e-4 + 3 * 4.4e-6])
     assert not vg.size_within_2sigma(far, truth, groups)
-    # one parameter, sign free (inertia asymmetry): the profile interval on the fitted sign
-    ia = {"params": ("Iyy_minus_Izz_kg_m2",), "size": [1.5e-8], "sigma": [5e-11],
-          "interval_2sigma": [(1.2e-8, 3.3e-7, False)]}
+    # the principal inertia difference |(Iyy - Izz, 2 Iyz)|: truth 3e-8 at 30 deg of roll
+    # (cos 60 = 0.5, sin 60 / 2 = 0.433), fitted in a frame 10 deg further round
     g = vg.ROLL_INVARIANT["inertia_asym"]
-    assert vg.size_within_2sigma(ia, {"Iyy_minus_Izz_kg_m2": -1.3e-8}, g)
-    assert not vg.size_within_2sigma(ia, {"Iyy_minus_Izz_kg_m2": -1.1e-8}, g)
+    ia_truth = {"Iyy_minus_Izz_kg_m2": 1.5e-8, "Iyz_kg_m2": 1.299e-8}
+    c, s = np.cos(np.radians(80.0)), np.sin(np.radians(80.0)) / 2
+    ia = {"params": ("Iyy_minus_Izz_kg_m2", "Iyz_kg_m2"), "size": [3.05e-8 * c, 3.05e-8 * s],
+          "sigma": [5e-10, 3e-10]}
+    assert vg.size_within_2sigma(ia, ia_truth, g)
+    assert not vg.size_within_2sigma(ia, ia_truth, None)
+    assert not vg.size_within_2sigma(dict(ia, size=[3.3e-8 * c, 3.3e-8 * s]), ia_truth, g)
+    # a zero truth is tested as a vector, not as a magnitude: the 2-parameter 2-sigma
+    # quantile is chi^2 = 6.18, so (2, 1.5) sigma (6.25) fails where its magnitude (2.5 sigma
+    # of a magnitude that noise alone puts near 1.25 sigma) would not mean much
+    zero = {"Ixy_kg_m2": 0.0, "Ixz_kg_m2": 0.0}
+    pr = {"params": ("Ixy_kg_m2", "Ixz_kg_m2"), "size": [2e-9, 1.5e-9], "sigma": [1e-9, 1e-9]}
+    assert not vg.size_within_2sigma(pr, zero, vg.ROLL_INVARIANT["products"])
+    pr["size"] = [2e-9, 1.4e-9]
+    assert vg.size_within_2sigma(pr, zero, vg.ROLL_INVARIANT["products"])
     # an effect that keeps its sign: the signed interval
     d = {"params": ("drho",), "size": [2e-3], "sigma": [1e-6],
          "interval_2sigma": [(1.9e-3, 2.1e-3, True)]}
