@@ -189,6 +189,7 @@ ALIAS_DCHI2 = 4.0
 #: how a refit that did not converge ended, for the verdict
 _HOW = {"stalled": "stalled", "max_iterations": "ran out of iterations", "linear": "was not run"}
 #: canonical correlation of the projected columns above which two candidates are aliases
+#: (when they were not both refitted)
 ALIAS_CORRELATION = 0.95
 #: a candidate is refitted nonlinearly only if its linear score's uncorrected p-value is below
 #: this (far above any significance level used: a pre-filter, not a test)
@@ -271,8 +272,9 @@ def fresh_fit(result: FitResult, shots: Sequence[ShotData], cand: Candidate,
     ``result``'s solution): its aero model and extras (started at 0) plus the candidate's
     terms; None if it fails. ``start``: the model as first given to the fit; its values
     are the automatic start's starting point (the linear-theory targets move only the
-    parameters they constrain: the rest would otherwise start where ``result`` left them). The fit without an effect may sit in a basin (a ``max(...)``
-    branch, terms bent to mimic the missing one) that a refit from there cannot leave.
+    parameters they constrain: the rest would otherwise start where ``result`` left them).
+    The fit without an effect may sit in a basin (a ``max(...)`` branch, terms bent to
+    mimic the missing one) that a refit from there cannot leave.
 
     The automatic start knows nothing of the candidate (its parameters start at 0), so a
     large effect can still leave the aero terms in a wrong basin while the candidate's own
@@ -494,7 +496,13 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 if row["dchi2"] < best["dchi2"] - ALIAS_DCHI2:
                     continue
                 Cj = _cand_matrix(per, row["candidate"])
-                if _canonical_corr(Cb, Cj - Q @ (Q.T @ Cj)) >= ALIAS_CORRELATION:
+                # both refitted: each refit's chi^2 is its own maximum likelihood, so a
+                # drop within ALIAS_DCHI2 is a likelihood ratio below e^2 whatever their
+                # linear columns (two large effects can reach the same chi^2 along different
+                # columns: an inertia asymmetry and products of inertia on a symmetric body
+                # that does not spin, 40044 and 40043.98 on one M1 trial)
+                both_refit = best["_refit"] is not None and row["_refit"] is not None
+                if both_refit or _canonical_corr(Cb, Cj - Q @ (Q.T @ Cj)) >= ALIAS_CORRELATION:
                     aliases.append(row["candidate"])
             table["alias_of_best"] = table["candidate"].isin(aliases)
             if ranking is None:
