@@ -2,7 +2,7 @@
 
 A fit's sigma (the covariance at its minimum) describes chi^2 only as far as chi^2 is quadratic
 in the unknowns. When the data fix a parameter only through a curved or flat valley -- an
-inertia asymmetry traded against the roll angle of a body that swings in one plane
+inertia asymmetry traded against a freed roll angle of a body that swings in one plane
 (docs/gap.md) -- that sigma can be orders of magnitude too small. The profile holds the
 parameter at a sequence of values and refits every other unknown at each (warm-started from
 the neighbouring point, outward from the fit on each side, steps growing geometrically from

@@ -178,13 +178,8 @@ def score(Q, r, C, n_obs, n_free):
             "dbic": -dchi2 / max(s2, 1.0) + k * math.log(n_obs), "Cp": Cp}
 
 
-#: Body asymmetries (lateral cg offset, inertia asymmetry, products of inertia) are
-#: parametrized in pairs that turn with the roll and so span every orientation about the axis
-#: (:mod:`cadra.gap.candidates`): their refits keep the fit's roll as it is. Freeing the roll
-#: of a body of revolution with them instead adds a direction the data see only through the
-#: asymmetry, with a saddle where it has no gradient (docs/gap.md).
-#: refit chi^2 within this of the best: "the data cannot tell them apart" (with collinear
-#: columns); a likelihood ratio below e^2 ~ 7
+#: refit chi^2 within this of the best: "the data cannot tell them apart" (both refitted, or
+#: with collinear columns); a likelihood ratio below e^2 ~ 7
 ALIAS_DCHI2 = 4.0
 #: how a refit that did not converge ended, for the verdict
 _HOW = {"stalled": "stalled", "max_iterations": "ran out of iterations", "linear": "was not run"}
@@ -245,7 +240,11 @@ def refit_with(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Can
                options=None) -> FitResult | None:
     """``result``'s fit redone with the candidates' terms added (their parameters free,
     started at 0; the fit's own extras kept, started at their values), from the fitted
-    states; None if the refit raises."""
+    states; None if the refit raises. The fit's free local unknowns stay as they are: a body
+    asymmetry is a pair that turns with the roll and spans every orientation about the axis
+    by itself (:mod:`cadra.gap.candidates`), so the roll of a body of revolution is not
+    freed with it (that would add a direction with a saddle where it has no gradient;
+    docs/gap.md)."""
     from cadra.fitting.solver import fit
 
     by_id = {s.shot_id: s for s in shots}
@@ -396,11 +395,12 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     there is one, else the linear one (F test, Bonferroni-adjusted p-value: half of ``alpha``
     shared by the physics candidates, half by the station ones; BIC beside it). The best is
     added when its adjusted p-value is below ``alpha`` and its BIC improves;
-    candidates the data cannot tell from it (collinear columns, refit chi^2 within
-    :data:`ALIAS_DCHI2`) are named beside it as aliases. What remains is tested against the
-    noise floor. An added effect whose refit did not converge (its sigma a linearization
-    at one point of a valley) gets, with ``profile``, a two-sigma profile-likelihood interval
-    per parameter (``interval_2sigma``; at most :data:`PROFILE_MAX_PARAMS` parameters).
+    candidates the data cannot tell from it (chi^2 drop within :data:`ALIAS_DCHI2`, both
+    refitted or with collinear columns) are named beside it as aliases. What remains is
+    tested against the noise floor. An added effect whose refit did not converge (its sigma
+    a linearization at one point of a valley) gets, with ``profile``, a two-sigma
+    profile-likelihood interval per parameter (``interval_2sigma``; at most
+    :data:`PROFILE_MAX_PARAMS` parameters).
     ``model``: the model as given to the fit (default ``result.model``): the library is built
     for it, and fits from scratch start from its values (:func:`fresh_fit`)."""
     integ = integ or Integration()
@@ -454,6 +454,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 pool.sort(key=lambda c, lin=lin: -lin[c.name]["dchi2"])
                 to_refit += pool[:n_refit]
             rows = []
+            scratch = set()         # candidates fitted from scratch this round
             for c in remaining:
                 if c.name not in lin:
                     continue
@@ -475,6 +476,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                         # an aero term also gets a fit from scratch (linear-theory start):
                         # a large one bends the fit without it far from its basin
                         fresh = fresh_fit(current, shots, c, model)
+                        scratch.add(c.name)
                         if fresh is not None and (rf is None or fresh.chi2 < rf.chi2):
                             rf = fresh
                     if bar is not None:
@@ -490,6 +492,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                     c = row["_c"]
                     if c.kind == "dynamics" and c in to_refit:
                         fresh = fresh_fit(current, shots, c, model)
+                        scratch.add(c.name)
                         if bar is not None:
                             bar.update(1)
                         if fresh is not None and (row["_refit"] is None
@@ -538,10 +541,10 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 more = refit_with(rf, shots, [], FitOptions())
                 if more is not None and more.chi2 <= rf.chi2:
                     rf = more
-            if rf is not None and c.kind != "aero" and stats.chi2.sf(
+            if rf is not None and c.name not in scratch and stats.chi2.sf(
                     rf.chi2, max(rf.dof, 1)) < alpha:
                 # still above the noise floor: the fit may have stayed in the basin of the
-                # fit without the effect; one fit from scratch with it (aero terms had one)
+                # fit without the effect; one fit from scratch with it (unless it had one)
                 fresh = fresh_fit(current, shots, c, model)
                 if fresh is not None and fresh.chi2 < rf.chi2:
                     rf = fresh
