@@ -32,6 +32,7 @@ from cadra.calibration.history import (
     load_bias_table,
     load_history,
     save_bias_table,
+    utc_now,
 )
 
 FAC = "hffaf"
@@ -110,6 +111,18 @@ def test_refuses_older_and_duplicate_entries(tmp_path):
     with pytest.raises(StationHistoryError, match="already entry 1"):
         append_entry(make_table(1, created="2026-12-01T08:00:00Z"), tmp_path)
     assert history_path(tmp_path, FAC).read_bytes() == before
+
+
+def test_same_numbers_estimated_twice_now_are_two_entries(tmp_path):
+    # the same sphere shots calibrated twice within one second (CI did this): two estimates,
+    # two entries in time order, not a duplicate refusal
+    a = make_table(1, created=utc_now())
+    b = make_table(1, created=utc_now())
+    assert a.created_utc != b.created_utc and a.created_utc.endswith("Z")
+    append_entry(a, tmp_path)
+    append_entry(b, tmp_path)
+    hist, _ = load_history(tmp_path, FAC)
+    assert [t.created_utc for t in hist] == [a.created_utc, b.created_utc]
 
 
 # --------------------------------------------------------------------------- damage

@@ -173,8 +173,11 @@ def _parse_utc(text) -> datetime:
 
 
 def utc_now() -> str:
-    """The current time as ``YYYY-MM-DDTHH:MM:SSZ``."""
-    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    """The current time as ``YYYY-MM-DDTHH:MM:SS.ffffffZ``.
+
+    Microseconds, so two estimates made one after the other (the same sphere shots calibrated
+    twice within a second) are two tables, not one table recorded twice."""
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 # --------------------------------------------------------------------------- canonical JSON
