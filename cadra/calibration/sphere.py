@@ -37,7 +37,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from datetime import UTC, datetime
 
 import numpy as np
 
@@ -82,11 +81,9 @@ class StationBiasEstimate:
 
     def to_table(self, created_utc: str | None = None, note: str = ""):
         """The estimate as a :class:`cadra.calibration.history.BiasTable`."""
-        from cadra.calibration.history import BiasTable
+        from cadra.calibration.history import BiasTable, utc_now
 
-        return BiasTable(facility=self.facility,
-                         created_utc=created_utc or datetime.now(UTC).strftime(
-                             "%Y-%m-%dT%H:%M:%SZ"),
+        return BiasTable(facility=self.facility, created_utc=created_utc or utc_now(),
                          stations=self.stations.copy(), bias=self.bias.copy(),
                          sigma=self.sigma.copy(), shots=self.shots, method=self.method,
                          note=note)
