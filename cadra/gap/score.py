@@ -50,7 +50,8 @@ class GapDiagnosis:
     """What :func:`diagnose_gap` found (SI)."""
 
     ranking: pd.DataFrame            # first round: every candidate, best first
-    added: tuple[dict, ...]          # effects added greedily: name, params, size, sigma, p
+    added: tuple[dict, ...]          # effects added greedily: name, params, size, sigma,
+    #                                  covariance (of the params; None if not refitted), p
     rms_before: dict                 # channel -> rms residual (SI) of the fit as given
     rms_after: dict                  # ... after adding the effects
     reduced_chi2_before: float
@@ -59,6 +60,7 @@ class GapDiagnosis:
     where: pd.DataFrame              # per shot, station, channel: normalized residual after
     verdict: str
     fit_after: FitResult | None = None   # the fit with the added effects (the last refit)
+    effects: tuple[Candidate, ...] = ()  # the added candidates, in order (for refit_with)
 
 
 def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],
@@ -320,6 +322,15 @@ def _sizes(fit_res: FitResult, c: Candidate, shot_ids) -> tuple[list, list, list
     return (list(names), [fit_res.value(n) for n in names], [fit_res.sigma(n) for n in names])
 
 
+def _cov_block(fit_res: FitResult, names) -> list[list[float]] | None:
+    """The fit's covariance of ``names`` (SI), or None if one is not a fitted parameter."""
+    pn = list(fit_res.param_names)
+    if any(n not in pn for n in names):
+        return None
+    ii = [pn.index(n) for n in names]
+    return np.asarray(fit_res.covariance)[np.ix_(ii, ii)].tolist()
+
+
 def _canonical_corr(A: np.ndarray, B: np.ndarray) -> float:
     """Largest canonical correlation between the column spans of A and B."""
     qa, qb = _orth(A), _orth(B)
@@ -421,6 +432,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     threshold = {kind: alpha / halves / max(n, 1) for kind, n in
                  (("physics", n_phys), ("measurement", n_meas))}
     added: list[dict] = []
+    effects: list[Candidate] = []
     ranking = None
     current = result
     remaining = list(cands)
@@ -564,11 +576,13 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                     bar.update(1)
             added.append({"effect": c.name, "kind": c.kind, "params": tuple(names),
                           "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
+                          "covariance": _cov_block(rf, names) if rf is not None else None,
                           "interval_2sigma": intervals,
                           "p_value": float(best["p_value"]), "dchi2": float(best["dchi2"]),
                           "round": round_ + 1, "refit": rf is not None,
                           "refit_status": rf.status if rf is not None else "linear",
                           "aliases": tuple(aliases)})
+            effects.append(c)
             remaining = [x for x in remaining if x.name != c.name]
             if rf is None:
                 break       # a linear-only addition: no fit to go on from
@@ -607,7 +621,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                         added=tuple(added), rms_before=rms_before, rms_after=rms_after,
                         reduced_chi2_before=rchi0, reduced_chi2_after=rchi1,
                         unexplained=bool(unexplained), where=where, verdict=verdict,
-                        fit_after=current)
+                        fit_after=current, effects=tuple(effects))
 
 
 __all__ = ["GapDiagnosis", "diagnose_gap", "fresh_fit", "refit_with", "score", "size_text"]
