@@ -284,6 +284,15 @@ def test_validation_compares_body_pairs_as_vectors_with_their_covariance():
     across = dict(along, size=[4.1e-9 + 0.01 * s1, 4e-11 - 0.01 * s2])
     assert not vg.size_within_2sigma(across, truth, g)
     assert vg.size_within_2sigma(dict(across, covariance=None), truth, g)
+    # the size: the magnitude, by its profile over the orientation. With an isotropic sigma
+    # (in (Iyy - Izz, 2 Iyz)) that is | |v| - t | <= 2 sigma; along the valley above, the
+    # truth's magnitude is reached at 2.4 sigma in step, too far for one parameter
+    iso = {"params": g[0], "size": [3e-9, 2e-9], "sigma": [1e-9, 0.5e-9],
+           "covariance": [[1e-18, 0.0], [0.0, 0.25e-18]]}          # |(a, 2b)| = 5e-9
+    assert vg.magnitude_within_2sigma(iso, {g[0][0]: 3.1e-9, g[0][1]: 0.0}, g)
+    assert not vg.magnitude_within_2sigma(iso, {g[0][0]: 0.0, g[0][1]: 2.9e-9 / 2}, g)
+    assert vg.magnitude_within_2sigma(iso, {g[0][0]: 0.0, g[0][1]: 6.9e-9 / 2}, g)
+    assert not vg.magnitude_within_2sigma(along, truth, g)
     # a zero truth (the other shots of a set): the 2-parameter 2-sigma quantile is
     # chi^2 = 6.18, so (2, 1.5) sigma (6.25) fails and (2, 1.4) sigma (5.96) passes
     zero = {"Ixy_kg_m2": 0.0, "Ixz_kg_m2": 0.0}
