@@ -37,7 +37,9 @@ its linearized profile likelihood with the refit's covariance -- and, printed be
 a vector with the truth turned into the fit's body frame; within the diagnosis'
 profile-likelihood interval where it gave one),
 shrink ratio (after adding the effect, residual rms per channel / rms of a fit of the same
-shot and noise without the effect; max over channels), null: "no significant effect"; out of
+shot and noise without the effect; max over channels; also pooled over the case's trials,
+and against the final model fitted to the same data from the truth), null: "no significant
+effect"; out of
 library: reported unexplained with an injected station/channel among the three named.
 Last line: a JSON object.
 
