@@ -60,7 +60,6 @@ class GapDiagnosis:
     where: pd.DataFrame              # per shot, station, channel: normalized residual after
     verdict: str
     fit_after: FitResult | None = None   # the fit with the added effects (the last refit)
-    effects: tuple[Candidate, ...] = ()  # the added candidates, in order (for refit_with)
 
 
 def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],
@@ -432,7 +431,6 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     threshold = {kind: alpha / halves / max(n, 1) for kind, n in
                  (("physics", n_phys), ("measurement", n_meas))}
     added: list[dict] = []
-    effects: list[Candidate] = []
     ranking = None
     current = result
     remaining = list(cands)
@@ -582,7 +580,6 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                           "round": round_ + 1, "refit": rf is not None,
                           "refit_status": rf.status if rf is not None else "linear",
                           "aliases": tuple(aliases)})
-            effects.append(c)
             remaining = [x for x in remaining if x.name != c.name]
             if rf is None:
                 break       # a linear-only addition: no fit to go on from
@@ -621,7 +618,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                         added=tuple(added), rms_before=rms_before, rms_after=rms_after,
                         reduced_chi2_before=rchi0, reduced_chi2_after=rchi1,
                         unexplained=bool(unexplained), where=where, verdict=verdict,
-                        fit_after=current, effects=tuple(effects))
+                        fit_after=current)
 
 
 __all__ = ["GapDiagnosis", "diagnose_gap", "fresh_fit", "refit_with", "score", "size_text"]
