@@ -371,20 +371,15 @@ def _fit_from_truth(fa, shots, true_model, truth):
     ``true_model`` (a term it lacks at 0), extras at their ``truth`` sizes (0 if absent), the
     states where ``fa`` has them; None if the fit fails."""
     from cadra.fitting import FitOptions
-    from cadra.fitting.solver import fit
+    from cadra.gap.score import refit_with
 
     names = set(true_model.names)
     m = fa.model.with_values({n: true_model.parameter(n).value if n in names else 0.0
                               for n in fa.model.names
                               if n in names or n.startswith("gap_")})
-    extras = [replace(e, value=float(truth.get(e.name, 0.0))) for e in fa.extras]
-    by_id = {s.shot_id: s for s in shots}
-    try:
-        return fit([by_id[sf.shot_id] for sf in fa.shots], m, [sf.state for sf in fa.shots],
-                   options=FitOptions(),
-                   local_free=[sf.local_free_indices for sf in fa.shots], extras=extras)
-    except (ValueError, FloatingPointError):
-        return None
+    at_truth = replace(fa, model=m, extra_values=np.array(
+        [float(truth.get(e.name, 0.0)) for e in fa.extras]))
+    return refit_with(at_truth, shots, [], FitOptions())
 
 
 def body_truth_in_fit_frame(case: str, truth: dict, sim, t0_s: float, q_fit) -> dict:
@@ -420,6 +415,15 @@ def body_truth_in_fit_frame(case: str, truth: dict, sim, t0_s: float, q_fit) -> 
     return out
 
 
+def _group_cov(added: dict, ii) -> np.ndarray:
+    """The refit's covariance of the parameters ``ii`` of an added effect (its sigmas alone,
+    correlations unknown, where it has none)."""
+    cov = added.get("covariance")
+    if cov is not None:
+        return np.asarray(cov, dtype=float)[np.ix_(ii, ii)]
+    return np.diag([added["sigma"][i] ** 2 for i in ii])
+
+
 def magnitude_within_2sigma(added: dict, truth: dict, groups) -> bool:
     """Is each body pair's *magnitude* (its size across the axis: the cg offset, the
     principal inertia difference sqrt((Iyy - Izz)^2 + 4 Iyz^2), the products' resultant)
@@ -430,13 +434,10 @@ def magnitude_within_2sigma(added: dict, truth: dict, groups) -> bool:
     one combination only (its other direction free) is not held to a sigma it does not have.
     A zero truth is a point: the vector test of ``size_within_2sigma``."""
     params = list(added["params"])
-    cov = added.get("covariance")
     phi = np.linspace(0.0, 2.0 * math.pi, 7200, endpoint=False)
     for group in groups:
         ii = [params.index(p) for p in group]
         v = np.array([added["size"][i] for i in ii])
-        C = (np.asarray(cov, dtype=float)[np.ix_(ii, ii)] if cov is not None
-             else np.diag([added["sigma"][i] ** 2 for i in ii]))
         w = np.array([2.0 if p.startswith("Iyz") else 1.0 for p in group])
         t = float(np.linalg.norm(w * np.array([truth.get(p, 0.0) for p in group])))
         if t == 0.0:
@@ -445,7 +446,7 @@ def magnitude_within_2sigma(added: dict, truth: dict, groups) -> bool:
             continue
         T = t * np.stack([np.cos(phi), np.sin(phi)], axis=1) / w      # (n, 2) candidates
         D = v - T
-        Ci = np.linalg.pinv(C)
+        Ci = np.linalg.pinv(_group_cov(added, ii))
         if float(np.min(np.einsum("ni,ij,nj->n", D, Ci, D))) > 4.0:
             return False
     return True
@@ -471,15 +472,10 @@ def size_within_2sigma(added: dict, truth: dict, groups=None) -> bool:
             if not (iv[0] <= t <= iv[1] if iv is not None else abs(v - t) <= 2 * s):
                 return False
         return True
-    cov = added.get("covariance")
     for group in groups:
         ii = [params.index(p) for p in group]
         d = np.array([est[p][0] - truth.get(p, 0.0) for p in group])
-        if cov is not None:
-            C = np.asarray(cov, dtype=float)[np.ix_(ii, ii)]
-        else:
-            C = np.diag([est[p][1] ** 2 for p in group])
-        if not float(d @ np.linalg.lstsq(C, d, rcond=None)[0]) <= stats.chi2.ppf(
+        if not float(d @ np.linalg.pinv(_group_cov(added, ii)) @ d) <= stats.chi2.ppf(
                 stats.chi2.cdf(4.0, 1), len(group)):
             return False
     return True
