@@ -177,6 +177,51 @@ def test_noisy_fit_pulls_and_honest_sigmas(m2_2429):
     assert 0.5 < result.reduced_chi2 < 1.6
 
 
+
+def test_fit_keeps_its_jacobian_and_leverages(m2_2429):
+    """The fit keeps its weighted Jacobian (rows in the order of ``residuals``) and each
+    residual's leverage. Truths: for noise small enough that the fit is linear over it, the
+    fitted residual is the noise less its projection, e - J (J^T J)^-1 J^T e, here a dense
+    least-squares solve; the mean square of such residuals over many noise draws is the
+    channel's noise floor; the leverages sum to the free parameters."""
+    from dataclasses import replace
+
+    from cadra.fitting.data import CHANNELS
+
+    shot = m2_2429
+    exact = _data(shot, sp=1e-5, sa=np.radians(0.01))
+    e = np.random.default_rng(5).standard_normal(exact.meas.shape)
+    scale = 1e-2        # the noise in sigmas: the fit is linear over it
+    noisy = replace(exact, meas=exact.meas + scale * e * exact.sigma)
+    opts = FitOptions(step_tol_sigma=1e-6, noise_tol_sigma=1e-5,
+                      integration=Integration(tol_position_m=1e-12, tol_angle_rad=1e-12))
+    result, _ = fit_shots([noisy], shot.model, options=opts)
+    assert result.converged, result.message
+    r = result.residuals
+    J = result.jacobian
+    assert J.shape == (len(r), result.n_free)
+    row = {int(st): i for i, st in enumerate(exact.stations)}
+    ew = scale * np.array([e[row[int(st)], CHANNELS.index(ch)]
+                           for st, ch in zip(r["station"], r["channel"], strict=True)])
+    coef, *_ = np.linalg.lstsq(J, ew, rcond=None)
+    predicted = ew - J @ coef
+    np.testing.assert_allclose(r["normalized"], predicted, rtol=0, atol=1e-3 * scale)
+    # leverages: in [0, 1], summing to the free parameters; the channels' dof to the fit's
+    h = r["leverage"].to_numpy()
+    assert np.all((h >= -1e-12) & (h <= 1 + 1e-12))
+    assert h.sum() == pytest.approx(result.n_free, abs=1e-6)
+    assert sum(result.dof_by_channel().values()) == pytest.approx(result.dof, abs=1e-6)
+    # the noise floor: the rms per channel a correct model leaves, over 4000 noise draws
+    E = np.random.default_rng(6).standard_normal((len(r), 4000))
+    R = E - J @ np.linalg.lstsq(J, E, rcond=None)[0]
+    floor = result.noise_floor()
+    sig = r["sigma"].to_numpy()
+    for ch in CHANNELS:
+        sel = (r["channel"] == ch).to_numpy()
+        mc = np.sqrt(np.mean((sig[sel, None] * R[sel]) ** 2))
+        assert floor[ch] == pytest.approx(mc, rel=0.02), ch
+        assert floor[ch] < np.median(sig[sel])
+
 def _duplicate_model():
     return model_from_dict({
         "name": "dup", "angle_plane": "sigma",

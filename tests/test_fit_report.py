@@ -89,6 +89,9 @@ def test_results_json_equals_result(fitted, written):
         unit, f = ("m", 1.0) if ch in "xyz" else ("deg", 180.0 / math.pi)
         assert shot["residual_rms"][f"{ch}_{unit}"] == pytest.approx(sf.rms[ch] * f,
                                                                        rel=1e-15)
+        assert data["residual_noise_floor"][f"{ch}_{unit}"] == pytest.approx(
+            res.noise_floor()[ch] * f, rel=1e-15)
+    assert sum(data["dof_by_channel"].values()) == pytest.approx(res.dof, abs=1e-6)
     # the epoch reference point is the fitted trajectory's prediction at the epoch station
     k = fitted["shots"][0].epoch_index
     r = res.residuals[res.residuals["station"] == fitted["shots"][0].stations[k]]
@@ -133,7 +136,7 @@ def test_residuals_csv_angles_in_degrees(fitted, written):
     res = fitted["result"]
     df = pd.read_csv(written / "residuals.csv")
     assert list(df.columns) == ["shot_id", "station", "t_s", "channel", "unit", "measured",
-                                "fitted", "residual", "sigma", "normalized"]
+                                "fitted", "residual", "sigma", "normalized", "leverage"]
     r = res.residuals
     assert len(df) == len(r)
     ang = df["channel"].isin(["theta", "psi"]).to_numpy()
@@ -144,6 +147,7 @@ def test_residuals_csv_angles_in_degrees(fitted, written):
         np.testing.assert_array_equal(df.loc[~ang, col], r.loc[~ang, col])
     # film sigma 0.1 deg in the file
     np.testing.assert_allclose(df.loc[ang, "sigma"], 0.1, rtol=1e-14)
+    np.testing.assert_array_equal(df["leverage"], r["leverage"])
 
 
 def test_refuses_to_overwrite(fitted, written):

@@ -7,6 +7,7 @@ was injected.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -130,6 +131,7 @@ def test_diagnose_cli(tmp_path, spec):
                  "where.png"):
         assert (out / name).is_file(), name
     assert "## Where the fit as given misses" in report
+    assert "| noise floor after |" in report
 
 
 # ---- "where" tests (cadra.gap.where) against hand-made residuals of known structure ----
@@ -350,3 +352,71 @@ def test_inertia_asymmetry_at_any_roll_found_as_its_principal_difference():
     # the roll is held where both the simulator and the fit start it (0): the pair itself,
     # not only its magnitude, is within the two-sigma region of the truth (chi^2, 2 dof)
     assert ((va - a) / sa) ** 2 + ((vb - b) / sb) ** 2 <= 6.18
+
+
+def test_validation_predicts_the_shrink_ratio_from_the_fits_linearizations():
+    """``linear_shrink`` on a linear least-squares problem, against dense solves: the ratio
+    of per-channel rms of the residuals left by two design matrices on the same noise (the
+    "after" fit's rows in another order), and how often it exceeds 1.10 on other noise."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    vg = _validator()
+    rng = np.random.default_rng(3)
+    stations, chans = np.arange(1, 17), ["x", "y", "z"]
+    keys = [("s", int(st), ch) for st in stations for ch in chans]
+    n = len(keys)
+    sigma = np.array([2.0 if ch == "z" else 1.0 for _, _, ch in keys])
+    Jc = rng.standard_normal((n, 12))
+    Ja = np.column_stack([Jc + 0.2 * rng.standard_normal((n, 12)), rng.standard_normal(n)])
+    noise = {k: float(v) for k, v in zip(keys, rng.standard_normal(n), strict=True)}
+
+    def fake(J, order):
+        frame = pd.DataFrame({"shot_id": [keys[i][0] for i in order],
+                              "station": [keys[i][1] for i in order],
+                              "channel": [keys[i][2] for i in order],
+                              "sigma": sigma[order]})
+        return SimpleNamespace(jacobian=J[order], covariance=np.linalg.inv(J.T @ J),
+                               residuals=frame)
+
+    clean = fake(Jc, np.arange(n))
+    after = fake(Ja, rng.permutation(n))
+
+    def ratio(E):
+        rc = E - Jc @ np.linalg.lstsq(Jc, E, rcond=None)[0]
+        ra = E - Ja @ np.linalg.lstsq(Ja, E, rcond=None)[0]
+        ch = np.array([k[2] for k in keys])
+        return np.max([np.sqrt(np.sum((sigma[ch == c, None] * ra[ch == c]) ** 2, axis=0)
+                               / np.sum((sigma[ch == c, None] * rc[ch == c]) ** 2, axis=0))
+                       for c in chans], axis=0)
+
+    predicted, prob = vg.linear_shrink(clean, after, noise, np.random.default_rng(4),
+                                       draws=4000)
+    e = np.array([noise[k] for k in keys])[:, None]
+    assert predicted == pytest.approx(float(ratio(e)[0]), rel=1e-10)
+    mc = float(np.mean(ratio(np.random.default_rng(9).standard_normal((n, 20000))) > 1.10))
+    assert 0.02 < mc < 0.98                 # the problem is one where the rate means something
+    assert prob == pytest.approx(mc, abs=4 * math.sqrt(mc * (1 - mc) / 4000))
+    # the same fit twice: ratio 1, never above the limit
+    same, p0 = vg.linear_shrink(clean, clean, noise, np.random.default_rng(4), draws=500)
+    assert same == pytest.approx(1.0, abs=1e-12) and p0 == 0.0
+
+
+def test_validation_tail_probability_of_trials_above_the_limit():
+    """``exceed_pvalue``: with equal probabilities the binomial tail (scipy); with unequal
+    ones the sum over all 2^n outcomes."""
+    import itertools
+
+    from scipy import stats
+
+    vg = _validator()
+    rows = [{"shrink_ratio": 1.2 if i < 7 else 1.0, "shrink_exceed_prob": 0.3}
+            for i in range(20)]
+    assert vg.exceed_pvalue(rows) == pytest.approx(stats.binom.sf(6, 20, 0.3), rel=1e-12)
+    q = [0.1, 0.5, 0.02, 0.7, 0.33, 0.9]
+    rows = [{"shrink_ratio": r, "shrink_exceed_prob": p}
+            for r, p in zip([1.3, 1.0, 1.2, 1.05, 1.11, 1.0], q, strict=True)]
+    brute = sum(math.prod(p if o else 1 - p for o, p in zip(out, q, strict=True))
+                for out in itertools.product([0, 1], repeat=len(q)) if sum(out) >= 3)
+    assert vg.exceed_pvalue(rows) == pytest.approx(brute, rel=1e-12)

@@ -38,9 +38,11 @@ a vector with the truth turned into the fit's body frame; within the diagnosis'
 profile-likelihood interval where it gave one),
 shrink ratio (after adding the effect, residual rms per channel / rms of a fit of the same
 shot and noise without the effect; max over channels; also pooled over the case's trials,
-and against the final model fitted to the same data from the truth), null: "no significant
-effect"; out of
-library: reported unexplained with an injected station/channel among the three named.
+against the final model fitted to the same data from the truth, predicted from the two
+fits' Jacobians and the noise drawn, and the fraction of trials above 1.10 beside the
+fraction a perfect diagnosis would have, ``linear_shrink``), null: "no significant effect";
+out of library: reported unexplained with an injected station/channel among the three
+named.
 Last line: a JSON object.
 
 Usage:
@@ -105,6 +107,10 @@ BODY_PAIRS = {"inertia_asym": [("Iyy_minus_Izz_kg_m2", "Iyz_kg_m2")],
 SP, SP_SPHERE, SA_DEG = 2.8e-7, 2.2e-7, 0.0012
 #: draws of an effect that does not matter redrawn at most this many times per trial
 MAX_REDRAWS = 5
+#: the issue's shrink criterion (rms per channel after / clean within 10 %), and the noise
+#: vectors drawn to estimate how often a perfect diagnosis fails it (``linear_shrink``)
+SHRINK_LIMIT = 1.10
+SHRINK_DRAWS = 4000
 
 
 def _draw(rng, lo, hi):
@@ -218,7 +224,8 @@ def make_case(name, rng, specs, model_file_dir):
 
 def _measure(sim, nominal, spec, seed, edit, offset=(0.0, 0.0)):
     """Stage-one-like measurements of a simulated shot, with a measurement edit applied;
-    ``offset``: (y, z) m by which the whole path is translated (a lateral launch offset)."""
+    ``offset``: (y, z) m by which the whole path is translated (a lateral launch offset);
+    ``seed`` None: without noise."""
     from cadra.fitting import shot_data_from_truth
 
     sphere = sim.body.kind == "sphere"
@@ -228,7 +235,7 @@ def _measure(sim, nominal, spec, seed, edit, offset=(0.0, 0.0)):
     sd = shot_data_from_truth(truth, nominal, spec.shot_id, sim.body.kind,
                               sigma_position_m=SP_SPHERE if sphere else SP,
                               sigma_angle_rad=math.radians(SA_DEG),
-                              rng=np.random.default_rng(seed))
+                              rng=None if seed is None else np.random.default_rng(seed))
     if edit is None:
         return sd
     meas = sd.meas.copy()
@@ -249,6 +256,7 @@ def run_trial(case, rng, tmpdir, force=False):
     ``force``."""
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
+    from cadra.fitting.data import CHANNELS
     from cadra.gap.score import diagnose_gap
     from cadra.simulate import load_shot_spec, simulate_shot
 
@@ -270,6 +278,7 @@ def run_trial(case, rng, tmpdir, force=False):
         if groups is not None:
             groups = [tuple(f"{p}@{sp.shot_id}" for p in g) for sp in specs for g in groups]
     shots, clean_shots, model = [], [], None
+    noise = {}          # (shot, station, channel) -> the noise drawn, in sigmas
     for k, spec in enumerate(specs):
         # a body effect is in the first shot only; an aero term in every shot (it is the
         # same air and shape); a measurement edit in every shot (the same stations)
@@ -283,6 +292,10 @@ def run_trial(case, rng, tmpdir, force=False):
                   if case in OFFSET_CASES else (0.0, 0.0))
         shots.append(_measure(sim, nominal, spec, seed, edit, offset))
         clean_shots.append(_measure(clean_sim, nominal, spec, seed, None, offset))
+        free = _measure(clean_sim, nominal, spec, None, None, offset)
+        e = (clean_shots[-1].meas - free.meas) / free.sigma
+        noise.update({(spec.shot_id, int(st), ch): float(e[i, j])
+                      for i, st in enumerate(free.stations) for j, ch in enumerate(CHANNELS)})
         model = clean_sim.model
         if k == 0:
             first_model = sim.model        # the aero model the data were simulated with
@@ -339,6 +352,12 @@ def run_trial(case, rng, tmpdir, force=False):
                                                     if math.isfinite(rms_m[c])))
             out["rms_pairs"] = {c: (float(rms_a[c]), float(rms_c[c])) for c in rms_c
                                 if math.isfinite(rms_c[c])}
+            # the same ratio predicted from the two fits' Jacobians and the noise drawn, and
+            # how often it would exceed SHRINK_LIMIT on other noise (docs/gap.md)
+            lin = linear_shrink(clean, dg.fit_after, noise,
+                                rng=np.random.default_rng([seed, 1]))
+            if lin is not None:
+                out["shrink_ratio_linear"], out["shrink_exceed_prob"] = lin
             out["chi2_after_best_clean"] = (float(dg.fit_after.chi2),
                                             float(best.chi2 if best is not None else math.nan),
                                             float(clean.chi2))
@@ -353,6 +372,67 @@ def run_trial(case, rng, tmpdir, force=False):
         out["where_ok"] = bool(dg.unexplained and named)
         out["pinned"] = [a["effect"] for a in dg.added]
     return out
+
+
+def linear_shrink(clean, after, noise: dict, rng, draws: int = SHRINK_DRAWS,
+                  limit: float = SHRINK_LIMIT):
+    """The shrink ratio as the two fits' linearizations give it: a correct model's residual
+    is the noise less its projection on the fit's Jacobian, r = (I - J (J^T J)^+ J^T) e (in
+    sigmas). With the noise drawn (``noise``: (shot, station, channel) -> e) this predicts
+    the trial's ratio (max over channels of rms after / rms clean); with ``draws`` other
+    noise vectors it gives the probability that the ratio exceeds ``limit`` when the effect
+    added is exactly the one injected: the rate at which a perfect diagnosis fails the
+    issue's 10 % criterion on this shot. Returns (predicted ratio, probability), or None if
+    either fit has no Jacobian."""
+    if clean.jacobian is None or after.jacobian is None:
+        return None
+    rc, ra = clean.residuals, after.residuals
+    keys = list(zip(rc["shot_id"], rc["station"].astype(int), rc["channel"], strict=True))
+    pos = {k: i for i, k in enumerate(zip(ra["shot_id"], ra["station"].astype(int),
+                                          ra["channel"], strict=True))}
+    Ja = after.jacobian[[pos[k] for k in keys]]
+    E = np.column_stack([[noise[k] for k in keys],
+                         rng.standard_normal((len(keys), draws))])
+
+    def resid(fit, J):
+        return E - J @ (fit.covariance @ (J.T @ E))
+
+    w2 = rc["sigma"].to_numpy(float)[:, None] ** 2
+    Rc, Ra = w2 * resid(clean, clean.jacobian) ** 2, w2 * resid(after, Ja) ** 2
+    chan = rc["channel"].to_numpy()
+    ratio = np.max([np.sqrt(Ra[chan == c].sum(axis=0) / Rc[chan == c].sum(axis=0))
+                    for c in np.unique(chan)], axis=0)
+    return float(ratio[0]), float(np.mean(ratio[1:] > limit))
+
+
+def exceed_observed(rows) -> float:
+    """Fraction of the trials (effect ranked first) whose shrink ratio exceeds
+    SHRINK_LIMIT."""
+    r = [x["shrink_ratio"] > SHRINK_LIMIT for x in rows if math.isfinite(x["shrink_ratio"])]
+    return float(np.mean(r)) if r else math.nan
+
+
+def exceed_expected(rows) -> float:
+    """The same fraction expected of a perfect diagnosis: the mean over the trials of
+    ``linear_shrink``'s probability."""
+    r = [x["shrink_exceed_prob"] for x in rows if "shrink_exceed_prob" in x]
+    return float(np.mean(r)) if r else math.nan
+
+
+def exceed_pvalue(rows) -> float:
+    """P(at least the observed number of trials above SHRINK_LIMIT) for a perfect diagnosis:
+    the trials' counts are independent with the probabilities of ``linear_shrink`` (a
+    Poisson-binomial tail). Small: the diagnosis exceeds the limit more often than the noise
+    explains."""
+    rows = [x for x in rows if "shrink_exceed_prob" in x and math.isfinite(x["shrink_ratio"])]
+    if not rows:
+        return math.nan
+    k = sum(x["shrink_ratio"] > SHRINK_LIMIT for x in rows)
+    dist = np.array([1.0])
+    for x in rows:
+        q = x["shrink_exceed_prob"]
+        dist = np.append(dist * (1 - q), 0.0) + np.insert(dist * q, 0, 0.0)
+    return float(dist[k:].sum())
 
 
 def pooled_shrink(rows) -> float:
@@ -559,7 +639,10 @@ def main(argv=None) -> int:
                         f"{np.mean([r['size_ok'] for r in rows]):.2f}, shrink ratio max "
                         f"{max(sr) if sr else math.nan:.3f} (pooled over the trials "
                         f"{pooled_shrink(rows):.3f}; against the same model fitted from the "
-                        f"truth {max(sb) if sb else math.nan:.3f}), effect matters "
+                        f"truth {max(sb) if sb else math.nan:.3f}; above {SHRINK_LIMIT} in "
+                        f"{exceed_observed(rows):.2f} of the trials, where a perfect diagnosis "
+                        f"would be in {exceed_expected(rows):.2f}, p = "
+                        f"{exceed_pvalue(rows):.2g}), effect matters "
                         f"{np.mean([r['matters'] for r in rows]):.2f} ({redrawn[case]} draws "
                         "that did not matter drawn again)")
             vec = [r["size_ok_vector"] for r in rows if "size_ok_vector" in r]
@@ -571,7 +654,10 @@ def main(argv=None) -> int:
                 if args.verbose and case not in ("null", "out_of_library") and r["top1"] and (
                         not r["size_ok"] or r["shrink_ratio"] > 1.1):
                     print(f"    {r['shot']} (size ok {r['size_ok']}, shrink "
-                          f"{r['shrink_ratio']:.3f}, against the fit from the truth "
+                          f"{r['shrink_ratio']:.3f} (linearized "
+                          f"{r.get('shrink_ratio_linear', math.nan):.3f}, P(> {SHRINK_LIMIT}) "
+                          f"{r.get('shrink_exceed_prob', math.nan):.2f}), against the fit "
+                          "from the truth "
                           f"{r['after_vs_truth_start']:.3f}; chi^2 after / from the truth / "
                           f"clean {'/'.join(f'{x:.1f}' for x in r['chi2_after_best_clean'])}, fit "
                           f"{r['fit_status']}, after "
@@ -608,6 +694,18 @@ def main(argv=None) -> int:
         "shrink_ratio_pooled_max": max((pooled_shrink(per[c]) for c in eff),
                                        default=math.nan),
         "shrink_ratio_pooled_by_case": {c: pooled_shrink(per[c]) for c in eff},
+        "shrink_exceed_rate_by_case": {c: exceed_observed(per[c]) for c in eff},
+        "shrink_exceed_expected_by_case": {c: exceed_expected(per[c]) for c in eff},
+        "shrink_exceed_pvalue_by_case": {c: exceed_pvalue(per[c]) for c in eff},
+        # chi^2 after minus that of the clean fit, mean over the trials: an effect of k
+        # parameters, exactly the one injected, gives -k on average
+        "chi2_after_minus_clean_mean_by_case": {
+            c: float(np.mean([r["chi2_after_best_clean"][0] - r["chi2_after_best_clean"][2]
+                              for r in per[c] if "chi2_after_best_clean" in r]))
+            for c in eff if any("chi2_after_best_clean" in r for r in per[c])},
+        "shrink_linear_deviation_max": max(
+            (abs(r["shrink_ratio"] / r["shrink_ratio_linear"] - 1.0) for c in eff
+             for r in per[c] if "shrink_ratio_linear" in r), default=math.nan),
         "after_vs_truth_start_max": max(
             (r["after_vs_truth_start"] for c in eff for r in per[c]
              if math.isfinite(r["after_vs_truth_start"])), default=math.nan),

@@ -10,16 +10,18 @@ file                           contents
 =============================  =================================================================
 ``results.json``               status, statistics, every parameter (value, sigmas, initial
                                value, held, bounds), per-shot fitted state at the epoch with
-                               sigmas, residual rms per shot and channel, near-singular
-                               directions, warnings. Plain JSON: a value that is not finite
-                               (an undetermined sigma) is ``null``.
+                               sigmas, residual rms per shot and channel and its noise
+                               floor (docs/fitting.md), near-singular directions, warnings.
+                               Plain JSON: a value that is not finite (an undetermined
+                               sigma) is ``null``.
 ``coefficients.csv``           :meth:`FitResult.coefficient_table` (seed 004 Table 4 layout)
 ``covariance.csv``             (J^T W J)^-1, labelled by ``param_names`` (SI, radians)
 ``correlation.csv``            its correlation form
 ``correlation_coloured.csv``   correlation of the coloured-residual (sandwich) covariance
 ``residuals.csv``              one row per measured channel and station: ``measured``,
                                ``fitted``, ``residual``, ``sigma`` in the ``unit`` column's unit
-                               (``m`` or ``deg``) and ``normalized`` (residual / sigma)
+                               (``m`` or ``deg``), ``normalized`` (residual / sigma) and
+                               ``leverage`` (the hat matrix's diagonal)
 ``report.md``                  one page, lmfit-style (see :func:`report_markdown`)
 ``plots/*.png``                coefficients, angle histories, residuals, 3-D trajectory
 =============================  =================================================================
@@ -247,6 +249,12 @@ def results_dict(result: FitResult, shots: Sequence[ShotData], *,
         "residual_rms_all_shots": {f"{ch}_{CHANNEL_OUTPUT_UNITS[ch][0]}":
                                    v * CHANNEL_OUTPUT_UNITS[ch][1]
                                    for ch, v in result.rms().items()},
+        # the rms a correct model would leave (sigma sqrt(1 - leverage)) and the channel's
+        # share of the degrees of freedom
+        "residual_noise_floor": {f"{ch}_{CHANNEL_OUTPUT_UNITS[ch][0]}":
+                                 v * CHANNEL_OUTPUT_UNITS[ch][1]
+                                 for ch, v in result.noise_floor().items()},
+        "dof_by_channel": result.dof_by_channel(),
         "high_correlations": [{"a": a, "b": b, "r": r}
                               for a, b, r in result.high_correlations(REPORT_CORRELATION)],
         "near_singular": [dict(d) for d in result.near_singular],
@@ -262,11 +270,12 @@ def residuals_table(result: FitResult) -> pd.DataFrame:
 
     Columns: ``shot_id``, ``station``, ``t_s``, ``channel``, ``unit`` (``m`` or ``deg``),
     ``measured``, ``fitted``, ``residual`` (measured - fitted), ``sigma`` (all in ``unit``) and
-    ``normalized`` (residual / sigma, dimensionless).
+    ``normalized`` (residual / sigma, dimensionless), ``leverage`` (the share of the residual's
+    noise the fit absorbs: a correct model leaves sigma sqrt(1 - leverage); dimensionless).
     """
     r = result.residuals
     cols = ["shot_id", "station", "t_s", "channel", "unit", "measured", "fitted", "residual",
-            "sigma", "normalized"]
+            "sigma", "normalized", "leverage"]
     if r is None or len(r) == 0:
         return pd.DataFrame(columns=cols)
     factor = r["channel"].map(lambda c: CHANNEL_OUTPUT_UNITS[c][1]).to_numpy(float)
@@ -277,7 +286,8 @@ def residuals_table(result: FitResult) -> pd.DataFrame:
         "fitted": r["fitted"].to_numpy(float) * factor,
         "residual": r["residual"].to_numpy(float) * factor,
         "sigma": r["sigma"].to_numpy(float) * factor,
-        "normalized": r["normalized"].to_numpy(float)})
+        "normalized": r["normalized"].to_numpy(float),
+        "leverage": r["leverage"].to_numpy(float)})
     return out.loc[:, cols]
 
 
@@ -471,6 +481,11 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     if len(result.shots) > 1:
         L.append(f"| all | {result.n_observations} | {result.chi2:.4g} | "
                  f"{cells(result.rms())} |")
+    dof = result.dof_by_channel()
+    L.append(f"| noise floor | dof {result.dof} | — | {cells(result.noise_floor())} |")
+    L += ["", "Noise floor: the rms a correct model leaves on noise of the stated σ, "
+          "σ√(1 − leverage); the fit absorbs the rest. Degrees of freedom per channel: "
+          + ", ".join(f"{ch} {v:.1f}" for ch, v in dof.items() if math.isfinite(v)) + "."]
     L.append("")
     if plot_files:
         captions = {"coefficients": "fitted coefficients vs angle with ±1σ bands",

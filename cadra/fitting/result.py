@@ -88,6 +88,9 @@ class FitResult:
     extra_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     extra_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
     held_extras: tuple = ()          # extras held at their values (not fitted)
+    #: d(fitted / sigma) / d(parameter) at the final point: rows in the order of
+    #: ``residuals``, columns ``param_names`` (SI, radians); None when the fit had none
+    jacobian: np.ndarray | None = None
 
     def __bool__(self) -> bool:
         return self.status == "converged"
@@ -154,6 +157,29 @@ class FitResult:
         for ch in CHANNELS:
             r = self.residuals.loc[self.residuals["channel"] == ch, "residual"]
             out[ch] = float(np.sqrt(np.mean(r**2))) if len(r) else math.nan
+        return out
+
+    def dof_by_channel(self) -> dict:
+        """Per channel, the degrees of freedom the fit leaves it: sum of (1 - leverage)
+        over its residuals (the channels' values add up to ``dof`` when every free
+        parameter is determined). NaN where the fit has no Jacobian."""
+        r = self.residuals
+        return {ch: float((1.0 - r.loc[r["channel"] == ch, "leverage"]).sum())
+                if (r["channel"] == ch).any() else math.nan for ch in CHANNELS}
+
+    def noise_floor(self) -> dict:
+        """Per channel, the residual rms a correct model leaves on noise of the stated
+        sigmas: sqrt(mean of sigma^2 (1 - leverage)) (SI). The fit absorbs part of the noise;
+        a channel on which many free parameters act keeps well below its sigma."""
+        r = self.residuals
+        out = {}
+        for ch in CHANNELS:
+            sel = r["channel"] == ch
+            # a leverage of 1 (a residual the fit matches exactly) may come out a rounding
+            # above it
+            keep = np.clip(1.0 - r.loc[sel, "leverage"].to_numpy(float), 0.0, None)
+            out[ch] = (float(np.sqrt(np.mean(r.loc[sel, "sigma"].to_numpy(float) ** 2 * keep)))
+                       if sel.any() else math.nan)
         return out
 
     def coefficient_table(self) -> pd.DataFrame:
@@ -293,6 +319,7 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
     chi2_total = 0.0
     n_obs = 0
     have_jac = all(st.jac is not None for st in states)
+    jac_rows = []
     for st, off in zip(states, offsets, strict=True):
         sd = st.data
         pred = st.pred if st.pred is not None else np.full(sd.meas.shape, np.nan)
@@ -304,6 +331,7 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
             Jfull[:, :ns] = Jw[:, nl:nl + ns]
             Jfull[:, off:off + nl] = Jw[:, :nl]
             N += Jfull.T @ Jfull
+            jac_rows.append(Jfull)
             chan = np.nonzero(st.mask)[1]
             blocks.append((Jfull, (res / sd.sigma)[st.mask], chan))
         chi2_shot = float(np.nansum(((res / sd.sigma)[st.mask]) ** 2))
@@ -328,10 +356,18 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
         middle = _coloured_middle(blocks)
         cov_c = cov @ middle @ cov
         near = _near_singular(N, names, na)
+        jacobian = np.vstack(jac_rows)
+        # leverage: the diagonal of the weighted hat matrix J (J^T J)^+ J^T
+        leverage = np.einsum("ij,jk,ik->i", jacobian, cov, jacobian)
     else:
         cov = np.full((P, P), np.nan)
         cov_c = cov.copy()
         near = []
+        jacobian = None
+        leverage = np.full(len(rows), 0.0 if have_jac else np.nan)
+    residuals = pd.DataFrame(rows)
+    if len(rows):
+        residuals["leverage"] = leverage
     sig = np.sqrt(np.maximum(np.diag(cov), 0.0)) if P else np.zeros(0)
     undetermined = {d["hold"] for d in near}
     for i, name in enumerate(names):
@@ -359,11 +395,11 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
         aero_sigma=sig[:na].copy(), shots=tuple(fits), param_names=tuple(names),
         covariance=cov, covariance_coloured=cov_c, chi2=chi2_total, n_observations=n_obs,
         n_free=n_free, iterations=iterations, history=tuple(history),
-        residuals=pd.DataFrame(rows), near_singular=tuple(near), warnings=tuple(warnings),
+        residuals=residuals, near_singular=tuple(near), warnings=tuple(warnings),
         elapsed_s=time.perf_counter() - t_start,
         extras=tuple(extras),
         extra_values=np.array(extra_values if extra_values is not None else [], dtype=float),
-        extra_sigma=sig[na:ns].copy(), held_extras=tuple(held_extras),
+        extra_sigma=sig[na:ns].copy(), held_extras=tuple(held_extras), jacobian=jacobian,
         options={"max_iterations": options.max_iterations,
                  "step_tol_sigma": options.step_tol_sigma,
                  "integration": options.integration.__dict__, "final_lambda": lam})

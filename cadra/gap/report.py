@@ -23,15 +23,23 @@ def summary_markdown(dg, result, where_tables=None) -> str:
          f"Fit: {result.status}, {len(result.shots)} shot(s), chi^2/dof "
          f"{dg.reduced_chi2_before:.3f} -> {dg.reduced_chi2_after:.3f} after the effects "
          "added.", "", "## How much: residual rms per channel", "",
-         "| channel | before | after | noise (median sigma) |", "|---|---|---|---|"]
+         "| channel | before | after | noise floor after | σ (median) | dof after |",
+         "|---|---|---|---|---|---|"]
     sig = result.residuals.groupby("channel")["sigma"].median()
+    final = dg.fit_after if dg.fit_after is not None else result
+    floor, dof = final.noise_floor(), final.dof_by_channel()
     for ch in CHANNELS:
         u, f = _UNIT[ch]
         b, a = dg.rms_before.get(ch, math.nan), dg.rms_after.get(ch, math.nan)
         if math.isnan(b):
             continue
         L.append(f"| {ch} | {b * f:.4g} {u} | {a * f:.4g} {u} | "
-                 f"{sig.get(ch, math.nan) * f:.4g} {u} |")
+                 f"{floor.get(ch, math.nan) * f:.4g} {u} | "
+                 f"{sig.get(ch, math.nan) * f:.4g} {u} | {dof.get(ch, math.nan):.1f} |")
+    L += ["", "Noise floor: the rms a correct model leaves on noise of the stated σ, "
+          "σ√(1 − leverage) (the fit absorbs the rest); dof: the channel's share of the "
+          "degrees of freedom. A channel with few (many free parameters act on it) has an rms "
+          "that scatters widely from fit to fit: about 1/√(2 dof) relative."]
     L += ["", "## Effects added (greedy, each significant)", ""]
     if dg.added:
         L += ["| round | effect | size ± σ | p (F test) | Δχ² |", "|---|---|---|---|---|"]
