@@ -391,16 +391,23 @@ def test_validation_predicts_the_shrink_ratio_from_the_fits_linearizations():
                                / np.sum((sigma[ch == c, None] * rc[ch == c]) ** 2, axis=0))
                        for c in chans], axis=0)
 
-    predicted, prob = vg.linear_shrink(clean, after, noise, np.random.default_rng(4),
-                                       draws=4000)
+    lin = vg.linear_shrink(clean, after, noise, np.random.default_rng(4), draws=4000)
+    predicted, prob = lin["ratio"], lin["prob"]
     e = np.array([noise[k] for k in keys])[:, None]
     assert predicted == pytest.approx(float(ratio(e)[0]), rel=1e-10)
+    # chi^2 after - clean: for the noise drawn, and its mean over draws (one more column:
+    # -1, the difference of the two projections' traces)
+    rc = e - Jc @ np.linalg.lstsq(Jc, e, rcond=None)[0]
+    ra = e - Ja @ np.linalg.lstsq(Ja, e, rcond=None)[0]
+    assert lin["dchi2"] == pytest.approx(float(np.sum(ra**2) - np.sum(rc**2)), rel=1e-10)
+    assert lin["dchi2_mean"] == pytest.approx(-1.0, abs=4 * math.sqrt(lin["dchi2_var"] / 4000))
     mc = float(np.mean(ratio(np.random.default_rng(9).standard_normal((n, 20000))) > 1.10))
     assert 0.02 < mc < 0.98                 # the problem is one where the rate means something
     assert prob == pytest.approx(mc, abs=4 * math.sqrt(mc * (1 - mc) / 4000))
     # the same fit twice: ratio 1, never above the limit
-    same, p0 = vg.linear_shrink(clean, clean, noise, np.random.default_rng(4), draws=500)
-    assert same == pytest.approx(1.0, abs=1e-12) and p0 == 0.0
+    same = vg.linear_shrink(clean, clean, noise, np.random.default_rng(4), draws=500)
+    assert same["ratio"] == pytest.approx(1.0, abs=1e-12) and same["prob"] == 0.0
+    assert same["dchi2_mean"] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_validation_tail_probability_of_trials_above_the_limit():

@@ -357,7 +357,8 @@ def run_trial(case, rng, tmpdir, force=False):
             lin = linear_shrink(clean, dg.fit_after, noise,
                                 rng=np.random.default_rng([seed, 1]))
             if lin is not None:
-                out["shrink_ratio_linear"], out["shrink_exceed_prob"] = lin
+                out["shrink_ratio_linear"], out["shrink_exceed_prob"] = lin["ratio"], lin["prob"]
+                out["dchi2_linear"] = (lin["dchi2"], lin["dchi2_mean"], lin["dchi2_var"])
             out["chi2_after_best_clean"] = (float(dg.fit_after.chi2),
                                             float(best.chi2 if best is not None else math.nan),
                                             float(clean.chi2))
@@ -382,8 +383,11 @@ def linear_shrink(clean, after, noise: dict, rng, draws: int = SHRINK_DRAWS,
     the trial's ratio (max over channels of rms after / rms clean); with ``draws`` other
     noise vectors it gives the probability that the ratio exceeds ``limit`` when the effect
     added is exactly the one injected: the rate at which a perfect diagnosis fails the
-    issue's 10 % criterion on this shot. Returns (predicted ratio, probability), or None if
-    either fit has no Jacobian."""
+    issue's 10 % criterion on this shot. The same for chi^2 after - chi^2 clean (whose mean
+    is minus the effect's parameter count; its scatter grows with the difference of the two
+    Jacobians). Returns a dict: ``ratio`` (predicted), ``prob``, ``dchi2`` (predicted),
+    ``dchi2_mean`` and ``dchi2_var`` over the draws; or None if either fit has no
+    Jacobian."""
     if clean.jacobian is None or after.jacobian is None:
         return None
     rc, ra = clean.residuals, after.residuals
@@ -397,12 +401,15 @@ def linear_shrink(clean, after, noise: dict, rng, draws: int = SHRINK_DRAWS,
     def resid(fit, J):
         return E - J @ (fit.covariance @ (J.T @ E))
 
+    Rc, Ra = resid(clean, clean.jacobian) ** 2, resid(after, Ja) ** 2     # (r / sigma)^2
+    dchi2 = Ra.sum(axis=0) - Rc.sum(axis=0)
     w2 = rc["sigma"].to_numpy(float)[:, None] ** 2
-    Rc, Ra = w2 * resid(clean, clean.jacobian) ** 2, w2 * resid(after, Ja) ** 2
     chan = rc["channel"].to_numpy()
-    ratio = np.max([np.sqrt(Ra[chan == c].sum(axis=0) / Rc[chan == c].sum(axis=0))
+    ratio = np.max([np.sqrt((w2 * Ra)[chan == c].sum(axis=0) / (w2 * Rc)[chan == c].sum(axis=0))
                     for c in np.unique(chan)], axis=0)
-    return float(ratio[0]), float(np.mean(ratio[1:] > limit))
+    return {"ratio": float(ratio[0]), "prob": float(np.mean(ratio[1:] > limit)),
+            "dchi2": float(dchi2[0]), "dchi2_mean": float(np.mean(dchi2[1:])),
+            "dchi2_var": float(np.var(dchi2[1:], ddof=1))}
 
 
 def exceed_observed(rows) -> float:
@@ -703,6 +710,13 @@ def main(argv=None) -> int:
             c: float(np.mean([r["chi2_after_best_clean"][0] - r["chi2_after_best_clean"][2]
                               for r in per[c] if "chi2_after_best_clean" in r]))
             for c in eff if any("chi2_after_best_clean" in r for r in per[c])},
+        # ... and what a perfect diagnosis gives: mean and sigma of that mean, from
+        # ``linear_shrink``'s draws
+        "chi2_after_minus_clean_expected_by_case": {
+            c: [float(np.mean([r["dchi2_linear"][1] for r in per[c] if "dchi2_linear" in r])),
+                float(math.sqrt(sum(r["dchi2_linear"][2] for r in per[c] if "dchi2_linear" in r))
+                      / sum("dchi2_linear" in r for r in per[c]))]
+            for c in eff if any("dchi2_linear" in r for r in per[c])},
         "shrink_linear_deviation_max": max(
             (abs(r["shrink_ratio"] / r["shrink_ratio_linear"] - 1.0) for c in eff
              for r in per[c] if "shrink_ratio_linear" in r), default=math.nan),
