@@ -198,8 +198,8 @@ def test_fit_keeps_its_jacobian_and_leverages(m2_2429):
     result, _ = fit_shots([noisy], shot.model, options=opts)
     assert result.converged, result.message
     r = result.residuals
-    J = result.jacobian
-    assert J.shape == (len(r), result.n_free)
+    assert result.jacobian.shape == (len(r), result.n_free)
+    J = result.jacobian.toarray()
     row = {int(st): i for i, st in enumerate(exact.stations)}
     ew = scale * np.array([e[row[int(st)], CHANNELS.index(ch)]
                            for st, ch in zip(r["station"], r["channel"], strict=True)])
@@ -305,6 +305,14 @@ def test_multifit_shares_parameters(m2_2429):
     assert multi.aero_sigma[i] < min(s.aero_sigma[i] for s in singles)
     assert len(multi.shots) == 2
     assert set(pd.unique(multi.residuals["shot_id"])) == {s.shot_id for s in sds}
+    # the leverages, computed shot by shot on the columns each touches, are the dense hat
+    # matrix's diagonal; a shot's rows do not touch the other shot's unknowns
+    J = multi.jacobian.toarray()
+    H = J @ np.linalg.solve(J.T @ J, J.T)
+    np.testing.assert_allclose(multi.residuals["leverage"], np.diag(H), rtol=0, atol=1e-9)
+    first = (multi.residuals["shot_id"] == sds[0].shot_id).to_numpy()
+    other_locals = [k for k, n in enumerate(multi.param_names) if n.startswith(sds[1].shot_id)]
+    assert other_locals and not np.any(J[np.ix_(first, other_locals)])
 
 
 def test_bounds_are_respected_and_reported(m2_2429):

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy import sparse
 
 from cadra.aero import AeroModel
 from cadra.fitting.data import CHANNELS, ShotData
@@ -89,8 +90,9 @@ class FitResult:
     extra_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
     held_extras: tuple = ()          # extras held at their values (not fitted)
     #: d(fitted / sigma) / d(parameter) at the final point: rows in the order of
-    #: ``residuals``, columns ``param_names`` (SI, radians); None when the fit had none
-    jacobian: np.ndarray | None = None
+    #: ``residuals``, columns ``param_names`` (SI, radians); sparse (``scipy.sparse.csr_array``:
+    #: a shot's rows touch only the shared unknowns and its own); None when the fit had none
+    jacobian: sparse.csr_array | None = None
 
     def __bool__(self) -> bool:
         return self.status == "converged"
@@ -331,7 +333,7 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
             Jfull[:, :ns] = Jw[:, nl:nl + ns]
             Jfull[:, off:off + nl] = Jw[:, :nl]
             N += Jfull.T @ Jfull
-            jac_rows.append(Jfull)
+            jac_rows.append((Jfull, np.r_[0:ns, off:off + nl]))
             chan = np.nonzero(st.mask)[1]
             blocks.append((Jfull, (res / sd.sigma)[st.mask], chan))
         chi2_shot = float(np.nansum(((res / sd.sigma)[st.mask]) ** 2))
@@ -356,9 +358,16 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
         middle = _coloured_middle(blocks)
         cov_c = cov @ middle @ cov
         near = _near_singular(N, names, na)
-        jacobian = np.vstack(jac_rows)
-        # leverage: the diagonal of the weighted hat matrix J (J^T J)^+ J^T
-        leverage = np.einsum("ij,jk,ik->i", jacobian, cov, jacobian)
+        # leverage: the diagonal of the weighted hat matrix J (J^T J)^+ J^T, shot by shot
+        # on the columns its rows touch
+        if jac_rows:
+            leverage = np.concatenate([
+                np.einsum("ij,jk,ik->i", J[:, c], cov[np.ix_(c, c)], J[:, c])
+                for J, c in jac_rows])
+            jacobian = sparse.csr_array(sparse.vstack([sparse.csr_array(J)
+                                                       for J, _ in jac_rows]))
+        else:
+            leverage, jacobian = np.zeros(0), sparse.csr_array((0, P))
     else:
         cov = np.full((P, P), np.nan)
         cov_c = cov.copy()
