@@ -221,6 +221,10 @@ def test_fit_keeps_its_jacobian_and_leverages(m2_2429):
         mc = np.sqrt(np.mean((sig[sel, None] * R[sel]) ** 2))
         assert floor[ch] == pytest.approx(mc, rel=0.02), ch
         assert floor[ch] < np.median(sig[sel])
+    # a fit without a Jacobian has no leverages: no floor, no dof (not a silent 0)
+    bare = replace(result, jacobian=None, residuals=r.assign(leverage=np.nan))
+    assert all(np.isnan(v) for v in bare.dof_by_channel().values())
+    assert all(np.isnan(v) for v in bare.noise_floor().values())
 
 def _duplicate_model():
     return model_from_dict({

@@ -166,7 +166,8 @@ class FitResult:
         over its residuals (the channels' values add up to ``dof`` when every free
         parameter is determined). NaN where the fit has no Jacobian."""
         r = self.residuals
-        return {ch: float((1.0 - r.loc[r["channel"] == ch, "leverage"]).sum())
+        # numpy's sum: a missing leverage (NaN) gives NaN, not pandas' skipped 0
+        return {ch: float(np.sum(1.0 - r.loc[r["channel"] == ch, "leverage"].to_numpy(float)))
                 if (r["channel"] == ch).any() else math.nan for ch in CHANNELS}
 
     def noise_floor(self) -> dict:
@@ -364,8 +365,7 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
             leverage = np.concatenate([
                 np.einsum("ij,jk,ik->i", J[:, c], cov[np.ix_(c, c)], J[:, c])
                 for J, c in jac_rows])
-            jacobian = sparse.csr_array(sparse.vstack([sparse.csr_array(J)
-                                                       for J, _ in jac_rows]))
+            jacobian = sparse.vstack([sparse.csr_array(J) for J, _ in jac_rows], format="csr")
         else:
             leverage, jacobian = np.zeros(0), sparse.csr_array((0, P))
     else:
