@@ -426,6 +426,14 @@ def exceed_expected(rows) -> float:
     return float(np.mean(r)) if r else math.nan
 
 
+def dchi2_expected(rows) -> list[float]:
+    """chi^2 after - chi^2 clean, mean over the trials, as a perfect diagnosis gives it
+    (``linear_shrink``'s draws): [mean, sigma of that mean]."""
+    lin = [x["dchi2_linear"] for x in rows if "dchi2_linear" in x]
+    return [float(np.mean([d[1] for d in lin])),
+            float(math.sqrt(sum(d[2] for d in lin)) / len(lin))]
+
+
 def exceed_pvalue(rows) -> float:
     """P(at least the observed number of trials above SHRINK_LIMIT) for a perfect diagnosis:
     the trials' counts are independent with the probabilities of ``linear_shrink`` (a
@@ -659,7 +667,7 @@ def main(argv=None) -> int:
             print(f"{case:16s} {line}")
             for r in rows:
                 if args.verbose and case not in ("null", "out_of_library") and r["top1"] and (
-                        not r["size_ok"] or r["shrink_ratio"] > 1.1):
+                        not r["size_ok"] or r["shrink_ratio"] > SHRINK_LIMIT):
                     print(f"    {r['shot']} (size ok {r['size_ok']}, shrink "
                           f"{r['shrink_ratio']:.3f} (linearized "
                           f"{r.get('shrink_ratio_linear', math.nan):.3f}, P(> {SHRINK_LIMIT}) "
@@ -713,10 +721,7 @@ def main(argv=None) -> int:
         # ... and what a perfect diagnosis gives: mean and sigma of that mean, from
         # ``linear_shrink``'s draws
         "chi2_after_minus_clean_expected_by_case": {
-            c: [float(np.mean([r["dchi2_linear"][1] for r in per[c] if "dchi2_linear" in r])),
-                float(math.sqrt(sum(r["dchi2_linear"][2] for r in per[c] if "dchi2_linear" in r))
-                      / sum("dchi2_linear" in r for r in per[c]))]
-            for c in eff if any("dchi2_linear" in r for r in per[c])},
+            c: dchi2_expected(per[c]) for c in eff if any("dchi2_linear" in r for r in per[c])},
         "shrink_linear_deviation_max": max(
             (abs(r["shrink_ratio"] / r["shrink_ratio_linear"] - 1.0) for c in eff
              for r in per[c] if "shrink_ratio_linear" in r), default=math.nan),
