@@ -2,7 +2,7 @@
 
 Stage one (``cadra1``) measures model position and attitude from shadowgraphs; stage two
 (``cadra2``) identifies aerodynamic coefficients by 6-DOF least-squares differential correction.
-The simulator (``cadra.dynamics`` + ``cadra.imaging.render``) and the fitter share one dynamics
+The simulator (``cadra.dynamics`` + ``cadra.synthetic.render``) and the fitter share one dynamics
 and one aerodynamic-model code path.
 
 Conventions (frames, angles, pixel origin, units) are defined once in ``docs/conventions.md``

@@ -14,7 +14,7 @@ import hashlib
 from pathlib import Path
 
 _ROOT = Path(__file__).resolve().parent
-_JIT_PACKAGES = ("aero", "dynamics", "imaging", "body", "fitting", "calibration", "gap")
+_JIT_PACKAGES = ("aero", "dynamics", "synthetic", "measure", "body", "fitting", "calibration", "gap")
 
 
 def ensure_fresh_cache() -> None:

@@ -14,7 +14,7 @@ import pytest
 from cadra.aero import save_model
 from cadra.cli.cadra2 import main
 from cadra.io.trajectory import COLUMNS, write_trajectory
-from cadra.simulate import load_shot_spec, simulate_shot, write_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 SPECS = Path("sample_shots/specs")
 
@@ -160,7 +160,7 @@ def test_unknown_model_and_bad_hold(shots, capsys):
 def test_hold_value_in_file_units(shots):
     """--hold alpha_ref=21.21 is degrees (the model file's unit), stored as radians."""
     from cadra.cli.cadra2 import _apply_holds, build_parser
-    from cadra.simulate import resolve_model
+    from cadra.synthetic.simulate import resolve_model
 
     args = build_parser().parse_args(["fit", "x", "--model", "m2_m070", "-o", "y",
                                       "--hold", "alpha_ref=20.0", "--bound", "CD_A1=0.5:1.5"])

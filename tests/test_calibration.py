@@ -18,7 +18,7 @@ from cadra.calibration.sphere import (
     estimate_station_biases,
 )
 from cadra.fitting import fit_shots, shot_data_from_truth
-from cadra.simulate import load_shot_spec, simulate_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SPECS = "sample_shots/specs"
 SIGMA = 1e-6      # m, position noise (stage one measures spheres to ~0.2 um)

@@ -1,10 +1,10 @@
-"""Two-view combination against exact geometry (cadra.imaging.combine)."""
+"""Two-view combination against exact geometry (cadra.measure.combine)."""
 
 import numpy as np
 import pytest
 
 from cadra.conventions import axis_from_inclinations, projected_angles_from_axis
-from cadra.imaging.combine import ViewPose, combine_views
+from cadra.measure.combine import ViewPose, combine_views
 
 RNG = np.random.default_rng(7)
 

@@ -1,4 +1,4 @@
-"""Cramér–Rao bound of the pose (cadra.imaging.crb) and the Otsu + moments baseline."""
+"""Cramér–Rao bound of the pose (cadra.synthetic.crb) and the Otsu + moments baseline."""
 
 import math
 
@@ -6,18 +6,18 @@ import numpy as np
 import pytest
 
 from cadra.body import capsule, silhouette
-from cadra.imaging.baseline import (
+from cadra.measure.baseline import (
     otsu_moments,
     polygon_centroid_offset,
     reference_from_centroid,
 )
-from cadra.imaging.crb import (
+from cadra.synthetic.crb import (
     grain_correlation_kernel,
     model_image,
     noise_covariance_operator,
     pose_crb,
 )
-from cadra.imaging.render import (
+from cadra.synthetic.render import (
     RenderConfig,
     Scene,
     _film_grain,

@@ -21,7 +21,7 @@ from cadra.fitting import (
 )
 from cadra.fitting.sensitivity import apply_local, observables, predict, predict_with_jacobian
 from cadra.fitting.solver import _blocks, _normal_equations, _scales, _step
-from cadra.simulate import load_shot_spec, simulate_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SPECS = "sample_shots/specs"
 

@@ -19,7 +19,7 @@ from cadra.fitting import shot_data_from_truth
 from cadra.fitting.extras import Extra
 from cadra.fitting.sensitivity import predict, predict_with_jacobian
 from cadra.fitting.solver import fit
-from cadra.simulate import load_shot_spec, simulate_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 CG_Z = 2e-4          # m, body z
 BIAS_Y = 3e-6        # m, station 6 y

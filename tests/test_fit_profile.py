@@ -18,7 +18,7 @@ from cadra.dynamics.effects import Effects
 from cadra.fitting import fit_shots, shot_data_from_truth
 from cadra.fitting.extras import Extra
 from cadra.fitting.profile import profile_parameter
-from cadra.simulate import load_shot_spec, simulate_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 BIAS_Z = 3e-6        # m, station 9
 

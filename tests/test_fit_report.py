@@ -18,7 +18,7 @@ import pytest
 from cadra.fitting.data import CHANNELS, FILM_SIGMAS, shot_data_from_truth
 from cadra.fitting.report import write_fit_outputs
 from cadra.fitting.solver import fit
-from cadra.simulate import load_shot_spec, simulate_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 FREE = ("CD_A1", "Cm_A1", "Cmq_A1")
 FILES = ("results.json", "coefficients.csv", "covariance.csv", "correlation.csv",

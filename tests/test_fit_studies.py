@@ -34,7 +34,7 @@ from cadra.fitting.studies import (
     single_fit,
     single_fits,
 )
-from cadra.simulate import load_shot_spec, rigid_body, simulate_shot, spec_from_dict
+from cadra.synthetic.simulate import load_shot_spec, rigid_body, simulate_shot, spec_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SPECS = ROOT / "sample_shots" / "specs"

@@ -16,7 +16,7 @@ import pytest
 from cadra.dynamics.effects import Effects
 from cadra.fitting import fit_shots, shot_data_from_truth
 from cadra.gap.score import diagnose_gap
-from cadra.simulate import load_shot_spec, simulate_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SP = 2.8e-7                      # m, stage one's capsule precision
 SA = np.radians(0.0012)          # rad
@@ -102,7 +102,7 @@ def test_diagnose_cli(tmp_path, spec):
 
     from cadra.cli.cadra2 import main
     from cadra.io.trajectory import COLUMNS, write_trajectory
-    from cadra.simulate import write_shot
+    from cadra.synthetic.simulate import write_shot
 
     sim = simulate_shot(replace(spec, effects=Effects(cg_offset_body_m=(0, 0, 2e-4))))
     d = write_shot(sim, tmp_path / "shot", images=False, progress=False)

@@ -1,4 +1,4 @@
-"""Synthetic shadowgraph renderer (cadra.imaging.render): truth, optics, files, config.
+"""Synthetic shadowgraph renderer (cadra.synthetic.render): truth, optics, files, config.
 
 Truths used: the shoelace area/centroid of the drawn polygon (exact), the separable overlap
 lengths of an axis-aligned rectangle with the pixel grid (exact), the pixel-integrated Gaussian
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.special import ndtr
 
-from cadra.imaging.render import (
+from cadra.synthetic.render import (
     RenderConfig,
     Scene,
     coverage,
@@ -27,7 +27,7 @@ from cadra.imaging.render import (
     wire_polygon,
     write_image,
 )
-from cadra.imaging.render_config import PsfShape, load_render_config, save_render_config
+from cadra.synthetic.render_config import PsfShape, load_render_config, save_render_config
 
 RNG = np.random.default_rng(20261123)
 

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from cadra.body import capsule, cone, sphere
-from cadra.imaging.baseline import otsu_moments
-from cadra.imaging.render import RenderConfig
-from cadra.imaging.silhouette_fit import fit_silhouette, make_template
-from cadra.imaging.synthetic import case_errors, measure_case, random_view_case
+from cadra.measure.baseline import otsu_moments
+from cadra.measure.silhouette_fit import fit_silhouette, make_template
+from cadra.synthetic.cases import case_errors, measure_case, random_view_case
+from cadra.synthetic.render import RenderConfig
 
 SPHERE = sphere(0.03556)
 M2 = capsule("M2")
@@ -145,7 +145,7 @@ def test_partly_out_of_frame_and_blank():
     fit = fit_silhouette(case.image, tpl, case.affine, far)
     assert not fit.ok and "out of frame" in fit.reason
     blank = np.full_like(case.image, 0.85)
-    from cadra.imaging.silhouette_fit import locate_model
+    from cadra.measure.silhouette_fit import locate_model
 
     coarse = locate_model(blank, tpl, case.affine)
     assert not coarse.ok and "no model" in coarse.reason
@@ -154,7 +154,7 @@ def test_partly_out_of_frame_and_blank():
 def test_band_pixels_match_brute_force_nearest_edge():
     """The band search (each edge's box of +-band px) finds, for every pixel within the band,
     the same signed distance and nearest edge as a brute-force search over all edges."""
-    from cadra.imaging.silhouette_fit import _band_pixels, _outline_geometry, outline_px
+    from cadra.measure.silhouette_fit import _band_pixels, _outline_geometry, outline_px
 
     tpl = make_template(capsule("M2"), "top", tilt_rad=0.2)
     M = np.array([[1.27e-4, 2e-7, -0.03], [-3e-7, 1.27e-4, -0.03]])
@@ -199,7 +199,7 @@ def test_dark_level_models_meet_targets(shadow_level):
     """Both dark-level models (tied to the bright level image-wide, the default; or free per
     segment) meet the sphere target on renders with an opaque shadow and a translucent one,
     and the two agree to well within the target."""
-    from cadra.imaging.silhouette_fit import FitSettings
+    from cadra.measure.silhouette_fit import FitSettings
 
     cfg = RenderConfig(shadow_level=shadow_level)
     rng = np.random.default_rng(5)
@@ -216,7 +216,7 @@ def test_dark_level_models_meet_targets(shadow_level):
 
 
 def test_fit_settings_refuse_an_unknown_dark_level():
-    from cadra.imaging.silhouette_fit import FitSettings
+    from cadra.measure.silhouette_fit import FitSettings
 
     with pytest.raises(ValueError, match="dark_level"):
         FitSettings(dark_level="global")

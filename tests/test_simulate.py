@@ -9,9 +9,9 @@ import pytest
 
 from cadra.cli import cadra1, cadra2
 from cadra.dynamics.observe import observe
-from cadra.imaging.render import illumination_field, read_image, render_clean
-from cadra.imaging.render_config import RenderConfig
-from cadra.simulate import (
+from cadra.synthetic.render import illumination_field, read_image, render_clean
+from cadra.synthetic.render_config import RenderConfig
+from cadra.synthetic.simulate import (
     SpecError,
     load_shot_spec,
     simulate_shot,
@@ -112,7 +112,7 @@ def test_regeneration_is_deterministic(tmp_path):
 
 
 def test_interrupted_write_leaves_nothing(tmp_path, monkeypatch):
-    import cadra.imaging.render as render_mod
+    import cadra.synthetic.render as render_mod
 
     spec = spec_from_dict(spec_dict("m2_2429", n_stations=3))
     shot = simulate_shot(spec)

@@ -11,8 +11,8 @@ import pytest
 
 from cadra.cli.cadra1 import main as cadra1_main
 from cadra.io.trajectory import load_trajectory
-from cadra.simulate import load_shot_spec, simulate_shot, write_shot
-from cadra.stage1 import measure_shot
+from cadra.measure.shot import measure_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 SPECS = Path(__file__).resolve().parents[1] / "sample_shots" / "specs"
 
@@ -122,7 +122,7 @@ def test_outputs_are_atomic_and_never_overwrite(m2_shot, tmp_path, monkeypatch):
     # an output directory holding the inputs is refused
     assert cadra1_main([str(m2_shot / "shot.toml"), "-o", str(m2_shot), "-q"]) == 2
     # a failure while writing leaves nothing behind
-    import cadra.imaging.plots as plots
+    import cadra.measure.plots as plots
 
     def boom(*a, **k):
         raise RuntimeError("disk full")

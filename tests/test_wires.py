@@ -1,7 +1,7 @@
-"""Fiducial wires and the image->plane affine (cadra.imaging.wires), against exact truth.
+"""Fiducial wires and the image->plane affine (cadra.measure.wires), against exact truth.
 
 Images come from the synthetic renderer: the wires are drawn with a known, perturbed affine
-(``cadra.simulate._film_affine``: ~4 px shift, 0.05 deg rotation, 5e-4 scale, 1-sigma), so
+(``cadra.synthetic.simulate.film_affine``: ~4 px shift, 0.05 deg rotation, 5e-4 scale, 1-sigma), so
 the true image->plane map and the true image line of every wire are exact.
 
 Measured when these tests were written (HFFAF station 1 top and 5 side, 80 default-realism
@@ -27,9 +27,9 @@ import numpy as np
 import pytest
 
 from cadra.facility.reference import apply_affine, fit_affine_to_wires, load_facility
-from cadra.imaging.render import RenderConfig, Scene, render
-from cadra.imaging.wires import WireMeasurement, measure_wires, wire_mask
-from cadra.simulate import FilmPlacement, _film_affine
+from cadra.measure.wires import WireMeasurement, measure_wires, wire_mask
+from cadra.synthetic.render import RenderConfig, Scene, render
+from cadra.synthetic.simulate import FilmPlacement, film_affine
 
 FAC = load_facility("hffaf")
 VIEWS = [(1, "top"), (5, "side")]
@@ -52,7 +52,7 @@ def circle(uc, vc, radius, n=720):
 
 def true_affine(view, seed):
     rng = np.random.default_rng(seed)
-    return _film_affine(view.image_to_plane, FilmPlacement(), rng, view.width_px,
+    return film_affine(view.image_to_plane, FilmPlacement(), rng, view.width_px,
                         view.height_px)
 
 

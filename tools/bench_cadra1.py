@@ -9,9 +9,9 @@ Sections (all on the M2 capsule, 3.556 cm = 280 px across, and a sphere of the s
 
 1. default realism, random subpixel positions and attitudes: bias and rms of the reference
    point (px, mm) and of the image axis angle (deg), the reported sigma and its ratio to the
-   actual error (1000 renders per body), the Cramer-Rao bound (cadra.imaging.crb) on a few
+   actual error (1000 renders per body), the Cramer-Rao bound (cadra.synthetic.crb) on a few
    of the same cases and the ratio rms / bound;
-2. the pixel-level baseline (Otsu threshold + image moments, cadra.imaging.baseline) on the
+2. the pixel-level baseline (Otsu threshold + image moments, cadra.measure.baseline) on the
    same images, and its error over CADRA's;
 3. "no inverse crime": renders with settings the measurement does not model (Airy-like and
    disk PSFs, a stronger diffraction fringe, coarser film grain, heavy clutter);
@@ -43,7 +43,7 @@ def _cases(body, n, config, seed, keep=0, baseline=False):
     """Render and measure ``n`` random cases, one at a time (1000 renders of 512 x 512 do
     not all fit in memory). Returns (errors, sigmas, baseline errors or None, fit times, the
     first ``keep`` cases)."""
-    from cadra.imaging.synthetic import case_errors, measure_case, random_view_case
+    from cadra.synthetic.cases import case_errors, measure_case, random_view_case
 
     rng = np.random.default_rng(seed)
     E, S, B, T, kept = [], [], [], [], []
@@ -64,7 +64,7 @@ def _cases(body, n, config, seed, keep=0, baseline=False):
 
 def _baseline_error(body, case):
     """Error of the Otsu + moments baseline on one case: u, v px (and axis deg)."""
-    from cadra.imaging.baseline import (
+    from cadra.measure.baseline import (
         otsu_moments,
         polygon_centroid_offset,
         reference_from_centroid,
@@ -87,7 +87,7 @@ def _baseline_error(body, case):
 
 
 def _crb(body, cases):
-    from cadra.imaging.crb import pose_crb
+    from cadra.synthetic.crb import pose_crb
 
     sig = []
     for case in cases:
@@ -114,7 +114,7 @@ def _ratio_se(B, E, n_boot=400, seed=0):
 
 def accuracy(n_default, n_variant, n_crb):
     from cadra.body import capsule, sphere
-    from cadra.imaging.render import RenderConfig
+    from cadra.synthetic.render import RenderConfig
 
     bodies = {"sphere": sphere(0.03556), "capsule": capsule("M2")}
     out = {}
@@ -153,8 +153,8 @@ def speed(tmpdir: Path, shot_spec: Path):
     """Render one shot's 32 images, then time stage one on one core and the read+blur floor."""
     import cv2
 
-    from cadra.simulate import load_shot_spec, simulate_shot, write_shot
-    from cadra.stage1 import measure_shot
+    from cadra.measure.shot import measure_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     shot_dir = tmpdir / "shot"
     write_shot(simulate_shot(load_shot_spec(shot_spec)), shot_dir, images=True, progress=False)

@@ -94,7 +94,7 @@ def _sim(name):
 
         from cadra.fitting.baseline import trajectory_ivp
         from cadra.fitting.sensitivity import observables
-        from cadra.simulate import load_shot_spec, simulate_shot
+        from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
         spec = load_shot_spec(ROOT / "sample_shots" / "specs" / f"{name}.toml")
         shot = simulate_shot(spec)

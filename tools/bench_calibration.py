@@ -70,7 +70,7 @@ def trials(n, sigma, seed, capsule_sigma=None):
 
     from cadra.calibration.sphere import apply_bias_table, estimate_station_biases
     from cadra.fitting import fit_shots
-    from cadra.simulate import load_shot_spec, simulate_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     specs = ROOT / "sample_shots" / "specs"
     spheres = [simulate_shot(load_shot_spec(specs / f"sphere_{k}.toml")) for k in (1, 2, 3)]
@@ -120,8 +120,8 @@ def end_to_end() -> dict:
 
     from cadra.calibration.sphere import estimate_station_biases
     from cadra.fitting import load_shot_data
-    from cadra.simulate import load_shot_spec, simulate_shot, write_shot
-    from cadra.stage1 import measure_shot
+    from cadra.measure.shot import measure_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     out = ROOT / "out" / "calibration_e2e"
     shots, injected = [], None

@@ -32,7 +32,7 @@ def main() -> None:
     import numpy as np
 
     from cadra.dynamics.setup import DT_MAX_DEFAULT, propagate_states
-    from cadra.simulate import load_shot_spec, simulate_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     spec = load_shot_spec(args.spec)
     t0 = time.perf_counter()

@@ -34,7 +34,7 @@ def main(argv=None) -> int:
 
     from tqdm import tqdm
 
-    from cadra.simulate import load_shot_spec, simulate_shot, write_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     specs = sorted(Path(args.specs).glob("*.toml"))
     if args.only:

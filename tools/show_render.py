@@ -17,7 +17,7 @@ import time
 import cv2
 import numpy as np
 
-from cadra.imaging.render import (
+from cadra.synthetic.render import (
     RenderConfig,
     Scene,
     load_render_config,

@@ -42,8 +42,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     from cadra.fitting import fit_shots, load_shot_data
-    from cadra.simulate import load_shot_spec, simulate_shot, write_shot
-    from cadra.stage1 import measure_shot
+    from cadra.measure.shot import measure_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

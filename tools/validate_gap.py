@@ -175,7 +175,7 @@ def make_case(name, rng, specs, model_file_dir):
         if name == "cm3":
             # scaled to the shot's own swing: at the largest |s| the cubic adds the fraction
             # v of the linear term's moment (the shots' swings differ fivefold)
-            from cadra.simulate import simulate_shot
+            from cadra.synthetic.simulate import simulate_shot
 
             a = np.concatenate([np.radians(simulate_shot(sp).truth["alpha_deg"].to_numpy())
                                 for sp in specs])
@@ -258,7 +258,7 @@ def run_trial(case, rng, tmpdir, force=False):
     from cadra.fitting import fit_shots
     from cadra.fitting.data import CHANNELS
     from cadra.gap.score import diagnose_gap
-    from cadra.simulate import load_shot_spec, simulate_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     pool = M1_SHOTS if case in M1_CASES else SHOTS
     group = SET_CASES.get(case)
@@ -583,7 +583,7 @@ def multifit_timing(seed: int = 0) -> dict:
     from cadra.fitting import fit_shots
     from cadra.gap.score import diagnose_gap
     from cadra.gap.where import where_analysis
-    from cadra.simulate import load_shot_spec, simulate_shot
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     shots, model = [], None
     for k, name in enumerate(SHOTS):

@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import pandas as pd
 
-    from cadra.stage1 import measure_shot
+    from cadra.measure.shot import measure_shot
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
     truth = pd.read_csv(args.truth) if args.truth else None

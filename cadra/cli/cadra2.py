@@ -51,7 +51,7 @@ def _refused(command: str, exc: Exception) -> int:
 
 
 def _simulate(args) -> int:
-    from cadra.simulate import SpecError, load_shot_spec, simulate_shot, write_shot
+    from cadra.synthetic.simulate import SpecError, load_shot_spec, simulate_shot, write_shot
 
     out = Path(args.output)
     if _exists(out, args, "simulate"):
@@ -133,7 +133,7 @@ def _fit(args) -> int:
 
     from cadra.fitting import FitDataError, FitOptions, fit_shots
     from cadra.fitting.report import write_fit_outputs
-    from cadra.simulate import SpecError, resolve_model
+    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
     if _exists(out, args, "fit"):
@@ -189,7 +189,7 @@ def _single(args) -> int:
     from cadra.aero import load_bundled_model
     from cadra.fitting import FitDataError, FitOptions
     from cadra.fitting.studies import linear_template_for, single_fits, write_single_fits
-    from cadra.simulate import SpecError, resolve_model
+    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
     if _exists(out, args, "single"):
@@ -217,7 +217,7 @@ def _holdone(args) -> int:
     from cadra.fitting import FitDataError, FitOptions, fit_shots
     from cadra.fitting.studies import hold_one_study, plot_hold_one
     from cadra.io.atomic import atomic_output_dir
-    from cadra.simulate import SpecError, resolve_model
+    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
     if _exists(out, args, "holdone"):
@@ -360,7 +360,7 @@ def _diagnose(args) -> int:
     from cadra.gap.score import diagnose_gap
     from cadra.gap.where import where_analysis
     from cadra.io.trajectory import load_trajectory
-    from cadra.simulate import SpecError, resolve_model
+    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
     if _exists(out, args, "diagnose"):

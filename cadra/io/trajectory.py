@@ -121,7 +121,7 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
 
 
 def station_rows(results, times_s: dict) -> pd.DataFrame:
-    """Table rows (:data:`COLUMNS`) from :class:`cadra.imaging.station.StationResult` s."""
+    """Table rows (:data:`COLUMNS`) from :class:`cadra.measure.station.StationResult` s."""
     rows = []
     for r in results:
         p = r.pose

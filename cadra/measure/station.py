@@ -4,16 +4,16 @@
 dict, settings) returning a :class:`StationResult`, so a process pool or a Dask scheduler can
 ship it. Per view (docs/stage1.md):
 
-1. read the image (:func:`cadra.imaging.loading.load_station_image`; a bad file fails that
+1. read the image (:func:`cadra.measure.loading.load_station_image`; a bad file fails that
    view with its reason);
-2. locate the model roughly (:func:`cadra.imaging.silhouette_fit.locate_model`);
+2. locate the model roughly (:func:`cadra.measure.silhouette_fit.locate_model`);
 3. find and fit the fiducial wires, solve the image->plane affine
-   (:func:`cadra.imaging.wires.measure_wires`), the model's box excluded;
+   (:func:`cadra.measure.wires.measure_wires`), the model's box excluded;
 4. fit the silhouette (method a) and the area centroid (method b) with the wires masked.
 
 The two views are then alternated: each view's outline depends on the axis' tilt out of its
 plane, which the other view measures; two or three rounds converge (the outline depends on the
-tilt only through its cosine). Finally :func:`cadra.imaging.combine.combine_views`.
+tilt only through its cosine). Finally :func:`cadra.measure.combine.combine_views`.
 
 Every problem is a reason string on the view or station; nothing raises for bad data.
 """
@@ -27,9 +27,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cadra.conventions import axis_from_projected_angles
-from cadra.imaging.combine import StationPose, ViewPose, combine_views
-from cadra.imaging.loading import load_station_image
-from cadra.imaging.silhouette_fit import (
+from cadra.measure.combine import StationPose, ViewPose, combine_views
+from cadra.measure.loading import load_station_image
+from cadra.measure.silhouette_fit import (
     FitSettings,
     ViewFit,
     fit_silhouette,
@@ -54,7 +54,7 @@ class ViewResult:
     ok: bool
     reason: str
     fit: ViewFit | None = None
-    wires: object | None = None            # cadra.imaging.wires.WireMeasurement
+    wires: object | None = None            # cadra.measure.wires.WireMeasurement
     affine: np.ndarray | None = None       # image -> plane actually used
     tilt_rad: float = 0.0
     warnings: tuple[str, ...] = ()
@@ -137,7 +137,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine)."""
-    from cadra.imaging.wires import measure_wires, wire_mask
+    from cadra.measure.wires import measure_wires, wire_mask
 
     masks = {} if masks is None else masks
 
@@ -261,7 +261,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             break
     results.update(fits)
     if overlays:
-        from cadra.imaging.plots import encode_png, view_overlay
+        from cadra.measure.plots import encode_png, view_overlay
 
         for name, img in images.items():
             r = results[name]

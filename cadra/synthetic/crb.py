@@ -3,7 +3,7 @@
 Stage one measures, per image, the body's reference-point position ``(u, v)`` (px) and its
 in-plane axis angle ``phi`` (rad, ``atan2(dv, du)`` in pixel axes) by fitting the known
 silhouette. :func:`pose_crb` gives the smallest standard deviations any unbiased estimator of
-those three numbers can reach on images made by :func:`cadra.imaging.render.render`: the
+those three numbers can reach on images made by :func:`cadra.synthetic.render.render`: the
 inverse Fisher information of the renderer's own image model.
 
 Model
@@ -15,7 +15,7 @@ moved by the pose ``p = (du, dv, dphi)``: rotated by ``dphi`` about ``ref_px`` a
 (``scratches = dust = 0``): clutter is a *nuisance the bound does not include* (it only
 removes information, so a real estimator facing clutter does worse than the bound).
 
-The noise of :func:`~cadra.imaging.render.render` is, to first order,
+The noise of :func:`~cadra.synthetic.render.render` is, to first order,
 ``I (1 + s_g g) + sqrt(read^2 + shot^2 I) n`` then quantized to steps ``q = 1/(2^b - 1)``, with
 ``g`` a unit-variance Gaussian field (white noise filtered by ``k (x) k``, ``k`` the Gaussian
 kernel of sigma ``L = film_grain_length_px``, scaled by ``1 / sum(k^2)``) and ``n`` white. The
@@ -58,7 +58,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cadra.imaging.render import (
+from cadra.synthetic.render import (
     RenderConfig,
     Scene,
     _gaussian_kernel_1d,
@@ -235,7 +235,7 @@ def model_image(
     Returns
     -------
     ndarray, float64, shape (height, width)
-        ``B * max(T, 0)`` exactly as :func:`~cadra.imaging.render.render_clean` composes it.
+        ``B * max(T, 0)`` exactly as :func:`~cadra.synthetic.render.render_clean` composes it.
     """
     u0, v0, w, h = roi
     cfg = _clean_config(config)
@@ -257,7 +257,7 @@ def grain_correlation_kernel(length_px: float) -> np.ndarray:
     """1-D factor ``a`` of the film-grain correlation ``K(du, dv) = a(du) a(dv)``.
 
     ``a = (k * k) / sum(k^2)`` with ``k`` the Gaussian kernel of sigma ``length_px`` that
-    :func:`cadra.imaging.render._film_grain` filters white noise with; ``a`` is symmetric,
+    :func:`cadra.synthetic.render._film_grain` filters white noise with; ``a`` is symmetric,
     odd-length, and its middle tap is 1 (unit variance). ``length_px = 0`` gives ``[1]``.
     """
     if length_px <= 0.0:

@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero import AeroModel, load_model
+from cadra.aero.model import MODELS_DIR
 from cadra.atmosphere import Atmosphere
 from cadra.body import Body, body_from_spec, silhouette
 from cadra.conventions import body_to_facility_matrix
@@ -43,7 +44,7 @@ from cadra.facility import Facility, load_facility
 from cadra.io import units
 from cadra.io.seed004 import load_seed004_table
 
-BUNDLED_MODELS = Path(__file__).resolve().parent / "aero" / "models"
+BUNDLED_MODELS = MODELS_DIR
 
 #: Kerr-cell exposure of seed 004 (30-40 ns); the motion blur is V * exposure
 EXPOSURE_S = 35e-9
@@ -442,7 +443,7 @@ def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> Simulated
 # --------------------------------------------------------------------------- images
 
 
-def _film_affine(nominal: np.ndarray, film: FilmPlacement, rng: np.random.Generator,
+def film_affine(nominal: np.ndarray, film: FilmPlacement, rng: np.random.Generator,
                  width: int, height: int) -> np.ndarray:
     """A perturbed image->plane affine: the film/scan placed slightly off nominal.
 
@@ -462,14 +463,14 @@ def _film_affine(nominal: np.ndarray, film: FilmPlacement, rng: np.random.Genera
 
 def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: np.ndarray,
                v_F: np.ndarray, exposure_s: float = EXPOSURE_S):
-    """One view's pixel-space :class:`~cadra.imaging.render.Scene` and its exact truth.
+    """One view's pixel-space :class:`~cadra.synthetic.render.Scene` and its exact truth.
 
     ``affine`` is the image->view-plane map actually used (film placement included), ``R_FB``
     the attitude, ``r_ref_F`` the reference point (m), ``v_F`` the velocity (m/s, for motion
     blur and the flow-clutter direction). Truth: reference-point pixel position, image-plane
     axis angle (atan2(dv, du) of the nose direction), motion blur, the affine's entries.
     """
-    from cadra.imaging.render import Scene
+    from cadra.synthetic.render import Scene
 
     def to_px(points_F):
         return view.plane_to_pixels(np.atleast_2d(points_F) @ view.P_view.T, affine=affine)
@@ -507,7 +508,7 @@ def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: 
 def station_scenes(shot: SimulatedShot, k: int, rng: np.random.Generator) -> list[dict]:
     """Pixel-space scenes of both views of station index ``k`` with their exact truth.
 
-    Each item: ``station``, ``view``, ``scene`` (:class:`cadra.imaging.render.Scene`), ``affine``
+    Each item: ``station``, ``view``, ``scene`` (:class:`cadra.synthetic.render.Scene`), ``affine``
     (the image->view-plane map actually used, film placement included) and ``truth`` (see
     :func:`view_scene`: what the image shows, biases included).
 
@@ -524,7 +525,7 @@ def station_scenes(shot: SimulatedShot, k: int, rng: np.random.Generator) -> lis
         r_ref = r_ref + bias_F
     out = []
     for name, view in sorted(station.views.items()):
-        affine = _film_affine(view.image_to_plane, shot.spec.film, rng, view.width_px,
+        affine = film_affine(view.image_to_plane, shot.spec.film, rng, view.width_px,
                               view.height_px)
         scene, truth = view_scene(shot.body, view, affine, R, r_ref, y[3:6])
         out.append({"station": station.id, "view": name, "scene": scene, "affine": affine,
@@ -538,7 +539,7 @@ def render_station_views(shot: SimulatedShot, k: int, rng: np.random.Generator,
 
     The bow shock is drawn only when the station's Mach number exceeds 1, at that Mach.
     """
-    from cadra.imaging.render import render
+    from cadra.synthetic.render import render
 
     mach = float(shot.truth["mach"].iloc[k])
     config = render_config.replace(bow_shock=render_config.bow_shock and mach > 1.0,
@@ -561,9 +562,9 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
     so an interrupted or failed run leaves nothing behind; an existing ``out_dir`` is refused
     unless ``overwrite``.
     """
-    from cadra.imaging.render import write_image
-    from cadra.imaging.render_config import RenderConfig
     from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, save_shot
+    from cadra.synthetic.render import write_image
+    from cadra.synthetic.render_config import RenderConfig
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:

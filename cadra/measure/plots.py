@@ -104,7 +104,7 @@ def view_overlay(image, result, template, station_id: int, crop_half_px: int = 2
     axis; below, the figures or the failure reason as text."""
     import cv2
 
-    from cadra.imaging.silhouette_fit import outline_px
+    from cadra.measure.silhouette_fit import outline_px
 
     fit = getattr(result, "fit", None)
     wires = getattr(result, "wires", None)

@@ -40,13 +40,13 @@ import numba
 import numpy as np
 from scipy.special import j1
 
-from cadra.imaging.render_config import (
+from cadra.io.atomic import atomic_write_bytes
+from cadra.synthetic.render_config import (
     PsfShape,
     RenderConfig,
     load_render_config,
     save_render_config,
 )
-from cadra.io.atomic import atomic_write_bytes
 
 __all__ = [
     "PsfShape",

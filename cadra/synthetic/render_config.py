@@ -1,4 +1,4 @@
-"""Configuration of the synthetic shadowgraph renderer (:mod:`cadra.imaging.render`).
+"""Configuration of the synthetic shadowgraph renderer (:mod:`cadra.synthetic.render`).
 
 One frozen dataclass, :class:`RenderConfig`, whose defaults are "default realism" for a scanned
 HFFAF shadowgraph (seed 004, DESIGN §5). Every knob is documented in ``docs/renderer.md``; the
@@ -221,6 +221,6 @@ def save_render_config(
         If ``path`` exists and ``overwrite`` is false.
     """
     path = Path(path)
-    text = "# cadra.imaging RenderConfig (docs/renderer.md)\n" + tomli_w.dumps(config.to_dict())
+    text = "# cadra.measure RenderConfig (docs/renderer.md)\n" + tomli_w.dumps(config.to_dict())
     atomic_write_text(path, text, overwrite=overwrite)
     return path

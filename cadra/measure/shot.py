@@ -1,7 +1,7 @@
 """Stage one over a shot: every station's images -> trajectory measurement file and reports.
 
 :func:`measure_shot` is the library call behind ``cadra1`` (docs/stage1.md). Stations are
-measured by :func:`cadra.imaging.station.measure_station` (pure, picklable), in parallel on the
+measured by :func:`cadra.measure.station.measure_station` (pure, picklable), in parallel on the
 available cores (a process pool; ``workers=1`` runs in-process), with a progress bar. Outputs go
 to a temporary sibling directory moved into place at the end (:func:`cadra.io.atomic.
 atomic_output_dir`): an interrupted or failed run leaves nothing behind, an existing output
@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cadra.imaging.station import VIEWS, StationResult, measure_station
 from cadra.io.trajectory import station_rows, trajectory_to_csv
+from cadra.measure.station import VIEWS, StationResult, measure_station
 
 
 @dataclass(frozen=True)
@@ -184,8 +184,8 @@ def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None
 
 
 def _write_outputs(out_dir: Path, table, quality, results, meta, shot, truth, overwrite):
-    from cadra.imaging.plots import trajectory_figure
     from cadra.io.atomic import atomic_output_dir
+    from cadra.measure.plots import trajectory_figure
 
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         (tmp / "trajectory.csv").write_text(trajectory_to_csv(table, meta), encoding="utf-8")

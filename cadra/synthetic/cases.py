@@ -4,8 +4,8 @@
 attitude on a small frame (the model plus margin; no wires, so the pose fit is measured alone
 with the image's true affine), with the renderer's exact truth. The frame's view plane and
 affine come from the default facility's scale; the film placement perturbs the affine as
-:func:`cadra.simulate._film_affine` does for whole shots. Same scene code as whole shots
-(:func:`cadra.simulate.view_scene`).
+:func:`cadra.synthetic.simulate.film_affine` does for whole shots. Same scene code as whole shots
+(:func:`cadra.synthetic.simulate.view_scene`).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import numpy as np
 from cadra.body import Body
 from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import ReferenceMark, View, nominal_image_to_plane
-from cadra.imaging.render import RenderConfig, render
-from cadra.simulate import FilmPlacement, _film_affine, view_scene
+from cadra.synthetic.render import RenderConfig, render
+from cadra.synthetic.simulate import FilmPlacement, film_affine, view_scene
 
 SCALE_M_PER_PX = 1.27e-4
 
@@ -73,7 +73,7 @@ def random_view_case(body: Body, rng: np.random.Generator, config: RenderConfig 
     r[list(view.axes)] = rng.uniform(-10.0, 10.0, 2) * SCALE_M_PER_PX
     out_axis = 3 - view.axes[0] - view.axes[1]
     r[out_axis] = rng.uniform(-0.01, 0.01)
-    affine = _film_affine(view.image_to_plane, FilmPlacement(), rng, size_px, size_px)
+    affine = film_affine(view.image_to_plane, FilmPlacement(), rng, size_px, size_px)
     scene, truth = view_scene(body, view, affine, R, r, np.array([speed_m_s, 0.0, 0.0]))
     if not clutter:
         from dataclasses import replace
@@ -97,7 +97,7 @@ def random_view_case(body: Body, rng: np.random.Generator, config: RenderConfig 
 def measure_case(case: ViewCase, body: Body, settings=None, tilt_rad: float | None = None):
     """Stage one's per-view measurement of a case with its true affine (no wires):
     locate -> silhouette fit (method a) and centroid (method b). Returns the ViewFit."""
-    from cadra.imaging.silhouette_fit import (
+    from cadra.measure.silhouette_fit import (
         fit_silhouette,
         locate_model,
         make_template,
