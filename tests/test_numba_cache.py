@@ -18,7 +18,8 @@ from cadra import _numba_cache as nc
 def _tree(tmp_path: Path) -> Path:
     root = tmp_path / "pkg"
     (root / "sub").mkdir(parents=True)
-    (root / "sub" / "kernel.py").write_text("import numba\n\n@numba.njit\ndef f(x):\n    return x\n")
+    (root / "sub" / "kernel.py").write_text(
+        "import numba\n\n@numba.njit\ndef f(x):\n    return x\n")
     (root / "plain.py").write_text("X = 1\n")
     return root
 
