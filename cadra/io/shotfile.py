@@ -26,6 +26,7 @@ import numpy as np
 from cadra.atmosphere import Atmosphere
 from cadra.io import units
 from cadra.io.atomic import atomic_write_text
+from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
 #: Current shot-file schema version.
 SCHEMA_VERSION = 1
@@ -41,7 +42,6 @@ MODEL_LENGTH_CM_MAX = 100.0               # model dimensions < 1 m
 VELOCITY_M_S_RANGE = (0.0, 2.0e4)
 #: Model-spec keys that are a size (must be > 0); other length keys need only |x| < 1 m.
 MODEL_SIZE_KEYS = ("d", "diameter", "h", "length", "l")
-_LENGTH_SUFFIXES = {"_cm": 1.0, "_mm": 0.1, "_m": 100.0}   # factor to cm
 
 _TOP_KEYS = ("schema_version", "shot_id", "facility", "notes", "nominal_velocity_m_s",
              "model", "mass", "range", "stations")
@@ -174,54 +174,21 @@ class ShotFile:
 # --------------------------------------------------------------------------- validation
 
 
-def _number(value, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise ShotFileError(f"{key}: expected a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ShotFileError(f"{key}: must be finite, got {value!r}")
-    return value
-
-
-def _in_range(value: float, key: str, lo: float, hi: float, what: str) -> float:
-    if not (lo < value <= hi):
-        raise ShotFileError(f"{key}: {value!r} is outside ({lo:g}, {hi:g}] -- not {what} "
-                            f"(check the unit)")
-    return value
-
-
-def _table(data: Mapping, key: str, where: str = "") -> Mapping:
-    if key not in data:
-        raise ShotFileError(f"{where}{key}: missing")
-    value = data[key]
-    if not isinstance(value, Mapping):
-        raise ShotFileError(f"{where}{key}: expected a table, got {type(value).__name__}")
-    return value
-
-
-def _require(data: Mapping, key: str, where: str = ""):
-    if key not in data:
-        raise ShotFileError(f"{where}{key}: missing")
-    return data[key]
+_F = Fields(ShotFileError)
+_number, _in_range, _require, _check_unknown = _F.number, _F.in_range, _F.require, \
+    _F.check_unknown
+_table = _F.table
 
 
 def _vector3(value, key: str) -> np.ndarray:
-    if not isinstance(value, list | tuple | np.ndarray) or len(value) != 3:
-        raise ShotFileError(f"{key}: expected 3 numbers [x, y, z], got {value!r}")
-    return np.array([_number(v, f"{key}[{i}]") for i, v in enumerate(value)])
-
-
-def _check_unknown(data: Mapping, known, where: str) -> None:
-    unknown = sorted(set(data) - set(known))
-    if unknown:
-        raise ShotFileError(f"{where}{unknown[0]}: unknown key (known: {sorted(known)})")
+    return _F.vector(value, 3, key, " [x, y, z]")
 
 
 def validate_model_spec(model, key: str = "model") -> dict:
     """Check a body spec: ``kind`` known, dimensions positive and plausible (cm scale).
 
     Keys ending in ``_cm``, ``_mm`` or ``_m`` are lengths (finite, |x| < 1 m); the size keys
-    ``d_*``, ``diameter_*``, ``h_*``, ``length_*``, ``l_*`` must be > 0. Keys ending in ``_deg``
+    ``d_*``, ``diameter_*``, ``h_*``, ``length_*``, ``l_*`` must be > 0. Angle keys (``_deg``, ``_rad``)
     must be finite numbers. Everything else is passed through for ``cadra.body``.
     """
     if not isinstance(model, Mapping):
@@ -233,19 +200,16 @@ def validate_model_spec(model, key: str = "model") -> dict:
     for k, v in model.items():
         if k == "kind":
             continue
-        for suffix, to_cm in _LENGTH_SUFFIXES.items():
-            if k.endswith(suffix):
-                x = _number(v, f"{key}.{k}")
-                size = k[: -len(suffix)] in MODEL_SIZE_KEYS
-                if size and not x > 0:
-                    raise ShotFileError(f"{key}.{k}: a model dimension must be > 0, got {v!r}")
-                if abs(x) * to_cm >= MODEL_LENGTH_CM_MAX:
-                    raise ShotFileError(f"{key}.{k}: {v!r} is not a model dimension "
-                                        f"(|x| < {MODEL_LENGTH_CM_MAX:g} cm; check the unit)")
-                break
-        else:
-            if k.endswith("_deg"):
-                _number(v, f"{key}.{k}")
+        length = units.split_unit_key(k, "length")
+        if length is not None:
+            x = _number(v, f"{key}.{k}")
+            if length[0] in MODEL_SIZE_KEYS and not x > 0:
+                raise ShotFileError(f"{key}.{k}: a model dimension must be > 0, got {v!r}")
+            if abs(units.m_to_cm(units.to_si(x, length[1]))) >= MODEL_LENGTH_CM_MAX:
+                raise ShotFileError(f"{key}.{k}: {v!r} is not a model dimension "
+                                    f"(|x| < {MODEL_LENGTH_CM_MAX:g} cm; check the unit)")
+        elif units.split_unit_key(k, "angle") is not None:
+            _number(v, f"{key}.{k}")
     return model
 
 
@@ -496,20 +460,11 @@ def dumps_shot(shot: ShotFile) -> str:
 
 
 def load_shot(path: str | os.PathLike) -> ShotFile:
-    """Read and validate a shot file; errors are :class:`ShotFileError` naming the key."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ShotFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ShotFileError(f"{path}: not valid TOML ({exc})") from None
-    try:
-        return shot_from_dict(data, source_path=path)
-    except ShotFileError as exc:
-        raise ShotFileError(f"{path}: {exc}") from None
+    """Read and validate a shot file; errors are :class:`ShotFileError` naming the file and
+    the key."""
+    data = read_toml(path, ShotFileError)
+    with prefixed_by(path, ShotFileError):
+        return shot_from_dict(data, source_path=Path(path))
 
 
 def save_shot(shot: ShotFile, path: str | os.PathLike, overwrite: bool = False) -> None:

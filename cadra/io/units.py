@@ -1,11 +1,16 @@
 """Unit conversions at file boundaries: the one place where non-SI units meet SI.
 
 Every file key carries its unit in its name (``pressure_torr``, ``mass_g``, ``d_cm``); readers
-convert with these functions and the library works in SI only (docs/conventions.md, "Units").
-All functions accept floats or numpy arrays and return the same kind.
+convert through the one table :data:`UNITS` (``to_si(x, "torr")``, ``from_si(x, "cm")``,
+``split_unit_key("d_cm") -> ("d", "cm")``) and the library works in SI only
+(docs/conventions.md, "Units"). The named functions (``torr_to_pa``, ``cm_to_m`` ...) are that
+table's entries under readable names. All accept floats or numpy arrays and return the same kind.
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -18,74 +23,114 @@ KG_M2_PER_G_CM2 = 1e-7  # 1 g cm^2 = 1e-3 kg * 1e-4 m^2
 S_PER_US = 1e-6
 
 
-def torr_to_pa(p_torr):
-    """Pressure, torr -> Pa."""
-    return p_torr * PA_PER_TORR
+@dataclass(frozen=True)
+class Unit:
+    """A file unit: its quantity and its SI value.
+
+    ``to_si(x) = x * si_per_unit``; ``from_si(x) = x / si_per_unit``, or ``x * unit_per_si``
+    when that is given (degrees: ``x * (180 / pi)``, numpy's and the math module's
+    ``degrees``, bit for bit).
+    """
+
+    name: str
+    quantity: str
+    si_per_unit: float
+    unit_per_si: float | None = None
+
+    def to_si(self, x):
+        return x * self.si_per_unit
+
+    def from_si(self, x):
+        return x * self.unit_per_si if self.unit_per_si is not None else x / self.si_per_unit
 
 
-def pa_to_torr(p_pa):
-    """Pressure, Pa -> torr."""
-    return p_pa / PA_PER_TORR
+def _table(*units: Unit) -> dict[str, Unit]:
+    return {u.name: u for u in units}
 
 
-def cm_to_m(x_cm):
-    """Length, cm -> m."""
-    return x_cm * M_PER_CM
+#: Every unit a file key may carry, by its key suffix (``"d_cm"`` -> ``UNITS["cm"]``); ``""``
+#: is a dimensionless number (an aero model parameter without a unit).
+UNITS = _table(
+    Unit("", "dimensionless", 1.0),
+    Unit("m", "length", 1.0),
+    Unit("cm", "length", M_PER_CM),
+    Unit("mm", "length", M_PER_MM),
+    Unit("kg", "mass", 1.0),
+    Unit("g", "mass", KG_PER_G),
+    Unit("kg_m2", "inertia", 1.0),
+    Unit("g_cm2", "inertia", KG_M2_PER_G_CM2),
+    Unit("pa", "pressure", 1.0),
+    Unit("torr", "pressure", PA_PER_TORR),
+    Unit("k", "temperature", 1.0),
+    Unit("s", "time", 1.0),
+    Unit("us", "time", S_PER_US),
+    Unit("deg", "angle", math.pi / 180.0, 180.0 / math.pi),
+    Unit("rad", "angle", 1.0),
+    Unit("m_s", "speed", 1.0),
+    Unit("rad_s", "angular rate", 1.0),
+    Unit("deg_s", "angular rate", math.pi / 180.0, 180.0 / math.pi),
+)
 
 
-def m_to_cm(x_m):
-    """Length, m -> cm."""
-    return x_m / M_PER_CM
+def unit(name: str) -> Unit:
+    """The :class:`Unit` of key suffix ``name`` (KeyError naming the known units)."""
+    try:
+        return UNITS[name]
+    except KeyError:
+        raise KeyError(f"unknown unit {name!r} (known: {sorted(UNITS)})") from None
 
 
-def mm_to_m(x_mm):
-    """Length, mm -> m."""
-    return x_mm * M_PER_MM
+def to_si(x, name: str):
+    """``x`` in unit ``name`` -> SI."""
+    return unit(name).to_si(x)
 
 
-def m_to_mm(x_m):
-    """Length, m -> mm."""
-    return x_m / M_PER_MM
+def from_si(x, name: str):
+    """SI ``x`` -> unit ``name``."""
+    return unit(name).from_si(x)
 
 
-def g_to_kg(m_g):
-    """Mass, g -> kg."""
-    return m_g * KG_PER_G
+def units_of(quantity: str) -> dict[str, Unit]:
+    """The units of one quantity (``"length"`` -> m, cm, mm), by name."""
+    return {k: u for k, u in UNITS.items() if u.quantity == quantity}
 
 
-def kg_to_g(m_kg):
-    """Mass, kg -> g."""
-    return m_kg / KG_PER_G
+def split_unit_key(key: str, quantity: str | None = None) -> tuple[str, str] | None:
+    """``"d_cm"`` -> ``("d", "cm")``: a key's base and its unit suffix (the longest known one,
+    so ``"rate_deg_s"`` is deg/s), or None if it ends in no known unit (of ``quantity``, if
+    given)."""
+    known = units_of(quantity) if quantity is not None else UNITS
+    for name in sorted(known, key=len, reverse=True):
+        if name and key.endswith("_" + name) and len(key) > len(name) + 1:
+            return key[: -len(name) - 1], name
+    return None
 
 
-def g_cm2_to_kg_m2(i_g_cm2):
-    """Moment of inertia, g cm^2 -> kg m^2."""
-    return i_g_cm2 * KG_M2_PER_G_CM2
+def _converter(name: str, direction: str, doc: str):
+    """A named function converting to (``"to_si"``) or from (``"from_si"``) unit ``name``."""
+    convert = getattr(UNITS[name], direction)
+
+    def converted(x):
+        return convert(x)
+
+    converted.__doc__ = doc
+    return converted
 
 
-def kg_m2_to_g_cm2(i_kg_m2):
-    """Moment of inertia, kg m^2 -> g cm^2."""
-    return i_kg_m2 / KG_M2_PER_G_CM2
-
-
-def deg_to_rad(a_deg):
-    """Angle, degrees -> radians."""
-    return np.radians(a_deg)
-
-
-def rad_to_deg(a_rad):
-    """Angle, radians -> degrees."""
-    return np.degrees(a_rad)
-
-
-def us_to_s(t_us):
-    """Time, microseconds -> seconds."""
-    return t_us * S_PER_US
-
-
-def s_to_us(t_s):
-    """Time, seconds -> microseconds."""
-    return t_s / S_PER_US
+torr_to_pa = _converter("torr", "to_si", "Pressure, torr -> Pa.")
+pa_to_torr = _converter("torr", "from_si", "Pressure, Pa -> torr.")
+cm_to_m = _converter("cm", "to_si", "Length, cm -> m.")
+m_to_cm = _converter("cm", "from_si", "Length, m -> cm.")
+mm_to_m = _converter("mm", "to_si", "Length, mm -> m.")
+m_to_mm = _converter("mm", "from_si", "Length, m -> mm.")
+g_to_kg = _converter("g", "to_si", "Mass, g -> kg.")
+kg_to_g = _converter("g", "from_si", "Mass, kg -> g.")
+g_cm2_to_kg_m2 = _converter("g_cm2", "to_si", "Moment of inertia, g cm^2 -> kg m^2.")
+kg_m2_to_g_cm2 = _converter("g_cm2", "from_si", "Moment of inertia, kg m^2 -> g cm^2.")
+deg_to_rad = _converter("deg", "to_si", "Angle, degrees -> radians.")
+rad_to_deg = _converter("deg", "from_si", "Angle, radians -> degrees.")
+us_to_s = _converter("us", "to_si", "Time, microseconds -> seconds.")
+s_to_us = _converter("us", "from_si", "Time, seconds -> microseconds.")
 
 
 def clean_float(x: float, digits: int = 16) -> float:
@@ -102,8 +147,8 @@ def clean_float(x: float, digits: int = 16) -> float:
 
 
 __all__ = [
-    "KG_M2_PER_G_CM2", "KG_PER_G", "M_PER_CM", "M_PER_MM", "PA_PER_TORR", "S_PER_US",
-    "clean_float", "cm_to_m", "deg_to_rad", "g_cm2_to_kg_m2", "g_to_kg", "kg_m2_to_g_cm2",
-    "kg_to_g", "m_to_cm", "m_to_mm", "mm_to_m", "pa_to_torr", "rad_to_deg", "s_to_us",
-    "torr_to_pa", "us_to_s",
+    "KG_M2_PER_G_CM2", "KG_PER_G", "M_PER_CM", "M_PER_MM", "PA_PER_TORR", "S_PER_US", "UNITS",
+    "Unit", "clean_float", "cm_to_m", "deg_to_rad", "from_si", "g_cm2_to_kg_m2", "g_to_kg",
+    "kg_m2_to_g_cm2", "kg_to_g", "m_to_cm", "m_to_mm", "mm_to_m", "pa_to_torr", "rad_to_deg",
+    "s_to_us", "split_unit_key", "to_si", "torr_to_pa", "unit", "units_of", "us_to_s",
 ]
