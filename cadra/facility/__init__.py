@@ -1,27 +1,38 @@
 """Facility: the range's stations, views, optics and fiducial wires (docs/facility_file.md).
 
-``load_facility("hffaf")`` reads ``facilities/hffaf.toml``; see :mod:`cadra.facility.reference`.
+``load_facility("hffaf")`` reads ``facilities/hffaf.toml``. The geometry and data objects are
+:mod:`cadra.facility.reference`; the file format (``load_facility``, ``facility_from_dict``,
+``FacilityFileError``) is :mod:`cadra.io.facility_file`, re-exported here.
 """
 
 from cadra.facility.reference import (
     AffineFit,
     Facility,
-    FacilityFileError,
     ReferenceMark,
     Station,
-    UnsupportedProjectionError,
     View,
     Wire,
     affine_inverse,
     apply_affine,
-    facility_from_dict,
     fit_affine_to_wires,
-    load_facility,
     nominal_image_to_plane,
 )
 
+#: names of :mod:`cadra.io.facility_file` offered here (imported on first use: that module
+#: imports :mod:`cadra.facility.reference`)
+_FILE_FORMAT_NAMES = ("FacilityFileError", "UnsupportedProjectionError", "facility_from_dict",
+                      "load_facility", "resolve_facility_path")
+
+
+def __getattr__(name: str):
+    if name in _FILE_FORMAT_NAMES:
+        from cadra.io import facility_file
+
+        return getattr(facility_file, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
-    "AffineFit", "Facility", "FacilityFileError", "ReferenceMark", "Station",
-    "UnsupportedProjectionError", "View", "Wire", "affine_inverse", "apply_affine",
-    "facility_from_dict", "fit_affine_to_wires", "load_facility", "nominal_image_to_plane",
+    "AffineFit", "Facility", "ReferenceMark", "Station", "View", "Wire", "affine_inverse",
+    "apply_affine", "fit_affine_to_wires", "nominal_image_to_plane", *_FILE_FORMAT_NAMES,
 ]

@@ -187,9 +187,10 @@ def _vector3(value, key: str) -> np.ndarray:
 def validate_model_spec(model, key: str = "model") -> dict:
     """Check a body spec: ``kind`` known, dimensions positive and plausible (cm scale).
 
-    Keys ending in ``_cm``, ``_mm`` or ``_m`` are lengths (finite, |x| < 1 m); the size keys
-    ``d_*``, ``diameter_*``, ``h_*``, ``length_*``, ``l_*`` must be > 0. Angle keys (``_deg``, ``_rad``)
-    must be finite numbers. Everything else is passed through for ``cadra.body``.
+    Keys ending in a length unit of :data:`cadra.io.units.UNITS` (``_cm``, ``_mm``, ``_m``)
+    are lengths (finite, |x| < 1 m); the size keys ``d_*``, ``diameter_*``, ``h_*``,
+    ``length_*``, ``l_*`` must be > 0. Angle keys (``_deg``, ``_rad``) must be finite numbers.
+    Everything else is passed through for ``cadra.body``.
     """
     if not isinstance(model, Mapping):
         raise ShotFileError(f"{key}: expected a table, got {type(model).__name__}")

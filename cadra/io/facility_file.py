@@ -1,0 +1,283 @@
+"""Facility reference files: reading and validating (docs/facility_file.md).
+
+The file format of :mod:`cadra.facility` -- stations, views, optics, fiducial wires -- parsed
+into the facility's data objects (:class:`~cadra.facility.reference.Facility`, ``Station``,
+``View``, ``Wire``, ``ReferenceMark``, which keep the geometry). Errors are
+:class:`FacilityFileError` naming the key path, e.g.
+``stations[3].views.top.wires[1].p0_m: expected 3 numbers``; :func:`load_facility` puts the
+file's path in front. ``point_source`` (perspective) views are recognised and refused
+(:class:`UnsupportedProjectionError`, "not supported yet"); the schema has room for their
+fields.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from cadra.facility.reference import (
+    VIEW_AXES,
+    Facility,
+    ReferenceMark,
+    Station,
+    View,
+    Wire,
+    fit_affine_to_wires,
+    nominal_image_to_plane,
+)
+from cadra.io.toml_file import Fields, prefixed_by, read_toml
+
+#: Current facility-file schema version.
+SCHEMA_VERSION = 1
+#: Projections the loader knows; only the first ones are supported.
+PROJECTIONS_SUPPORTED = ("parallel",)
+PROJECTIONS_KNOWN = ("parallel", "point_source")
+BIT_DEPTHS = (8, 16)
+#: Minimum number of wires per view (an affine has 6 unknowns; each wire line gives 2).
+MIN_WIRES = 3
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+class FacilityFileError(ValueError):
+    """A facility reference file that cannot be right; the message names the key path."""
+
+
+class UnsupportedProjectionError(FacilityFileError, NotImplementedError):
+    """A projection the schema knows but this CADRA cannot use yet (``point_source``)."""
+
+
+_F = Fields(FacilityFileError)
+_err, _number, _positive, _integer = _F.fail, _F.number, _F.positive, _F.integer
+_table, _require, _check_unknown = _F.as_table, _F.require, _F.check_unknown
+
+
+def _vec(value, n: int, path: str) -> np.ndarray:
+    return _F.vector(value, n, path)
+
+
+_VIEW_KEYS = {"projection", "width_px", "height_px", "bit_depth", "scale_m_per_px",
+              "image_to_plane", "wires", "reference_mark", "source_position_m",
+              "film_distance_m"}
+_DEFAULT_KEYS = _VIEW_KEYS - {"image_to_plane", "wires", "projection"}
+
+
+def _check_projection(proj, where: str, view: Mapping, vpath: str) -> str:
+    if not isinstance(proj, str) or proj not in PROJECTIONS_KNOWN:
+        raise _err(where, f"unknown projection {proj!r}; known: {list(PROJECTIONS_KNOWN)}")
+    if proj not in PROJECTIONS_SUPPORTED:
+        # check the fields such a view needs, so the file is ready when support lands
+        _vec(_require(view, "source_position_m", vpath), 3, f"{vpath}source_position_m")
+        _positive(_require(view, "film_distance_m", vpath), f"{vpath}film_distance_m")
+        raise UnsupportedProjectionError(
+            f"{where}: projection {proj!r} (perspective, point-source spark) is recognised "
+            f"but not supported yet; CADRA handles {list(PROJECTIONS_SUPPORTED)} only")
+    return proj
+
+
+def _reference_mark(value, path: str, width: int, height: int) -> ReferenceMark:
+    mark = _table(value, path)
+    _check_unknown(mark, {"u_px", "v_px", "arm_px", "width_px"}, f"{path}.")
+    u = _number(_require(mark, "u_px", f"{path}."), f"{path}.u_px")
+    v = _number(_require(mark, "v_px", f"{path}."), f"{path}.v_px")
+    arm = _positive(_require(mark, "arm_px", f"{path}."), f"{path}.arm_px", 1e3)
+    wid = _positive(_require(mark, "width_px", f"{path}."), f"{path}.width_px", 1e2)
+    if not (arm <= u <= width - 1 - arm and arm <= v <= height - 1 - arm):
+        raise _err(path, f"the mark at ({u:g}, {v:g}) with arm {arm:g} px is not inside the "
+                         f"{width} x {height} image")
+    return ReferenceMark(u_px=u, v_px=v, arm_px=arm, width_px=wid)
+
+
+def _wire(value, path: str, axes: tuple[int, int]) -> Wire:
+    w = _table(value, path)
+    _check_unknown(w, {"name", "p0_m", "p1_m", "diameter_m"}, f"{path}.")
+    name = _require(w, "name", f"{path}.")
+    if not isinstance(name, str) or not name:
+        raise _err(f"{path}.name", f"expected a non-empty string, got {name!r}")
+    p0 = _vec(_require(w, "p0_m", f"{path}."), 3, f"{path}.p0_m")
+    p1 = _vec(_require(w, "p1_m", f"{path}."), 3, f"{path}.p1_m")
+    for key, p in (("p0_m", p0), ("p1_m", p1)):
+        if np.any(np.abs(p) > 1e4):
+            raise _err(f"{path}.{key}", f"{p.tolist()} is not a position in metres")
+    dia = _positive(_require(w, "diameter_m", f"{path}."), f"{path}.diameter_m", 5e-3)
+    d = (p1 - p0)[list(axes)]
+    if np.hypot(d[0], d[1]) < 1e-3:
+        raise _err(path, "the wire is seen end-on in this view (projected length < 1 mm)")
+    return Wire(name=name, p0_m=p0, p1_m=p1, diameter_m=dia)
+
+
+def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Mapping,
+          facility_projection: tuple[str, str]) -> View:
+    view = _table(data, path)
+    vpath = f"{path}."
+    _check_unknown(view, _VIEW_KEYS, vpath)
+    merged = {**defaults, **view}
+    if "projection" in view:
+        _check_projection(view["projection"], f"{vpath}projection", merged, vpath)
+        projection = view["projection"]
+    else:
+        proj, where = facility_projection
+        _check_projection(proj, where, merged, vpath)
+        projection = proj
+
+    def key_path(k):  # where a merged key came from
+        return f"{vpath}{k}" if k in view else f"view_defaults.{k}"
+
+    def get(k):
+        if k not in merged:
+            raise _err(f"{vpath}{k}", "missing (give it in the view or in [view_defaults])")
+        return merged[k]
+
+    width = _integer(get("width_px"), key_path("width_px"), 16, 100_000)
+    height = _integer(get("height_px"), key_path("height_px"), 16, 100_000)
+    bit_depth = get("bit_depth")
+    if bit_depth not in BIT_DEPTHS or isinstance(bit_depth, bool):
+        raise _err(key_path("bit_depth"), f"must be one of {list(BIT_DEPTHS)}, got {bit_depth!r}")
+    scale = _positive(get("scale_m_per_px"), key_path("scale_m_per_px"), 1e-2)
+    axes = VIEW_AXES[name]
+    if "image_to_plane" in view:
+        ipath = f"{vpath}image_to_plane"
+        raw = view["image_to_plane"]
+        if not isinstance(raw, list | tuple) or len(raw) != 2:
+            raise _err(ipath, f"expected 2 rows of 3 numbers, got {raw!r}")
+        M = np.array([_vec(r, 3, f"{ipath}[{i}]") for i, r in enumerate(raw)])
+        det = float(np.linalg.det(M[:, :2]))
+        if not abs(det) > 0:
+            raise _err(ipath, "the affine is singular")
+        if abs(math.sqrt(abs(det)) / scale - 1.0) > 0.02:
+            raise _err(ipath, f"its scale {math.sqrt(abs(det)):.6g} m/px disagrees with "
+                              f"scale_m_per_px = {scale:.6g} by more than 2 %")
+    else:
+        M = nominal_image_to_plane(x_m, scale, width, height)
+    mark = _reference_mark(get("reference_mark"), key_path("reference_mark"), width, height)
+    wires_raw = get("wires")
+    wpath = key_path("wires")
+    if not isinstance(wires_raw, list | tuple):
+        raise _err(wpath, "expected an array of wire tables")
+    wires = tuple(_wire(w, f"{wpath}[{i}]", axes) for i, w in enumerate(wires_raw))
+    names = [w.name for w in wires]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise _err(wpath, f"wire name {dup!r} used twice")
+    if len(wires) < MIN_WIRES:
+        raise _err(wpath, f"{len(wires)} wire(s); at least {MIN_WIRES} are needed to solve "
+                          f"the image->plane affine")
+    v = View(station=station_id, name=name, projection=projection, axes=axes, width_px=width,
+             height_px=height, bit_depth=int(bit_depth), scale_m_per_px=scale,
+             image_to_plane=M, wires=wires, reference_mark=mark)
+    lines = v.wire_lines_px()
+    for i, seg in enumerate(lines):
+        if seg is None:
+            raise _err(f"{wpath}[{i}]", f"wire {wires[i].name!r} is not in the image")
+    try:
+        fit = fit_affine_to_wires(v, lines)
+    except ValueError:
+        raise _err(wpath, f"the wires {names} cannot determine the affine (need lines in two "
+                          f"directions)") from None
+    if fit.dof < 1:
+        raise _err(wpath, "the wires determine the affine without redundancy; add a wire")
+    return v
+
+
+def facility_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) -> Facility:
+    """Validate a parsed facility file and build the :class:`Facility`."""
+    data = _table(data, "facility file")
+    _check_unknown(data, {"schema_version", "name", "description", "projection",
+                          "view_defaults", "stations"}, "")
+    version = _require(data, "schema_version", "")
+    if version != SCHEMA_VERSION:
+        raise _err("schema_version", f"{version!r} not supported (this CADRA reads version "
+                                     f"{SCHEMA_VERSION})")
+    name = _require(data, "name", "")
+    if not isinstance(name, str) or not name:
+        raise _err("name", f"expected a non-empty string, got {name!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise _err("description", "expected a string")
+    projection = (data.get("projection", "parallel"),
+                  "projection" if "projection" in data else "projection (default)")
+    if not isinstance(projection[0], str) or projection[0] not in PROJECTIONS_KNOWN:
+        raise _err("projection", f"unknown projection {projection[0]!r}; known: "
+                                 f"{list(PROJECTIONS_KNOWN)}")
+    defaults = dict(_table(data.get("view_defaults", {}), "view_defaults"))
+    _check_unknown(defaults, _DEFAULT_KEYS, "view_defaults.")
+    stations_raw = _require(data, "stations", "")
+    if not isinstance(stations_raw, list) or not stations_raw:
+        raise _err("stations", "expected a non-empty array of [[stations]] tables")
+    stations = []
+    for k, st in enumerate(stations_raw):
+        spath = f"stations[{k}]"
+        st = _table(st, spath)
+        _check_unknown(st, {"id", "x_m", "views"}, f"{spath}.")
+        sid = _integer(_require(st, "id", f"{spath}."), f"{spath}.id", 1, 10_000)
+        x_m = _number(_require(st, "x_m", f"{spath}."), f"{spath}.x_m")
+        views_raw = _table(_require(st, "views", f"{spath}."), f"{spath}.views")
+        if not views_raw:
+            raise _err(f"{spath}.views", "no views")
+        views = {}
+        for vname, vdata in views_raw.items():
+            if vname not in VIEW_AXES:
+                raise _err(f"{spath}.views.{vname}", f"unknown view; known: {list(VIEW_AXES)}")
+            views[vname] = _view(vdata, f"{spath}.views.{vname}", vname, sid, x_m, defaults,
+                                 projection)
+        stations.append(Station(id=sid, x_m=x_m, views=views))
+    ids = [s.id for s in stations]
+    if len(set(ids)) != len(ids):
+        dup = next(i for i in ids if ids.count(i) > 1)
+        raise _err(f"stations[{ids.index(dup, ids.index(dup) + 1)}].id", f"duplicate id {dup}")
+    for k in range(1, len(stations)):
+        if not (stations[k].id > stations[k - 1].id and stations[k].x_m > stations[k - 1].x_m):
+            raise _err(f"stations[{k}]", "stations must be listed in increasing id and x_m")
+    return Facility(name=name, description=description, stations=tuple(stations),
+                    source_path=str(source_path) if source_path is not None else None)
+
+
+def resolve_facility_path(path_or_name: str | os.PathLike) -> Path:
+    """A facility file path from a path or a bare name (``"hffaf"``).
+
+    A bare name (no directory part, no ``.toml``) is looked up as
+    ``<repo>/facilities/<name>.toml``, then ``./facilities/<name>.toml``, then
+    ``./<name>.toml``.
+    """
+    p = Path(path_or_name)
+    if isinstance(path_or_name, Path) or p.suffix == ".toml" or len(p.parts) > 1:
+        return p
+    candidates = [REPO_ROOT / "facilities" / f"{p.name}.toml",
+                  Path.cwd() / "facilities" / f"{p.name}.toml", Path.cwd() / f"{p.name}.toml"]
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise FileNotFoundError(f"facility {str(path_or_name)!r} not found; looked in "
+                            f"{[str(c) for c in candidates]}")
+
+
+_CACHE: dict[tuple[str, int], Facility] = {}
+
+
+def load_facility(path_or_name: str | os.PathLike) -> Facility:
+    """Load and validate a facility reference file (by path or bare name, see
+    :func:`resolve_facility_path`). The result is immutable and cached per file version."""
+    path = resolve_facility_path(path_or_name)
+    try:
+        stat = path.stat()
+    except OSError as exc:
+        raise FileNotFoundError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    key = (str(path.resolve()), stat.st_mtime_ns)
+    if key in _CACHE:
+        return _CACHE[key]
+    data = read_toml(path, FacilityFileError, read_error=FileNotFoundError)
+    with prefixed_by(path, FacilityFileError):
+        fac = facility_from_dict(data, source_path=path)
+    _CACHE[key] = fac
+    return fac
+
+
+__all__ = [
+    "BIT_DEPTHS", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED", "SCHEMA_VERSION",
+    "FacilityFileError", "UnsupportedProjectionError", "facility_from_dict", "load_facility",
+    "resolve_facility_path",
+]
