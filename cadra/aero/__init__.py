@@ -5,6 +5,9 @@ Public API (docs/aero_models.md; frames and signs: docs/conventions.md):
 
 - :class:`Parameter`, :class:`AeroModel`, :func:`load_model`, :func:`save_model`,
   :func:`model_from_dict`, :func:`load_bundled_model`, :func:`bundled_model_names`;
+- :func:`resolve_model` (a bundled name or a model file path: the one resolver of model names
+  used by the simulator and the CLIs), :func:`resolve_model_path`, :func:`is_model_path`,
+  :class:`ModelNotFoundError`;
 - :class:`AeroProgram`, :func:`eval_coefficients` (numba), :data:`COEFFICIENTS`,
   :data:`VARIABLES`;
 - :func:`parse_expression`, :func:`evaluate_tree`, :class:`ExpressionError`.
@@ -23,11 +26,15 @@ from cadra.aero.model import (
     ANGLE_PLANES,
     MODELS_DIR,
     AeroModel,
+    ModelNotFoundError,
     Parameter,
     bundled_model_names,
+    is_model_path,
     load_bundled_model,
     load_model,
     model_from_dict,
+    resolve_model,
+    resolve_model_path,
     save_model,
 )
 from cadra.aero.program import (
@@ -48,16 +55,20 @@ __all__ = [
     "AeroModel",
     "AeroProgram",
     "ExpressionError",
+    "ModelNotFoundError",
     "Parameter",
     "bundled_model_names",
     "compile_program",
     "eval_coefficients",
     "eval_coefficients_batch",
     "evaluate_tree",
+    "is_model_path",
     "load_bundled_model",
     "load_model",
     "model_from_dict",
     "parse_expression",
+    "resolve_model",
+    "resolve_model_path",
     "save_model",
     "to_text",
 ]

@@ -15,14 +15,11 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
-import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import tomli_w
 
 from cadra.aero.expr import (
     NAME_RE,
@@ -39,13 +36,16 @@ from cadra.aero.program import (
     AeroProgram,
     eval_coefficients_batch,
 )
+from cadra.io import units as _units
+from cadra.io.toml_file import Fields, read_toml, write_toml
 
 #: the two kinds of model (docs/conventions.md, "Aerodynamic coefficients")
 ANGLE_PLANES = ("alpha_beta", "sigma")
 #: points the moment coefficients may be about
 MOMENT_REFERENCES = ("cg",)
-#: file units of parameter values -> factor to SI
-UNITS = {"": 1.0, "deg": math.pi / 180.0}
+#: file units of parameter values -> factor to SI (entries of :data:`cadra.io.units.UNITS`,
+#: through which values are converted)
+UNITS = {name: _units.UNITS[name].si_per_unit for name in ("", "deg")}
 #: coefficients a total-angle (sigma) model may not define (conventions: C_C and C_n are not
 #: used; C_mq damps both transverse rates, so C_nr would be ignored)
 SIGMA_UNUSED = ("CC", "Cn", "Cnr")
@@ -54,6 +54,7 @@ FILE_FORMAT = "cadra.aero/1"
 #: directory of the bundled model files
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 
+_F = Fields(ValueError)
 _MODEL_KEYS = ("format", "name", "description", "angle_plane", "moment_reference", "reference",
                "coefficients", "parameters")
 _PARAM_KEYS = ("value", "vary", "min", "max", "unit", "note")
@@ -125,12 +126,16 @@ class Parameter:
         """The value in the file's unit (:attr:`unit`)."""
         return _to_file(self.value, self.unit)
 
+    def to_si(self, file_value: float) -> float:
+        """A value in this parameter's file unit (:attr:`unit`, e.g. degrees) -> SI."""
+        return _from_file(float(file_value), self.unit)
+
 
 def _to_file(x: float, unit: str) -> float:
     """SI -> file unit, choosing the float whose conversion back is exactly ``x``."""
     if unit == "" or not math.isfinite(x):
         return x
-    d = math.degrees(x)
+    d = _units.from_si(x, unit)
     if _from_file(d, unit) == x:
         return d
     up = down = d
@@ -145,7 +150,7 @@ def _to_file(x: float, unit: str) -> float:
 def _from_file(x: float, unit: str) -> float:
     if unit == "" or not math.isfinite(x):
         return float(x)
-    return math.radians(x)
+    return _units.to_si(x, unit)
 
 
 @dataclass(frozen=True)
@@ -403,15 +408,12 @@ def model_from_dict(data: Mapping, source: str = "model") -> AeroModel:
 
 
 def _model_from_dict(data: Mapping, source: str) -> AeroModel:
-    for k in data:
-        if k not in _MODEL_KEYS:
-            raise ValueError(f"{k}: unknown key (expected {', '.join(_MODEL_KEYS)})")
+    _F.check_unknown(data, _MODEL_KEYS)
     fmt = data.get("format", FILE_FORMAT)
     if fmt != FILE_FORMAT:
         raise ValueError(f"format: {fmt!r} is not {FILE_FORMAT!r}")
     for k in ("angle_plane", "coefficients", "parameters"):
-        if k not in data:
-            raise ValueError(f"{k}: missing")
+        _F.require(data, k)
     coefficients = data["coefficients"]
     if not isinstance(coefficients, Mapping):
         raise ValueError("coefficients: must be a table of name = \"expression\"")
@@ -423,11 +425,8 @@ def _model_from_dict(data: Mapping, source: str) -> AeroModel:
         key = f"parameters.{name}"
         if not isinstance(entry, Mapping):
             raise ValueError(f"{key}: must be a table such as {{ value = 1.0, vary = true }}")
-        for k in entry:
-            if k not in _PARAM_KEYS:
-                raise ValueError(f"{key}.{k}: unknown key (expected {', '.join(_PARAM_KEYS)})")
-        if "value" not in entry:
-            raise ValueError(f"{key}.value: missing")
+        _F.check_unknown(entry, _PARAM_KEYS, f"{key}.")
+        _F.require(entry, "value", f"{key}.")
         unit = entry.get("unit", "")
         if unit not in UNITS:
             raise ValueError(f"{key}.unit: must be one of {sorted(UNITS)}, got {unit!r}")
@@ -455,13 +454,10 @@ def _model_from_dict(data: Mapping, source: str) -> AeroModel:
 
 
 def load_model(path: str | os.PathLike) -> AeroModel:
-    """Read an aerodynamic model file (TOML; docs/aero_models.md)."""
+    """Read an aerodynamic model file (TOML; docs/aero_models.md); errors name the file and
+    the key."""
     path = Path(path)
-    with open(path, "rb") as f:
-        try:
-            data = tomllib.load(f)
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path, ValueError, read_error=FileNotFoundError)
     data.setdefault("name", path.stem)
     return model_from_dict(data, source=str(path))
 
@@ -472,25 +468,18 @@ def save_model(model: AeroModel, path: str | os.PathLike, *, overwrite: bool = F
     Refuses to replace an existing file unless ``overwrite=True`` (``FileExistsError``).
     Returns the path written.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists (pass overwrite=True to replace it)")
-    text = ("# CADRA aerodynamic model (docs/aero_models.md), written by "
-            "cadra.aero.save_model\n" + tomli_w.dumps(model.to_dict()))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
+    return write_toml(path, model.to_dict(), overwrite=overwrite,
+                      header="CADRA aerodynamic model (docs/aero_models.md), written by "
+                             "cadra.aero.save_model")
+
+
+class ModelNotFoundError(KeyError, ValueError):
+    """No bundled aero model, or no model file, by the name given (the message says which and
+    lists the bundled names). A ``KeyError`` (a name looked up) and a ``ValueError`` (an input
+    refused)."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
 
 
 def bundled_model_names() -> tuple[str, ...]:
@@ -498,10 +487,54 @@ def bundled_model_names() -> tuple[str, ...]:
     return tuple(sorted(p.stem for p in MODELS_DIR.glob("*.toml")))
 
 
+def is_model_path(name_or_path: str | os.PathLike) -> bool:
+    """Whether ``name_or_path`` names a model file rather than a bundled model: a ``Path``, or
+    text with a directory part or a suffix (``"models/m.toml"``, ``"m.toml"``, ``"./m"``)."""
+    if isinstance(name_or_path, os.PathLike):
+        return True
+    p = Path(name_or_path)
+    return bool(p.suffix) or len(p.parts) != 1 or str(name_or_path) != p.name
+
+
+def resolve_model_path(name_or_path: str | os.PathLike, base_dir: str | os.PathLike | None = None
+                       ) -> Path:
+    """The file of an aero model given as a bundled name or a path (:func:`is_model_path`).
+
+    A bundled name (``"m2_m070"``) is looked up in :data:`MODELS_DIR` only. A path is that
+    file -- relative paths are tried against ``base_dir`` first (e.g. the directory of the
+    spec that names the model), then the working directory -- and never falls back to a
+    bundled model of the same stem. Raises :class:`ModelNotFoundError` saying what was tried.
+    """
+    bundled = bundled_model_names()
+    if not is_model_path(name_or_path):
+        path = MODELS_DIR / f"{name_or_path}.toml"
+        if path.is_file():
+            return path
+        raise ModelNotFoundError(f"no bundled aero model {str(name_or_path)!r} (bundled: "
+                                 f"{', '.join(bundled)}; a model file is given by its path)")
+    p = Path(name_or_path)
+    tried = [Path(base_dir) / p] if base_dir is not None and not p.is_absolute() else []
+    tried.append(p)
+    for c in tried:
+        if c.is_file():
+            return c
+    hint = (f"; the bundled model {p.stem!r} is named without a directory or suffix"
+            if p.stem in bundled else "")
+    raise ModelNotFoundError(f"aero model file {str(name_or_path)!r} not found (looked at "
+                             f"{', '.join(str(c) for c in tried)}){hint}")
+
+
+def resolve_model(name_or_path: str | os.PathLike, base_dir: str | os.PathLike | None = None
+                  ) -> AeroModel:
+    """An aero model from a bundled name (``"m2_m070"``) or a model file path: the one
+    resolver of model names (:func:`resolve_model_path`)."""
+    return load_model(resolve_model_path(name_or_path, base_dir))
+
+
 def load_bundled_model(name: str) -> AeroModel:
-    """A bundled model by name (e.g. ``"m2_m070"``)."""
-    path = MODELS_DIR / f"{name}.toml"
-    if not path.is_file():
-        raise KeyError(f"no bundled aero model {name!r} (have: "
-                       f"{', '.join(bundled_model_names())})")
-    return load_model(path)
+    """A bundled model by name (e.g. ``"m2_m070"``); :class:`ModelNotFoundError` (a
+    ``KeyError``) naming the bundled models if there is none."""
+    if is_model_path(name):
+        raise ModelNotFoundError(f"{name!r} is a path, not a bundled model name (bundled: "
+                                 f"{', '.join(bundled_model_names())})")
+    return resolve_model(name)

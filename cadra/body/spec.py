@@ -16,16 +16,17 @@ optional ``name`` names the body. Unknown or missing keys raise ValueError namin
 from __future__ import annotations
 
 from collections.abc import Mapping
-from numbers import Real
-
-import numpy as np
 
 from cadra.body.capsule import PRESETS, capsule
 from cadra.body.model import KINDS, Body
 from cadra.body.shapes import cone, sphere
+from cadra.io.toml_file import Fields
+from cadra.io.units import units_of
 
-_LENGTH_UNITS = {"_m": 1.0, "_cm": 1e-2, "_mm": 1e-3}
-_ANGLE_UNITS = {"_deg": np.pi / 180.0, "_rad": 1.0}
+_F = Fields(ValueError)
+#: quantity of a spec key's unit suffix: lengths (m, cm, mm) and angles (deg, rad), converted
+#: through the unit table (:data:`cadra.io.units.UNITS`)
+_LENGTH, _ANGLE = "length", "angle"
 
 #: kind -> (length quantities, angle quantities, other keys)
 _SCHEMA = {
@@ -35,26 +36,14 @@ _SCHEMA = {
 }
 
 
-def _number(spec: Mapping, key: str) -> float:
-    v = spec[key]
-    if isinstance(v, bool) or not isinstance(v, Real) or not np.isfinite(float(v)):
-        raise ValueError(f"{key}: expected a finite number, got {v!r}")
-    return float(v)
-
-
-def _quantity(spec: Mapping, base: str, units: Mapping[str, float]) -> tuple[float | None, str]:
+def _quantity(spec: Mapping, base: str, quantity: str) -> tuple[float | None, str]:
     """SI value of quantity ``base`` given with any one unit suffix (None if absent), and the
     key it was given under (``base + "_cm"`` if absent)."""
-    keys = [base + u for u in units if base + u in spec]
-    if len(keys) > 1:
-        raise ValueError(f"{keys[1]}: {base!r} is given twice ({', '.join(keys)})")
-    if not keys:
-        return None, base + "_cm"
-    return _number(spec, keys[0]) * units[keys[0][len(base):]], keys[0]
+    return _F.unit_value(spec, base, quantity, default_unit="cm")
 
 
-def _missing(kind: str, base: str, units: Mapping[str, float], why: str = "") -> ValueError:
-    alts = "/".join(base + u for u in units)
+def _missing(kind: str, base: str, why: str = "") -> ValueError:
+    alts = "/".join(f"{base}_{u}" for u in units_of(_LENGTH))
     return ValueError(f"{base}_cm: missing from the {kind} spec (give one of {alts}){why}")
 
 
@@ -76,8 +65,8 @@ def body_from_spec(spec: Mapping) -> Body:
         raise ValueError(f"kind: {kind!r} is not one of {list(KINDS)}")
     lengths, angles, others = _SCHEMA[kind]
     known = {"kind", "name", *others}
-    known |= {q + u for q in lengths for u in _LENGTH_UNITS}
-    known |= {q + u for q in angles for u in _ANGLE_UNITS}
+    known |= {f"{q}_{u}" for q in lengths for u in units_of(_LENGTH)}
+    known |= {f"{q}_{u}" for q in angles for u in units_of(_ANGLE)}
     for key in spec:
         if key not in known:
             raise ValueError(f"{key}: unknown key for a {kind} spec (known: {sorted(known)})")
@@ -86,7 +75,7 @@ def body_from_spec(spec: Mapping) -> Body:
         raise ValueError(f"name: expected a string, got {name!r}")
     val, where = {}, {}
     for q in lengths + angles:
-        val[q], where[q] = _quantity(spec, q, _LENGTH_UNITS if q in lengths else _ANGLE_UNITS)
+        val[q], where[q] = _quantity(spec, q, _LENGTH if q in lengths else _ANGLE)
     for q in lengths:
         if val[q] is not None and not (val[q] > 0 or (q == "nose_radius" and val[q] == 0)):
             raise ValueError(f"{where[q]}: must be a positive length, got {spec[where[q]]!r}")
@@ -106,11 +95,11 @@ def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body:
 
     if kind == "sphere":
         if val["d"] is None:
-            raise _missing(kind, "d", _LENGTH_UNITS)
+            raise _missing(kind, "d")
         return sphere(val["d"], name=name or "sphere")
     if kind == "cone":
         if val["d"] is None:
-            raise _missing(kind, "d", _LENGTH_UNITS)
+            raise _missing(kind, "d")
         if val["half_angle"] is None:
             raise ValueError("half_angle_deg: missing from the cone spec "
                              "(give half_angle_deg or half_angle_rad)")
@@ -122,7 +111,7 @@ def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body:
     if preset is None:
         for q in lengths:
             if val[q] is None:
-                raise _missing(kind, q, _LENGTH_UNITS, " when no preset is given")
+                raise _missing(kind, q, " when no preset is given")
     return capsule(preset, d_m=val["d"], h_m=val["h"], R1_m=val["R1"], R2_m=val["R2"],
                    l1_m=val["l1"], name=name)
 
