@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cadra.geometry import affine_inverse, apply_affine  # the 2x3 affines' one home
+
 #: Facility axes (0 = x, 1 = y, 2 = z) each view sees, in view-plane order (a, b).
 VIEW_AXES = {"top": (0, 1), "side": (0, 2)}
 
@@ -52,20 +54,6 @@ def _ro(a) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
-
-
-def affine_inverse(M: np.ndarray) -> np.ndarray:
-    """Inverse of a 2x3 affine map ``y = M @ [x, 1]``, as a 2x3 map."""
-    M = np.asarray(M, dtype=float)
-    A_inv = np.linalg.inv(M[:, :2])
-    return np.hstack([A_inv, -(A_inv @ M[:, 2])[:, None]])
-
-
-def apply_affine(M: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Apply a 2x3 affine to points ``(..., 2)``."""
-    pts = np.asarray(pts, dtype=float)
-    M = np.asarray(M, dtype=float)
-    return pts @ M[:, :2].T + M[:, 2]
 
 
 def nominal_image_to_plane(x_station_m: float, scale_m_per_px: float, width_px: int,
@@ -183,6 +171,14 @@ class View:
     def image_centre_px(self) -> np.ndarray:
         """Pixel coordinates of the image centre, ``((W-1)/2, (H-1)/2)``."""
         return np.array([(self.width_px - 1) / 2.0, (self.height_px - 1) / 2.0])
+
+    def optics(self, affine: np.ndarray | None = None):
+        """This view's :class:`~cadra.optics.projection.ParallelProjection` (docs/conventions.md,
+        "Projections"), with the nominal image->plane affine or ``affine`` (e.g. the one solved
+        from the image's wires)."""
+        from cadra.optics.projection import ParallelProjection
+
+        return ParallelProjection.from_view(self, affine)
 
     def project_points(self, r_F: np.ndarray) -> np.ndarray:
         """Parallel projection of facility points ``(N, 3)`` (or ``(3,)``) to the view plane."""

@@ -1,0 +1,218 @@
+"""A view's optics as a protocol: facility point <-> image point <-> facility ray.
+
+Every consumer of a view's geometry (the renderer's scene building, the wire fit, the
+silhouette fit, the two-view combination) talks to a :class:`Projection` and never to a 2x3
+affine directly, so that a new optical model (the next one: a point-source, i.e. conical,
+shadowgraph) is one new class implementing this protocol (docs/conventions.md, "Projections").
+
+Frames and units (docs/conventions.md): facility points ``r_F`` in metres, shape ``(..., 3)``;
+image points ``uv`` = (column, row) in pixels, origin at the centre of the top-left pixel,
+shape ``(..., 2)``. Each view also has a **view plane**: the plane through the range axis
+spanned by the two orthonormal facility directions ``plane_basis`` (2, 3) (top view: x, y;
+side view: x, z), with coordinates ``ab = plane_basis @ r_F`` (metres). The view-plane point of
+a facility point is where the ray through it meets the view plane; the image and the view
+plane are related one-to-one (the film's map), which is what the measurement fits in.
+
+:class:`ParallelProjection` (collimated light, the only implementation now): rays are
+parallel to the view plane's normal ``plane_basis[0] x plane_basis[1]``; the view-plane point
+of ``r_F`` is ``plane_basis @ r_F``, and the image follows by the inverse of the view's 2x3
+``image_to_plane`` affine (docs/conventions.md, "Images and pixels"). Every map is affine, so
+the Jacobians are constants.
+
+:func:`intersect_rays` is the weighted least-squares intersection of several views' rays, the
+combination step of stage one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from cadra.geometry import affine_inverse, apply_affine
+
+__all__ = ["ParallelProjection", "Projection", "RayIntersection", "intersect_rays"]
+
+
+@runtime_checkable
+class Projection(Protocol):
+    """What stage one and the renderer need to know about a view's optics.
+
+    Shapes broadcast over leading axes: ``r_F (..., 3)``, ``uv (..., 2)``, ``ab (..., 2)``.
+    Jacobians are ``(..., 2, 3)`` (facility -> image or plane) and ``(..., 2, 2)`` (image <->
+    plane). A ray is ``(origin (..., 3), unit direction (..., 3))``; its sense is a convention
+    of the implementation (a ray is used as a line).
+    """
+
+    plane_basis: np.ndarray   # (2, 3) orthonormal rows: the view plane's axes in F
+
+    def to_image(self, r_F) -> np.ndarray:
+        """Image points (px) of facility points (m)."""
+
+    def to_image_jacobian(self, r_F) -> np.ndarray:
+        """``d uv / d r_F`` at ``r_F``: (..., 2, 3), px per m."""
+
+    def plane_point(self, r_F) -> np.ndarray:
+        """View-plane point (m) of the ray through each facility point."""
+
+    def plane_point_jacobian(self, r_F) -> np.ndarray:
+        """``d ab / d r_F`` at ``r_F``: (..., 2, 3); zero along the ray."""
+
+    def ray(self, uv) -> tuple[np.ndarray, np.ndarray]:
+        """The facility ray seen at image points: origin on the view plane, unit direction."""
+
+    def plane_ray(self, ab) -> tuple[np.ndarray, np.ndarray]:
+        """The facility ray through view-plane points: origin there, unit direction."""
+
+    def to_plane(self, uv) -> np.ndarray:
+        """View-plane points (m) of image points (px)."""
+
+    def from_plane(self, ab) -> np.ndarray:
+        """Image points (px) of view-plane points (m): the inverse of :meth:`to_plane`."""
+
+    def to_plane_jacobian(self, uv) -> np.ndarray:
+        """``d ab / d uv`` at ``uv``: (..., 2, 2), m per px."""
+
+    def from_plane_jacobian(self, ab) -> np.ndarray:
+        """``d uv / d ab`` at ``ab``: (..., 2, 2), px per m."""
+
+
+def _broadcast(mat: np.ndarray, pts) -> np.ndarray:
+    """``mat`` (a constant Jacobian) repeated over the leading axes of the points ``pts``."""
+    pts = np.asarray(pts, dtype=float)
+    return np.broadcast_to(mat, pts.shape[:-1] + mat.shape).copy()
+
+
+@dataclass(frozen=True, eq=False)
+class ParallelProjection:
+    """Parallel (collimated) projection: see the module docstring.
+
+    Parameters
+    ----------
+    plane_basis : (2, 3) orthonormal rows, the facility directions the view sees (the
+        orthonormal view matrix of :func:`cadra.body.outline.silhouette`).
+    image_to_plane : (2, 3) affine ``[a, b] = M @ [u, v, 1]`` (m), nominal or fitted to the
+        image's wires.
+    """
+
+    plane_basis: np.ndarray
+    image_to_plane: np.ndarray
+    plane_to_image: np.ndarray = field(init=False, repr=False)
+    direction: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        P = np.array(self.plane_basis, dtype=float)
+        M = np.array(self.image_to_plane, dtype=float)
+        if P.shape != (2, 3) or not np.allclose(P @ P.T, np.eye(2), atol=1e-12):
+            raise ValueError("plane_basis: expected (2, 3) orthonormal rows")
+        if M.shape != (2, 3) or not np.all(np.isfinite(M)) or np.linalg.det(M[:, :2]) == 0.0:
+            raise ValueError("image_to_plane: expected a finite, invertible (2, 3) affine")
+        Minv = affine_inverse(M)
+        d = np.cross(P[0], P[1])
+        for name, value in (("plane_basis", P), ("image_to_plane", M), ("plane_to_image", Minv),
+                            ("direction", d)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def for_axes(cls, axes: tuple[int, int], image_to_plane) -> ParallelProjection:
+        """The projection of a view seeing facility axes ``axes`` (top (0, 1), side (0, 2))."""
+        P = np.zeros((2, 3))
+        P[0, axes[0]] = 1.0
+        P[1, axes[1]] = 1.0
+        return cls(P, image_to_plane)
+
+    @classmethod
+    def from_view(cls, view, affine=None) -> ParallelProjection:
+        """The projection of a :class:`cadra.facility.reference.View` with its nominal affine,
+        or ``affine`` (e.g. the one fitted to the image's wires)."""
+        return cls.for_axes(view.axes, view.image_to_plane if affine is None else affine)
+
+    # facility -> image
+    def plane_point(self, r_F) -> np.ndarray:
+        return np.asarray(r_F, dtype=float) @ self.plane_basis.T
+
+    def plane_point_jacobian(self, r_F) -> np.ndarray:
+        return _broadcast(self.plane_basis, r_F)
+
+    def to_image(self, r_F) -> np.ndarray:
+        return self.from_plane(self.plane_point(r_F))
+
+    def to_image_jacobian(self, r_F) -> np.ndarray:
+        return _broadcast(self.plane_to_image[:, :2] @ self.plane_basis, r_F)
+
+    # image -> facility
+    def ray(self, uv) -> tuple[np.ndarray, np.ndarray]:
+        return self.plane_ray(self.to_plane(uv))
+
+    def plane_ray(self, ab) -> tuple[np.ndarray, np.ndarray]:
+        ab = np.asarray(ab, dtype=float)
+        return ab @ self.plane_basis, _broadcast(self.direction, ab)
+
+    # image <-> view plane
+    def to_plane(self, uv) -> np.ndarray:
+        return apply_affine(self.image_to_plane, uv)
+
+    def from_plane(self, ab) -> np.ndarray:
+        return apply_affine(self.plane_to_image, ab)
+
+    def to_plane_jacobian(self, uv) -> np.ndarray:
+        return _broadcast(self.image_to_plane[:, :2], uv)
+
+    def from_plane_jacobian(self, ab) -> np.ndarray:
+        return _broadcast(self.plane_to_image[:, :2], ab)
+
+
+@dataclass(frozen=True)
+class RayIntersection:
+    """Result of :func:`intersect_rays`: the point (m, F), its covariance, the chi-square of
+    the views' view-plane residuals at it, and each ray's point closest to it (k, 3)."""
+
+    r_F: np.ndarray
+    cov: np.ndarray
+    chi2: float
+    closest: np.ndarray
+
+
+def intersect_rays(projections: Sequence[Projection], plane_points, plane_covs,
+                   max_iter: int = 10, tol_m: float = 1e-13) -> RayIntersection:
+    """Weighted least-squares intersection of the rays of several views.
+
+    View k measured the view-plane point ``plane_points[k]`` (2,) with covariance
+    ``plane_covs[k]`` (2, 2); the point ``r_F`` minimizing
+    ``sum_k (plane_point_k(r_F) - ab_k)^T C_k^-1 (plane_point_k(r_F) - ab_k)`` is found by
+    Gauss-Newton from the linear intersection of the rays (each ray weighted across itself by
+    ``J_k^T C_k^-1 J_k``, ``J_k`` its view's :meth:`Projection.plane_point_jacobian`).
+    For parallel projections the problem is linear and the first solve is the answer: two
+    orthogonal views give the inverse-variance mean of the coordinate both see and each
+    view's own measurement of the other two.
+    """
+    ab = [np.asarray(p, dtype=float).reshape(2) for p in plane_points]
+    W = [np.linalg.inv(np.asarray(c, dtype=float).reshape(2, 2)) for c in plane_covs]
+    rays = [proj.plane_ray(a) for proj, a in zip(projections, ab, strict=True)]
+    # the rays' linear intersection: each ray weighted across itself at its own origin
+    N, g = np.zeros((3, 3)), np.zeros(3)
+    for proj, w, (o, _) in zip(projections, W, rays, strict=True):
+        J = proj.plane_point_jacobian(o)
+        N += J.T @ w @ J
+        g += J.T @ w @ (J @ o)
+    r = np.linalg.solve(N, g)
+    for _ in range(max_iter):   # Gauss-Newton (no step for affine projections)
+        N, g = np.zeros((3, 3)), np.zeros(3)
+        for proj, a, w in zip(projections, ab, W, strict=True):
+            J = proj.plane_point_jacobian(r)
+            N += J.T @ w @ J
+            g += J.T @ w @ (a - proj.plane_point(r))
+        step = np.linalg.solve(N, g)
+        if np.max(np.abs(step)) < tol_m:
+            break
+        r = r + step
+    chi2 = 0.0
+    closest = []
+    for proj, a, w, (o, d) in zip(projections, ab, W, rays, strict=True):
+        e = proj.plane_point(r) - a
+        chi2 += float(e @ w @ e)
+        closest.append(o + ((r - o) @ d) * d)
+    return RayIntersection(r_F=r, cov=np.linalg.inv(N), chi2=chi2, closest=np.array(closest))
