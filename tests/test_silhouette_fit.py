@@ -13,9 +13,12 @@ import pytest
 
 from cadra.body import capsule, cone, sphere
 from cadra.measure.baseline import otsu_moments
-from cadra.measure.silhouette_fit import fit_silhouette, make_template
-from cadra.synthetic.cases import case_errors, measure_case, random_view_case
+from cadra.measure.silhouette_lsq import FitSettings, fit_silhouette
+from cadra.measure.template import make_template, outline_px
+from cadra.optics.projection import ParallelProjection
+from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.render import RenderConfig
+from cadra.validation import case_errors, measure_case
 
 SPHERE = sphere(0.03556)
 M2 = capsule("M2")
@@ -142,26 +145,26 @@ def test_partly_out_of_frame_and_blank():
     # push the pose so more than half of the outline is outside the frame
     a, b, phi = case.pose
     far = (a + 330 * 1.27e-4, b, phi)
-    fit = fit_silhouette(case.image, tpl, case.affine, far)
+    fit = fit_silhouette(case.image, tpl, case.projection, far)
     assert not fit.ok and "out of frame" in fit.reason
     blank = np.full_like(case.image, 0.85)
-    from cadra.measure.silhouette_fit import locate_model
+    from cadra.measure.locate import locate_model
 
-    coarse = locate_model(blank, tpl, case.affine)
+    coarse = locate_model(blank, tpl, case.projection)
     assert not coarse.ok and "no model" in coarse.reason
 
 
 def test_band_pixels_match_brute_force_nearest_edge():
     """The band search (each edge's box of +-band px) finds, for every pixel within the band,
     the same signed distance and nearest edge as a brute-force search over all edges."""
-    from cadra.measure.silhouette_fit import _band_pixels, _outline_geometry, outline_px
+    from cadra.measure.edge_segments import band_pixels, outline_geometry
 
     tpl = make_template(capsule("M2"), "top", tilt_rad=0.2)
     M = np.array([[1.27e-4, 2e-7, -0.03], [-3e-7, 1.27e-4, -0.03]])
-    poly = outline_px(tpl, (0.0012, -0.0007, 0.3), M)
-    geo = _outline_geometry(poly, 3.0)
+    poly = outline_px(tpl, (0.0012, -0.0007, 0.3), ParallelProjection.for_axes((0, 1), M))
+    geo = outline_geometry(poly, 3.0)
     band = 3.5
-    lin, sd, edge, t = _band_pixels(geo, band, (480, 480))
+    lin, sd, edge, t = band_pixels(geo, band, (480, 480))
     W = 480
     u, v = (lin % W).astype(float), (lin // W).astype(float)
     # brute force: distance of every band pixel to every edge
@@ -199,8 +202,6 @@ def test_dark_level_models_meet_targets(shadow_level):
     """Both dark-level models (tied to the bright level image-wide, the default; or free per
     segment) meet the sphere target on renders with an opaque shadow and a translucent one,
     and the two agree to well within the target."""
-    from cadra.measure.silhouette_fit import FitSettings
-
     cfg = RenderConfig(shadow_level=shadow_level)
     rng = np.random.default_rng(5)
     E = {"tied": [], "segment": []}
@@ -216,7 +217,5 @@ def test_dark_level_models_meet_targets(shadow_level):
 
 
 def test_fit_settings_refuse_an_unknown_dark_level():
-    from cadra.measure.silhouette_fit import FitSettings
-
     with pytest.raises(ValueError, match="dark_level"):
         FitSettings(dark_level="global")

@@ -43,7 +43,8 @@ def _cases(body, n, config, seed, keep=0, baseline=False):
     """Render and measure ``n`` random cases, one at a time (1000 renders of 512 x 512 do
     not all fit in memory). Returns (errors, sigmas, baseline errors or None, fit times, the
     first ``keep`` cases)."""
-    from cadra.synthetic.cases import case_errors, measure_case, random_view_case
+    from cadra.synthetic.cases import random_view_case
+    from cadra.validation import case_errors, measure_case
 
     rng = np.random.default_rng(seed)
     E, S, B, T, kept = [], [], [], [], []

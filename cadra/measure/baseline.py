@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cadra.synthetic.render import polygon_area_centroid
+from cadra.geometry import polygon_area_centroid
 
 __all__ = [
     "BaselinePose",

@@ -1,11 +1,14 @@
 """Combine the top and side views of a station into a 3-D position and attitude.
 
-Parallel projection (docs/conventions.md): the top view sees (x, y), the side view (x, z).
 Each view measures the reference point's two view-plane coordinates and the in-plane angle of
-the model's axis (top: psi_p = atan2(a_y, a_x); side: theta_p = atan2(a_z, a_x)). Downrange x is
-seen twice: the weighted mean is reported, and the difference is a consistency figure.
-The projected angles give the axis and so the seed-004 inclinations theta, psi.
-Pure functions on plain numbers (SI, radians).
+the model's axis (top: psi_p = atan2(a_y, a_x); side: theta_p = atan2(a_z, a_x);
+docs/conventions.md). The position is the weighted least-squares intersection of the two
+views' rays through their measured points (:func:`cadra.optics.projection.intersect_rays`,
+through each view's :class:`~cadra.optics.projection.Projection`). For the two orthogonal
+parallel views of the default facility (top sees (x, y), side (x, z)) that is the
+inverse-variance mean of x, seen twice, with y from the top view and z from the side view;
+the x difference is a consistency figure. The projected angles give the axis and so the
+seed-004 inclinations theta, psi. Pure functions on plain numbers (SI, radians).
 """
 
 from __future__ import annotations
@@ -15,12 +18,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from cadra.conventions import axis_from_projected_angles, inclinations_from_axis
+from cadra.facility.reference import VIEW_AXES
+from cadra.optics.projection import ParallelProjection, Projection, intersect_rays
+
+#: Stand-in projections for a ViewPose without one: the nominal parallel top and side views
+#: (only their view planes matter to the combination; the image affine is the identity).
+_DEFAULT_PROJECTIONS = {name: ParallelProjection.for_axes(axes, np.eye(2, 3))
+                        for name, axes in VIEW_AXES.items()}
 
 
 @dataclass(frozen=True)
 class ViewPose:
     """One view's measurement in its view plane: reference point (a, b), m, and the in-plane
-    axis angle (from the first view-plane axis toward the second), rad, each with 1-sigma."""
+    axis angle (from the first view-plane axis toward the second), rad, each with 1-sigma;
+    ``projection`` the view's optics (None: the nominal parallel view of its role, top or
+    side)."""
 
     a_m: float
     b_m: float
@@ -28,6 +40,7 @@ class ViewPose:
     sigma_a_m: float
     sigma_b_m: float
     sigma_angle_rad: float
+    projection: Projection | None = None
 
 
 @dataclass(frozen=True)
@@ -54,12 +67,19 @@ def inclinations_from_views(theta_p: float, psi_p: float) -> tuple[float, float]
 
 
 def combine_views(top: ViewPose, side: ViewPose) -> StationPose:
-    """3-D pose from the two views (inverse-variance mean of x; first-order error propagation
-    of the projected angles into theta, psi)."""
-    w_top, w_side = 1.0 / top.sigma_a_m**2, 1.0 / side.sigma_a_m**2
-    x = (w_top * top.a_m + w_side * side.a_m) / (w_top + w_side)
-    sigma_x = 1.0 / np.sqrt(w_top + w_side)
-    dx = top.a_m - side.a_m
+    """3-D pose from the two views: the position by the rays' weighted least-squares
+    intersection (module docstring), theta, psi from the projected angles with first-order
+    error propagation. ``x_top_minus_side_m`` is the x difference of the two rays' points
+    closest to the intersection (for parallel views, of the two measured x), and
+    ``x_consistency_sigma`` the square root of the intersection's chi-square (one degree of
+    freedom: ``|x_top - x_side| / sqrt(s_top^2 + s_side^2)`` for parallel views)."""
+    views = (top, side)
+    projections = [v.projection if v.projection is not None else _DEFAULT_PROJECTIONS[name]
+                   for v, name in zip(views, ("top", "side"), strict=True)]
+    hit = intersect_rays(projections, [(v.a_m, v.b_m) for v in views],
+                         [np.diag([v.sigma_a_m**2, v.sigma_b_m**2]) for v in views])
+    sig = np.sqrt(np.diag(hit.cov))
+    dx = hit.closest[0, 0] - hit.closest[1, 0]
     theta, psi = inclinations_from_views(side.angle_rad, top.angle_rad)
     # first-order propagation: d(theta, psi) / d(theta_p, psi_p), central differences
     h = 1e-7
@@ -70,11 +90,10 @@ def combine_views(top: ViewPose, side: ViewPose) -> StationPose:
         J[:, j] = (np.array(plus) - np.array(minus)) / (2 * h)
     C = J @ np.diag([side.sigma_angle_rad**2, top.sigma_angle_rad**2]) @ J.T
     return StationPose(
-        x_m=float(x), y_m=float(top.b_m), z_m=float(side.b_m),
+        x_m=float(hit.r_F[0]), y_m=float(hit.r_F[1]), z_m=float(hit.r_F[2]),
         theta_rad=float(theta), psi_rad=float(psi),
-        sigma_x_m=float(sigma_x), sigma_y_m=float(top.sigma_b_m),
-        sigma_z_m=float(side.sigma_b_m),
+        sigma_x_m=float(sig[0]), sigma_y_m=float(sig[1]), sigma_z_m=float(sig[2]),
         sigma_theta_rad=float(np.sqrt(C[0, 0])), sigma_psi_rad=float(np.sqrt(C[1, 1])),
         x_top_minus_side_m=float(dx),
-        x_consistency_sigma=float(abs(dx) / np.sqrt(top.sigma_a_m**2 + side.sigma_a_m**2)),
+        x_consistency_sigma=float(np.sqrt(hit.chi2)),
     )

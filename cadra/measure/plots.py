@@ -104,7 +104,7 @@ def view_overlay(image, result, template, station_id: int, crop_half_px: int = 2
     axis; below, the figures or the failure reason as text."""
     import cv2
 
-    from cadra.measure.silhouette_fit import outline_px
+    from cadra.measure.template import outline_px
 
     fit = getattr(result, "fit", None)
     wires = getattr(result, "wires", None)
@@ -118,7 +118,7 @@ def view_overlay(image, result, template, station_id: int, crop_half_px: int = 2
     outline = ref = axis = cen = None
     labels = [f"station {station_id} {result.view}"]
     if fit is not None and fit.ok and template is not None:
-        outline = outline_px(template, fit.pose, result.affine)
+        outline = outline_px(template, fit.pose, result.projection)
         ref = fit.ref_px
         if math.isfinite(fit.axis_angle_px_rad):
             axis = (math.cos(fit.axis_angle_px_rad), math.sin(fit.axis_angle_px_rad))

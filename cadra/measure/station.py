@@ -6,10 +6,13 @@ ship it. Per view (docs/stage1.md):
 
 1. read the image (:func:`cadra.measure.loading.load_station_image`; a bad file fails that
    view with its reason);
-2. locate the model roughly (:func:`cadra.measure.silhouette_fit.locate_model`);
-3. find and fit the fiducial wires, solve the image->plane affine
-   (:func:`cadra.measure.wires.measure_wires`), the model's box excluded;
-4. fit the silhouette (method a) and the area centroid (method b) with the wires masked.
+2. locate the model roughly (:func:`cadra.measure.locate.locate_model`) with the view's
+   nominal projection;
+3. find and fit the fiducial wires, solve the image->plane affine and so the view's
+   :class:`~cadra.optics.projection.Projection` (:func:`cadra.measure.wires.measure_wires`),
+   the model's box excluded;
+4. fit the silhouette (method a, :mod:`cadra.measure.silhouette_lsq`) and the area centroid
+   (method b, :mod:`cadra.measure.centroid`) with the wires masked.
 
 The two views are then alternated: each view's outline depends on the axis' tilt out of its
 plane, which the other view measures; two or three rounds converge (the outline depends on the
@@ -29,15 +32,10 @@ import numpy as np
 from cadra.conventions import axis_from_projected_angles
 from cadra.measure.combine import StationPose, ViewPose, combine_views
 from cadra.measure.loading import load_station_image
-from cadra.measure.silhouette_fit import (
-    FitSettings,
-    ViewFit,
-    fit_silhouette,
-    locate_model,
-    make_template,
-    outline_px,
-    pose_from_coarse,
-)
+from cadra.measure.locate import locate_model, pose_from_coarse
+from cadra.measure.silhouette_lsq import FitSettings, ViewFit, fit_silhouette
+from cadra.measure.template import make_template, outline_px
+from cadra.optics.projection import ParallelProjection
 
 VIEWS = ("top", "side")
 
@@ -60,6 +58,7 @@ class ViewResult:
     warnings: tuple[str, ...] = ()
     seconds: float = 0.0
     overlay_png: bytes | None = None
+    projection: ParallelProjection | None = None   # the view's optics with that affine
 
 
 @dataclass(frozen=True)
@@ -112,14 +111,14 @@ def _view_pose(fit: ViewFit, wires) -> ViewPose:
     return ViewPose(a_m=fit.pose[0], b_m=fit.pose[1], angle_rad=fit.pose[2] if finite else 0.0,
                     sigma_a_m=math.hypot(math.sqrt(fit.cov[0, 0]), s_aff[0]),
                     sigma_b_m=math.hypot(math.sqrt(fit.cov[1, 1]), s_aff[1]),
-                    sigma_angle_rad=s_ang if finite else 0.0)
+                    sigma_angle_rad=s_ang if finite else 0.0, projection=wires.projection)
 
 
-def _wire_crossings(fit: ViewFit, template, affine, wires) -> list[str]:
+def _wire_crossings(fit: ViewFit, template, projection, wires) -> list[str]:
     """Names of found wires whose image comes within the fit band of the model's outline."""
     if wires is None or not fit.ok:
         return []
-    poly = outline_px(template, fit.pose, affine)
+    poly = outline_px(template, fit.pose, projection)
     names = []
     for w in wires.wires:
         if not w.found:
@@ -144,7 +143,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     template = _template(body, view.name, tilt)
     if prev is None:
         if coarse is None:
-            coarse = locate_model(img, template, view.image_to_plane)
+            coarse = locate_model(img, template, ParallelProjection.from_view(view))
         if not coarse.ok:
             return None, coarse.reason, None, None, ()
         H, W = img.shape
@@ -156,7 +155,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         if not wires.ok:
             return None, wires.reason, wires, None, ()
         affine = wires.affine
-        pose0 = pose_from_coarse(coarse, template, affine)
+        pose0 = pose_from_coarse(coarse, template, wires.projection)
         mask = masks[view.name] = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
         # a quick first pass when a refit with better tilts follows
         settings_used = settings if final else replace(settings, max_iter=2)
@@ -169,7 +168,8 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         settings_used = settings
     if prev is not None:   # a refit after a small tilt change: start close, few iterations
         settings_used = replace(settings, max_iter=min(settings.max_iter, 4))
-    fit = fit_silhouette(img, template, affine, pose0, exclude=mask, settings=settings_used,
+    fit = fit_silhouette(img, template, wires.projection, pose0, exclude=mask,
+                         settings=settings_used,
                          edge_sigma0=prev.fit.edge_sigma_px if prev is not None else 0.9,
                          noise_coef=prev.fit.noise_coef if prev is not None else None,
                          edge_profile0=prev.fit.edge_profile if prev is not None else None,
@@ -182,7 +182,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     for w in wires.wires:
         if not w.found:
             warn.append(w.reason or f"wire {w.name!r} not found")
-    crossing = _wire_crossings(fit, template, affine, wires)
+    crossing = _wire_crossings(fit, template, wires.projection, wires)
     if crossing:
         warn.append(f"model crosses wire(s) {', '.join(repr(c) for c in crossing)}: "
                     f"{fit.n_segments} edge segments used, pixels on the wire masked")
@@ -224,12 +224,13 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             continue
         images[name] = img
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
-    coarse = {n: locate_model(img, _template(body, n, 0.0, 256), station.views[n].image_to_plane)
+    nominal = {n: ParallelProjection.from_view(v) for n, v in station.views.items()}
+    coarse = {n: locate_model(img, _template(body, n, 0.0, 256), nominal[n])
               for n, img in images.items()}
     tilts = {"top": 0.0, "side": 0.0}
     if not sphere and all(n in coarse and coarse[n].ok for n in VIEWS):
-        phi = {n: pose_from_coarse(coarse[n], _template(body, n, 0.0, 256),
-                                   station.views[n].image_to_plane)[2] for n in VIEWS}
+        phi = {n: pose_from_coarse(coarse[n], _template(body, n, 0.0, 256), nominal[n])[2]
+               for n in VIEWS}
         a = axis_from_projected_angles(phi["side"], phi["top"])
         tilts = {"top": math.asin(a[2]), "side": math.asin(a[1])}
     fits: dict[str, ViewResult] = {}
@@ -250,7 +251,8 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             ok = fit is not None and fit.ok
             fits[name] = ViewResult(name, str(image_paths[name]), ok, reason, fit, wires,
                                     affine, tilts[name], warn,
-                                    time.perf_counter() - t0 + (prev.seconds if prev else 0.0))
+                                    time.perf_counter() - t0 + (prev.seconds if prev else 0.0),
+                                    projection=None if wires is None else wires.projection)
         if sphere or not all(n in fits and fits[n].ok for n in VIEWS):
             break
         a = axis_from_projected_angles(fits["side"].fit.pose[2], fits["top"].fit.pose[2])

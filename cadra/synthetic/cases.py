@@ -5,7 +5,8 @@ attitude on a small frame (the model plus margin; no wires, so the pose fit is m
 with the image's true affine), with the renderer's exact truth. The frame's view plane and
 affine come from the default facility's scale; the film placement perturbs the affine as
 :func:`cadra.synthetic.simulate.film_affine` does for whole shots. Same scene code as whole shots
-(:func:`cadra.synthetic.simulate.view_scene`).
+(:func:`cadra.synthetic.simulate.view_scene`). Measuring a case is the harness layer's job
+(:func:`cadra.validation.measure_case`): this module never imports stage one.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from cadra.body import Body
 from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import ReferenceMark, View, nominal_image_to_plane
+from cadra.optics.projection import ParallelProjection
 from cadra.synthetic.render import RenderConfig, render
 from cadra.synthetic.simulate import FilmPlacement, film_affine, view_scene
 
@@ -42,6 +44,11 @@ class ViewCase:
     config: RenderConfig
     R_FB: np.ndarray
     r_ref_F: np.ndarray
+
+    @property
+    def projection(self) -> ParallelProjection:
+        """The view's optics with the image's true affine."""
+        return ParallelProjection.from_view(self.view, self.affine)
 
 
 def small_view(name: str = "top", size_px: int = 512, x_m: float = 0.0) -> View:
@@ -92,33 +99,3 @@ def random_view_case(body: Body, rng: np.random.Generator, config: RenderConfig 
                     pose=(float(ab[0]), float(ab[1]), phi),
                     tilt_rad=float(math.asin(np.clip(ax[out_axis], -1, 1))), scene=scene,
                     config=cfg, R_FB=R, r_ref_F=r)
-
-
-def measure_case(case: ViewCase, body: Body, settings=None, tilt_rad: float | None = None):
-    """Stage one's per-view measurement of a case with its true affine (no wires):
-    locate -> silhouette fit (method a) and centroid (method b). Returns the ViewFit."""
-    from cadra.measure.silhouette_fit import (
-        fit_silhouette,
-        locate_model,
-        make_template,
-        pose_from_coarse,
-    )
-
-    tpl = make_template(body, case.view.name, case.tilt_rad if tilt_rad is None else tilt_rad)
-    coarse = locate_model(case.image, tpl, case.affine)
-    if not coarse.ok:
-        raise RuntimeError(coarse.reason)
-    pose0 = pose_from_coarse(coarse, tpl, case.affine)
-    return fit_silhouette(case.image, tpl, case.affine, pose0, settings=settings)
-
-
-def case_errors(case: ViewCase, fit, body: Body) -> tuple[list[float], list[float]]:
-    """A fit's errors against the case's truth and its reported sigmas, per channel:
-    reference point u, v (px) and, for a non-sphere, the image axis angle (deg)."""
-    e = [fit.ref_px[0] - case.u_ref_px, fit.ref_px[1] - case.v_ref_px]
-    s = list(fit.sigma_ref_px)
-    if body.kind != "sphere":
-        e.append(math.degrees(math.remainder(fit.axis_angle_px_rad - case.axis_angle_px_rad,
-                                             2 * math.pi)))
-        s.append(math.degrees(fit.sigma_axis_px_rad))
-    return e, s

@@ -1,0 +1,295 @@
+"""Measure the model's pose in one shadowgraph: the silhouette least squares (method a).
+
+Stage one's main method (seed 004, "Data Reduction and Analysis"; docs/stage1.md):
+
+(a) **Least squares** (:func:`fit_silhouette`): the body's exact outline (:mod:`cadra.body`) is
+    placed at a trial pose; pixels in a band around it are grouped into short contour
+    *segments*; in each segment a blurred-edge model ``I = L (1 - g) + D g + a L h``,
+    ``g = Phi((delta - d) / s)`` (d = the pixel centre's signed distance from the outline,
+    + outside; L the local bright level, D the dark level, tied to it image-wide as
+    ``D = r L + c`` by default (``FitSettings.dark_level``: a free D per segment costs each
+    offset ~12 % of its sigma); s the edge width) gives the segment's edge offset ``delta``
+    along the outward normal, with its variance (stage A, :mod:`cadra.measure.edge_segments`).
+    ``a L h`` is the diffraction fringe: a bright band outside the edge and a dark one inside,
+    the second derivative of a blurred step. The edge width and the fringe amplitude are
+    fitted per image, each as ``x0 + x4 cos(4 theta)`` (theta the normal's
+    angle to the pixel grid): the profile across an edge depends on that angle at fourth
+    order (a square pixel projects onto the normal as a box along an axis, a triangle along a
+    diagonal).
+    The pose correction then follows from all offsets by weighted least squares (stage B)::
+
+        delta_k = n_k . (dr + dphi x (x_k - r_ref)) - c kappa_k
+
+    The last term is the curvature bias of a blurred edge: the half-intensity contour of a
+    blurred convex edge lies inside the true outline by ``(blur variance along the tangent)
+    kappa / 2`` (Mendonca et al., ECCV 2004); a diffraction fringe adds a term of the same
+    form. ``c`` (px^2) is fitted, not assumed, so the correction holds for a PSF shape or a
+    fringe the measurement does not model. Iterated to convergence (band and segments re-built
+    at each pose). Uncertainty: Newey-West sandwich over the contour-ordered segment residuals,
+    so correlated noise (film grain) and misfit show up in the sigma.
+
+Method (b), the area centroid, is :mod:`cadra.measure.centroid`; the outline template
+:mod:`cadra.measure.template`; stage A (the per-segment edge offsets and their numba kernels)
+:mod:`cadra.measure.edge_segments`; the first guess :mod:`cadra.measure.locate`.
+
+Geometry is in the *view plane* (metres in F, docs/conventions.md) through the view's
+:class:`~cadra.optics.projection.Projection` (for a parallel view: the image's wire affine);
+the pose of one view is ``(a, b, phi)``: the reference point's view-plane coordinates and the
+in-plane axis angle from the first view axis toward the second (top view: psi_p = atan2(a_y,
+a_x); side view: theta_p = atan2(a_z, a_x)). The outline depends also on the axis' tilt out
+of the view plane (seen by the other view): ``tilt_rad`` (its sign does not matter: the
+outline depends on |cos| of the angle to the line of sight).
+
+Everything here is a pure function of plain arrays and frozen dataclasses (picklable).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cadra.measure.centroid import centroid_pose
+from cadra.measure.edge_segments import outline_geometry, stage_a
+from cadra.measure.template import Template, outline_px, pose_px
+from cadra.optics.projection import Projection
+
+__all__ = ["FitSettings", "ViewFit", "fit_silhouette"]
+
+#: After two iterations a converging fit moves far less than this (px at the rim).
+MAX_LATE_STEP_PX = 0.3
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Knobs of the silhouette fit (docs/stage1.md); defaults suit ~1 px blur."""
+
+    band_px: float = 3.5            # half-width of the pixel band about the outline
+    segment_px: float = 8.0         # contour segment length
+    corner_clear_px: float = 3.0    # segments this close to a sharp corner are not used
+    min_fill: float = 0.6           # a segment needs this fraction of its expected pixels
+    max_iter: int = 8               # pose iterations (band rebuilt each time)
+    tol_px: float = 2e-4            # stop when the pose moves less than this (px at the rim)
+    outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
+    hac_lags: int = 3               # Newey-West lags over contour-ordered segments
+    fit_curvature_bias: bool = True
+    fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
+    cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
+    warm_rounds: int = 2            # stage-A outer rounds warm-started from the last pose
+    dark_level: str = "tied"        # "tied": D = r L + c image-wide; "segment": D per segment
+
+    def __post_init__(self):
+        if self.dark_level not in ("tied", "segment"):
+            raise ValueError(f"FitSettings.dark_level: expected 'tied' or 'segment', got "
+                             f"{self.dark_level!r}")
+
+
+
+def _newey_west(X: np.ndarray, e: np.ndarray, lags: int) -> np.ndarray:
+    """Newey-West estimate of Var(X^T e) for contour-ordered rows (circular)."""
+    xe = X * e[:, None]
+    S = xe.T @ xe
+    n = len(e)
+    for lag in range(1, min(lags, n - 1) + 1):
+        wgt = 1.0 - lag / (lags + 1.0)
+        G = xe.T @ np.roll(xe, -lag, axis=0)
+        S += wgt * (G + G.T)
+    return S
+
+
+@dataclass(frozen=True)
+class ViewFit:
+    """One view's silhouette measurement (method a) and centroid measurement (method b).
+
+    ``pose`` = (a_m, b_m, phi_rad) in the view plane; ``cov`` its 3x3 covariance (for a sphere
+    phi is not measured: 0 with infinite variance). Pixel-space figures are for diagnostics
+    and comparison with renderer truth: ``ref_px`` and ``axis_angle_px_rad`` (atan2(dv, du) of
+    the nose direction in the image).
+    """
+
+    ok: bool
+    reason: str
+    pose: tuple[float, float, float]
+    cov: np.ndarray
+    ref_px: tuple[float, float]
+    axis_angle_px_rad: float
+    sigma_ref_px: tuple[float, float]
+    sigma_axis_px_rad: float
+    curvature_bias_px2: float
+    edge_sigma_px: float
+    resid_rms: float              # intensity residual rms (fraction of full scale)
+    offset_rms_px: float          # rms of the segment offsets about the fitted outline
+    n_segments: int
+    n_rejected: int
+    iterations: int
+    converged: bool
+    outline_outside_frac: float
+    centroid_ref_px: tuple[float, float]
+    centroid_axis_px_rad: float
+    centroid_pose: tuple[float, float, float]
+    warnings: tuple[str, ...] = ()
+    noise_coef: np.ndarray | None = None
+    edge_profile: tuple[float, float, float, float] | None = None  # (s0, a0, s4, a4)
+
+
+def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
+                   pose0: tuple[float, float, float], *, exclude: np.ndarray | None = None,
+                   settings: FitSettings | None = None, edge_sigma0: float = 0.9,
+                   noise_coef: np.ndarray | None = None,
+                   edge_profile0: tuple[float, float, float, float] | None = None,
+                   centroid: bool = True) -> ViewFit:
+    """Least-squares silhouette fit (method a) from ``pose0``; see the module docstring.
+
+    ``img`` float (H, W) in [0, 1]; ``projection`` the view's optics (for a parallel view
+    :class:`~cadra.optics.projection.ParallelProjection` with the image's wire affine);
+    ``exclude`` True on pixels not to use (wires, other
+    clutter known in advance); ``edge_sigma0`` (or the whole edge profile ``edge_profile0``,
+    :attr:`ViewFit.edge_profile`) and ``noise_coef`` (the image's noise model,
+    :attr:`ViewFit.noise_coef`) warm-start a refit; ``centroid=False`` skips method (b)
+    (an intermediate fit). Never raises for bad data: ``ok`` False
+    with a reason.
+    """
+    settings = FitSettings() if settings is None else settings
+    Jrot = np.array([[0.0, -1.0], [1.0, 0.0]])
+    pose = np.array(pose0, float)
+    fit_phi = not template.axisymmetric_point
+    # (for a sphere the curvature is the same all round and the term is a radius change: it
+    # does not move the centre, but leaving it out lets an uneven set of rejected segments
+    # turn the edges' common offset into a centre shift)
+    fit_c = settings.fit_curvature_bias
+    nan3 = np.full((3, 3), np.nan)
+    H, W = img.shape
+    profile = (np.array(edge_profile0, float) if edge_profile0 is not None
+               else np.array([edge_sigma0, 0.0, 0.0, 0.0]))
+    converged = False
+    seg = None
+    cov = nan3
+    c_bias = 0.0
+    n_rej = 0
+    it = 0
+    outside = 0.0
+    diverged = False
+    A_lin = projection.from_plane_jacobian(pose[:2])   # plane (m) -> pixel displacement
+    for it in range(1, settings.max_iter + 1):  # noqa: B007 (it is reported)
+        A_lin = projection.from_plane_jacobian(pose[:2])
+        poly = outline_px(template, pose, projection)
+        inside = ((poly[:, 0] >= settings.band_px) & (poly[:, 0] <= W - 1 - settings.band_px)
+                  & (poly[:, 1] >= settings.band_px) & (poly[:, 1] <= H - 1 - settings.band_px))
+        outside = 1.0 - float(inside.mean())
+        if outside > 0.5:
+            return _failed(f"model mostly out of frame ({outside:.0%} of its outline)", pose,
+                           outside)
+        geo = outline_geometry(poly, settings.corner_clear_px)
+        seg = stage_a(img, geo, settings, exclude, profile, noise_coef)
+        if seg is None:
+            return _failed("too few usable edge segments", pose, outside)
+        profile = seg.profile
+        noise_coef = seg.noise_coef
+        ref_px = projection.from_plane(pose[:2])
+        lever = projection.to_plane(seg.foot_px) - pose[:2]        # plane, m
+        cols = [seg.normal @ A_lin[:, 0], seg.normal @ A_lin[:, 1]]
+        if fit_phi:
+            cols.append(np.einsum("ij,ij->i", seg.normal, (lever @ Jrot.T) @ A_lin.T))
+        if fit_c:
+            cols.append(-seg.kappa)
+        X = np.column_stack(cols)
+        y = seg.delta_px
+        wts = 1.0 / seg.var_px2
+        keep = np.isfinite(y) & np.isfinite(wts) & (wts > 0)
+        for _ in range(3):  # robust: drop outlying segments (dust, wire crossings)
+            sw = np.sqrt(wts[keep])
+            colscale = np.linalg.norm(X[keep] * sw[:, None], axis=0)
+            colscale[colscale == 0] = 1.0
+            beta, *_ = np.linalg.lstsq(X[keep] * sw[:, None] / colscale, y[keep] * sw,
+                                       rcond=None)
+            beta = beta / colscale
+            e = (y - X @ beta) * np.sqrt(wts)
+            mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
+            new_keep = keep & (np.abs(e) <= settings.outlier_sigma * max(mad, 1e-12))
+            if new_keep.sum() == keep.sum() or new_keep.sum() < 0.5 * keep.sum():
+                break   # nothing more to drop, or a noise-free image (mad ~ 0)
+            keep = new_keep
+        n_rej = int((~keep).sum())
+        npar = X.shape[1]
+        if keep.sum() < npar + 5:
+            return _failed("too few consistent edge segments", pose, outside)
+        # covariance: Newey-West sandwich on the kept, contour-ordered segments
+        Xw = X[keep] * np.sqrt(wts[keep])[:, None]
+        ew = (y[keep] - X[keep] @ beta) * np.sqrt(wts[keep])
+        bread = np.linalg.pinv(Xw.T @ Xw)
+        meat = _newey_west(Xw, ew, settings.hac_lags)
+        n_k = int(keep.sum())
+        cov_b = bread @ meat @ bread * n_k / max(n_k - npar, 1)
+        dpose = np.zeros(3)
+        dpose[0], dpose[1] = beta[0], beta[1]
+        if fit_phi:
+            dpose[2] = beta[2]
+        if it > 3:   # damp late iterations: re-banding noise can make full steps oscillate
+            dpose *= 0.5
+        scale = math.sqrt(abs(np.linalg.det(projection.to_plane_jacobian(ref_px))))
+        rim = 0.5 * math.sqrt(template.area_m2 / math.pi) / scale
+        move = np.hypot(*(A_lin @ dpose[:2])) + (abs(dpose[2]) * rim if fit_phi else 0.0)
+        if it > 2 and move > MAX_LATE_STEP_PX:
+            # a converging fit does not jump late: a stage-A failure (a strong fringe, a
+            # clutter feature) produced this step; keep the last pose and say so
+            diverged = True
+            break
+        c_bias = float(beta[-1]) if fit_c else 0.0
+        pose = pose + dpose
+        cov = np.full((3, 3), 0.0)
+        idx = [0, 1, 2] if fit_phi else [0, 1]
+        cov[np.ix_(idx, idx)] = cov_b[: len(idx), : len(idx)]
+        if not fit_phi:
+            cov[2, 2] = np.inf
+        # converged: the step is below the tolerance or a small fraction of the pose's own
+        # sigma (re-banding at a new pose re-draws the noise; steps below that are jitter)
+        sig_px = math.sqrt(max(np.trace(A_lin @ cov[:2, :2] @ A_lin.T), 0.0))
+        if move < max(settings.tol_px, 0.5 * sig_px):
+            converged = True
+            break
+    ref_px, ang_px = pose_px(pose, projection)
+    # pixel-space sigmas by linear propagation
+    Jp = np.zeros((3, 3))
+    Jp[:2, :2] = A_lin
+    h = 1e-7
+    _, a_plus = pose_px(pose + [0, 0, h], projection)
+    Jp[2, 2] = (a_plus - ang_px) / h
+    cov_fin = np.where(np.isfinite(cov), cov, 0.0)
+    cov_px = Jp @ cov_fin @ Jp.T
+    # offsets about the fitted outline (a sphere: about its mean, the radius change)
+    resid = seg.delta_px + c_bias * seg.kappa
+    nan2 = (math.nan, math.nan)
+    cen = (centroid_pose(img, template, projection, pose, seg, exclude) if centroid
+           else (nan2, math.nan, (math.nan,) * 3))
+    warnings = []
+    if diverged:
+        warnings.append(f"silhouette fit: a late step of > {MAX_LATE_STEP_PX} px was rejected "
+                        f"(edge model failing in part of the outline); last pose kept")
+    elif not converged:
+        warnings.append(f"silhouette fit not converged in {settings.max_iter} iterations")
+    if outside > 0.0:
+        warnings.append(f"model partly out of frame ({outside:.0%} of its outline)")
+    return ViewFit(
+        ok=True, reason="", pose=tuple(float(x) for x in pose), cov=cov,
+        ref_px=(float(ref_px[0]), float(ref_px[1])), axis_angle_px_rad=float(ang_px),
+        sigma_ref_px=(float(math.sqrt(cov_px[0, 0])), float(math.sqrt(cov_px[1, 1]))),
+        sigma_axis_px_rad=float(math.sqrt(cov_px[2, 2])) if fit_phi else math.inf,
+        curvature_bias_px2=c_bias, edge_sigma_px=seg.edge_sigma_px, resid_rms=seg.resid_rms,
+        offset_rms_px=float(np.sqrt(np.mean(resid ** 2))), n_segments=len(seg.delta_px),
+        n_rejected=n_rej, iterations=it, converged=converged, outline_outside_frac=outside,
+        centroid_ref_px=cen[0], centroid_axis_px_rad=cen[1], centroid_pose=cen[2],
+        warnings=tuple(warnings), noise_coef=seg.noise_coef,
+        edge_profile=tuple(float(x) for x in seg.profile))
+
+
+def _failed(reason: str, pose, outside: float) -> ViewFit:
+    nan = math.nan
+    return ViewFit(ok=False, reason=reason, pose=tuple(float(x) for x in pose),
+                   cov=np.full((3, 3), np.nan), ref_px=(nan, nan), axis_angle_px_rad=nan,
+                   sigma_ref_px=(nan, nan), sigma_axis_px_rad=nan, curvature_bias_px2=nan,
+                   edge_sigma_px=nan, resid_rms=nan, offset_rms_px=nan, n_segments=0,
+                   n_rejected=0, iterations=0, converged=False,
+                   outline_outside_frac=outside, centroid_ref_px=(nan, nan),
+                   centroid_axis_px_rad=nan, centroid_pose=(nan, nan, nan))
+

@@ -1,0 +1,48 @@
+"""The harness layer: synthetic cases with exact truth measured by stage one.
+
+The one place that may import both sides: the synthetic data (:mod:`cadra.synthetic`) and
+the measurement it tests (:mod:`cadra.measure`), which never import each other. Tests and
+benchmarks (``tools/bench_cadra1.py``) put a case and a measurement together through here.
+
+:func:`measure_case` runs stage one's per-view measurement on a
+:class:`~cadra.synthetic.cases.ViewCase`; :func:`case_errors` scores it against the case's
+truth.
+"""
+
+from __future__ import annotations
+
+import math
+
+from cadra.body import Body
+from cadra.measure.locate import locate_model, pose_from_coarse
+from cadra.measure.silhouette_lsq import FitSettings, ViewFit, fit_silhouette
+from cadra.measure.template import make_template
+from cadra.synthetic.cases import ViewCase
+
+__all__ = ["case_errors", "measure_case"]
+
+
+def measure_case(case: ViewCase, body: Body, settings: FitSettings | None = None,
+                 tilt_rad: float | None = None) -> ViewFit:
+    """Stage one's per-view measurement of a case with its true affine (no wires):
+    locate -> silhouette fit (method a) and centroid (method b). RuntimeError if the model
+    is not found. ``tilt_rad`` overrides the case's true out-of-plane tilt."""
+    tpl = make_template(body, case.view.name, case.tilt_rad if tilt_rad is None else tilt_rad)
+    projection = case.projection
+    coarse = locate_model(case.image, tpl, projection)
+    if not coarse.ok:
+        raise RuntimeError(coarse.reason)
+    pose0 = pose_from_coarse(coarse, tpl, projection)
+    return fit_silhouette(case.image, tpl, projection, pose0, settings=settings)
+
+
+def case_errors(case: ViewCase, fit: ViewFit, body: Body) -> tuple[list[float], list[float]]:
+    """A fit's errors against the case's truth and its reported sigmas, per channel:
+    reference point u, v (px) and, for a non-sphere, the image axis angle (deg)."""
+    e = [fit.ref_px[0] - case.u_ref_px, fit.ref_px[1] - case.v_ref_px]
+    s = list(fit.sigma_ref_px)
+    if body.kind != "sphere":
+        e.append(math.degrees(math.remainder(fit.axis_angle_px_rad - case.axis_angle_px_rad,
+                                             2 * math.pi)))
+        s.append(math.degrees(fit.sigma_axis_px_rad))
+    return e, s
