@@ -58,13 +58,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cadra.synthetic.render import (
-    RenderConfig,
-    Scene,
-    _gaussian_kernel_1d,
-    illumination_field,
-    render_clean,
-)
+from cadra.synthetic.blur import _gaussian_kernel_1d
+from cadra.synthetic.render import RenderConfig, Scene, illumination_field, render_clean
 
 __all__ = [
     "PoseCRB",
@@ -257,7 +252,7 @@ def grain_correlation_kernel(length_px: float) -> np.ndarray:
     """1-D factor ``a`` of the film-grain correlation ``K(du, dv) = a(du) a(dv)``.
 
     ``a = (k * k) / sum(k^2)`` with ``k`` the Gaussian kernel of sigma ``length_px`` that
-    :func:`cadra.synthetic.render._film_grain` filters white noise with; ``a`` is symmetric,
+    :func:`cadra.synthetic.realism._film_grain` filters white noise with; ``a`` is symmetric,
     odd-length, and its middle tap is 1 (unit variance). ``length_px = 0`` gives ``[1]``.
     """
     if length_px <= 0.0:
