@@ -22,12 +22,8 @@ from the shot file (see :func:`axial_offset_from_base`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:  # pragma: no cover
-    from cadra.body.capsule import CapsuleOML
 
 #: Body kinds built by :mod:`cadra.body`.
 KINDS = ("sphere", "capsule", "cone")
@@ -62,7 +58,7 @@ class Body:
     params : the defining dimensions, SI (``(("d_m", 0.0355), ...)``), as ``to_spec`` writes them.
     preset : Table 1 preset the body was built from (capsules), else None.
     oml : the resolved capsule outer mold line (:class:`~cadra.body.capsule.CapsuleOML`), else
-        None.
+        None. Typed ``object`` here: the capsule module builds on this one, not the reverse.
 
     Bodies compare by identity; compare ``to_spec()`` for equality of shape.
     """
@@ -78,7 +74,7 @@ class Body:
     arcs: np.ndarray = field(repr=False)
     params: tuple = ()
     preset: str | None = None
-    oml: CapsuleOML | None = field(default=None, repr=False)
+    oml: object | None = field(default=None, repr=False)
 
     def to_spec(self) -> dict:
         """Plain-data spec in file units (cm, deg); ``body_from_spec`` rebuilds the body."""
