@@ -6,7 +6,8 @@ benchmarks (``tools/bench_cadra1.py``) put a case and a measurement together thr
 
 :func:`measure_case` runs stage one's per-view measurement on a
 :class:`~cadra.synthetic.cases.ViewCase`; :func:`case_errors` scores it against the case's
-truth.
+truth; :data:`NO_INVERSE_CRIME` are the renders the measurement does not model, which the
+tests and the benchmark both use.
 """
 
 from __future__ import annotations
@@ -18,8 +19,20 @@ from cadra.measure.locate import locate_model, pose_from_coarse
 from cadra.measure.silhouette_lsq import FitSettings, ViewFit, fit_silhouette
 from cadra.measure.template import make_template
 from cadra.synthetic.cases import ViewCase
+from cadra.synthetic.render_config import RenderConfig
 
-__all__ = ["case_errors", "measure_case"]
+__all__ = ["NO_INVERSE_CRIME", "case_errors", "measure_case"]
+
+#: Render settings the measurement does not model (no "inverse crime"): Airy-like and disk
+#: PSFs, twice the diffraction fringe, coarser film grain, heavy clutter (docs/stage1.md).
+NO_INVERSE_CRIME: dict[str, RenderConfig] = {
+    "airy_psf": RenderConfig(psf_shape="airy_like"),
+    "disk_psf": RenderConfig(psf_shape="disk"),
+    "fringe_x2": RenderConfig(diffraction_fringe=0.2),
+    "coarse_grain": RenderConfig(film_grain_sigma=0.02, film_grain_length_px=2.0),
+    "heavy_clutter": RenderConfig(scratches=20, dust=300, bow_shock_contrast=0.2,
+                                  wake_contrast=0.1),
+}
 
 
 def measure_case(case: ViewCase, body: Body, settings: FitSettings | None = None,

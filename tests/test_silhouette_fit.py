@@ -18,7 +18,7 @@ from cadra.measure.template import make_template, outline_px
 from cadra.optics.projection import ParallelProjection
 from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.render import RenderConfig
-from cadra.validation import case_errors, measure_case
+from cadra.validation import NO_INVERSE_CRIME, case_errors, measure_case
 
 SPHERE = sphere(0.03556)
 M2 = capsule("M2")
@@ -54,16 +54,6 @@ def test_default_realism_meets_targets(body):
     # the reported sigma is of the right size (the 200-render check is in the benchmark)
     ratio = _rms(S) / rms
     assert np.all((ratio > 0.4) & (ratio < 2.5)), ratio
-
-
-NO_INVERSE_CRIME = {
-    "airy_psf": RenderConfig(psf_shape="airy_like"),
-    "disk_psf": RenderConfig(psf_shape="disk"),
-    "fringe_x2": RenderConfig(diffraction_fringe=0.2),
-    "coarse_grain": RenderConfig(film_grain_sigma=0.02, film_grain_length_px=2.0),
-    "heavy_clutter": RenderConfig(scratches=20, dust=300, bow_shock_contrast=0.2,
-                                  wake_contrast=0.1),
-}
 
 
 @pytest.mark.parametrize("variant", sorted(NO_INVERSE_CRIME))

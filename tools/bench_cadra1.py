@@ -116,17 +116,11 @@ def _ratio_se(B, E, n_boot=400, seed=0):
 def accuracy(n_default, n_variant, n_crb):
     from cadra.body import capsule, sphere
     from cadra.synthetic.render import RenderConfig
+    from cadra.validation import NO_INVERSE_CRIME
 
     bodies = {"sphere": sphere(0.03556), "capsule": capsule("M2")}
     out = {}
-    variants = {
-        "airy_psf": RenderConfig(psf_shape="airy_like"),
-        "disk_psf": RenderConfig(psf_shape="disk"),
-        "fringe_x2": RenderConfig(diffraction_fringe=0.2),
-        "coarse_grain": RenderConfig(film_grain_sigma=0.02, film_grain_length_px=2.0),
-        "heavy_clutter": RenderConfig(scratches=20, dust=300, bow_shock_contrast=0.2,
-                                      wake_contrast=0.1),
-    }
+    variants = NO_INVERSE_CRIME
     for name, body in bodies.items():
         t0 = time.perf_counter()
         E, S, B, T, kept = _cases(body, n_default, RenderConfig(),

@@ -111,28 +111,10 @@ class RenderConfig:
                 if not math.isfinite(value):
                     raise ValueError(f"RenderConfig.{f.name} must be finite, got {value!r}")
                 object.__setattr__(self, f.name, float(value))
-        _check_range(self, "supersample", 1, 32)
-        _check_range(self, "background_level", 0.0, 1.0, low_open=True)
-        _check_range(self, "illumination_variation", 0.0, 0.5)
-        _check_range(self, "illumination_order", 0, 8)
-        _check_range(self, "illumination_mottle", 0.0, 0.5)
-        _check_range(self, "illumination_mottle_scale_px", 2.0, 1e6)
-        _check_range(self, "shadow_level", 0.0, 1.0)
-        _check_range(self, "optics_blur_sigma_px", 0.0, 20.0)
-        _check_range(self, "diffraction_fringe", 0.0, 0.5)
-        _check_range(self, "fringe_width_px", 0.1, 10.0)
-        _check_range(self, "read_noise_sigma", 0.0, 1.0)
-        _check_range(self, "shot_noise_sigma", 0.0, 1.0)
-        _check_range(self, "film_grain_sigma", 0.0, 1.0)
-        _check_range(self, "film_grain_length_px", 0.0, 50.0)
         if self.bit_depth not in (8, 16):
             raise ValueError(f"RenderConfig.bit_depth must be 8 or 16, got {self.bit_depth}")
-        _check_range(self, "bow_shock_contrast", 0.0, 1.0)
-        _check_range(self, "bow_shock_mach", 1.0, 30.0, low_open=True)
-        _check_range(self, "wake_contrast", 0.0, 1.0)
-        _check_range(self, "scratches", 0, 1000)
-        _check_range(self, "dust", 0, 100000)
-        _check_range(self, "clutter_clearance_px", 0.0, 1000.0)
+        for name, (lo, hi) in _RANGES.items():
+            _check_range(self, name, lo, hi, low_open=name in _LOW_OPEN)
 
     # ------------------------------------------------------------------ dict / TOML forms
 
@@ -171,6 +153,32 @@ _FIELD_KIND: dict[str, type] = {
     )
     for f in dataclasses.fields(RenderConfig)
 }
+
+
+#: Allowed closed range ``[lo, hi]`` of each numeric knob (``(lo, hi]`` for :data:`_LOW_OPEN`).
+_RANGES: dict[str, tuple[float, float]] = {
+    "supersample": (1, 32),
+    "background_level": (0.0, 1.0),
+    "illumination_variation": (0.0, 0.5),
+    "illumination_order": (0, 8),
+    "illumination_mottle": (0.0, 0.5),
+    "illumination_mottle_scale_px": (2.0, 1e6),
+    "shadow_level": (0.0, 1.0),
+    "optics_blur_sigma_px": (0.0, 20.0),
+    "diffraction_fringe": (0.0, 0.5),
+    "fringe_width_px": (0.1, 10.0),
+    "read_noise_sigma": (0.0, 1.0),
+    "shot_noise_sigma": (0.0, 1.0),
+    "film_grain_sigma": (0.0, 1.0),
+    "film_grain_length_px": (0.0, 50.0),
+    "bow_shock_contrast": (0.0, 1.0),
+    "bow_shock_mach": (1.0, 30.0),
+    "wake_contrast": (0.0, 1.0),
+    "scratches": (0, 1000),
+    "dust": (0, 100000),
+    "clutter_clearance_px": (0.0, 1000.0),
+}
+_LOW_OPEN = ("background_level", "bow_shock_mach")
 
 
 def _check_range(cfg: RenderConfig, name: str, lo: float, hi: float, low_open=False) -> None:
