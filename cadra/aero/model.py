@@ -15,12 +15,15 @@ from __future__ import annotations
 
 import math
 import os
+import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
+from cadra import units as _units
 from cadra.aero.expr import (
     NAME_RE,
     RESERVED,
@@ -36,14 +39,13 @@ from cadra.aero.program import (
     AeroProgram,
     eval_coefficients_batch,
 )
-from cadra.io import units as _units
-from cadra.io.toml_file import Fields, read_toml, write_toml
+from cadra.fields import Fields, read_toml
 
 #: the two kinds of model (docs/conventions.md, "Aerodynamic coefficients")
 ANGLE_PLANES = ("alpha_beta", "sigma")
 #: points the moment coefficients may be about
 MOMENT_REFERENCES = ("cg",)
-#: file units of parameter values -> factor to SI (entries of :data:`cadra.io.units.UNITS`,
+#: file units of parameter values -> factor to SI (entries of :data:`cadra.units.UNITS`,
 #: through which values are converted)
 UNITS = {name: _units.UNITS[name].si_per_unit for name in ("", "deg")}
 #: coefficients a total-angle (sigma) model may not define (conventions: C_C and C_n are not
@@ -468,9 +470,25 @@ def save_model(model: AeroModel, path: str | os.PathLike, *, overwrite: bool = F
     Refuses to replace an existing file unless ``overwrite=True`` (``FileExistsError``).
     Returns the path written.
     """
-    return write_toml(path, model.to_dict(), overwrite=overwrite,
-                      header="CADRA aerodynamic model (docs/aero_models.md), written by "
-                             "cadra.aero.save_model")
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists (pass overwrite=True to replace it)")
+    text = ("# CADRA aerodynamic model (docs/aero_models.md), written by "
+            "cadra.aero.save_model\n" + tomli_w.dumps(model.to_dict()))
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
 
 
 class ModelNotFoundError(KeyError, ValueError):

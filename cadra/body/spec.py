@@ -20,12 +20,12 @@ from collections.abc import Mapping
 from cadra.body.capsule import PRESETS, capsule
 from cadra.body.model import KINDS, Body
 from cadra.body.shapes import cone, sphere
-from cadra.io.toml_file import Fields
-from cadra.io.units import units_of
+from cadra.fields import Fields
+from cadra.units import units_of
 
 _F = Fields(ValueError)
 #: quantity of a spec key's unit suffix: lengths (m, cm, mm) and angles (deg, rad), converted
-#: through the unit table (:data:`cadra.io.units.UNITS`)
+#: through the unit table (:data:`cadra.units.UNITS`)
 _LENGTH, _ANGLE = "length", "angle"
 
 #: kind -> (length quantities, angle quantities, other keys)

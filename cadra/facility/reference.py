@@ -16,8 +16,6 @@ This module holds the facility's geometry and data objects; reading and validati
 
 from __future__ import annotations
 
-import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +23,8 @@ import numpy as np
 
 from cadra.geometry import affine_inverse, apply_affine  # the 2x3 affines' one home
 
+#: Facility-file schema version this CADRA reads and :func:`default_hffaf_text` writes.
+SCHEMA_VERSION = 1
 #: Facility axes (0 = x, 1 = y, 2 = z) each view sees, in view-plane order (a, b).
 VIEW_AXES = {"top": (0, 1), "side": (0, 2)}
 
@@ -33,9 +33,9 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 #: The file format (reading, validation, errors) lives in :mod:`cadra.io.facility_file`;
 #: these names stay importable from here.
 _FILE_FORMAT_NAMES = (
-    "BIT_DEPTHS", "MIN_WIRES", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED", "SCHEMA_VERSION",
+    "BIT_DEPTHS", "MIN_WIRES", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED",
     "FacilityFileError", "UnsupportedProjectionError", "facility_from_dict", "load_facility",
-    "resolve_facility_path",
+    "resolve_facility_path", "write_default_facility",
 )
 
 
@@ -357,8 +357,6 @@ def default_hffaf_text() -> str:
     z = -0.12 m, side-view wires at y = -0.12 m), each end point offset by a deterministic
     "survey" error of up to 1 mm.
     """
-    from cadra.io.facility_file import SCHEMA_VERSION
-
     spacing, n_st = 1.524, 16
     w, h, s = 1600, 1200, 1.27e-4
     across, along, off, half = 0.080, 0.069, 0.12, 0.15
@@ -420,19 +418,8 @@ def default_hffaf_text() -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_default_facility(path: str | os.PathLike | None = None,
-                           overwrite: bool = False) -> Path:
-    """Write :func:`default_hffaf_text` to ``path`` (default ``<repo>/facilities/hffaf.toml``)."""
-    from cadra.io.atomic import atomic_write_text
-    from cadra.io.facility_file import facility_from_dict
-
-    path = Path(path) if path is not None else REPO_ROOT / "facilities" / "hffaf.toml"
-    facility_from_dict(tomllib.loads(default_hffaf_text()))  # validate before writing
-    return atomic_write_text(path, default_hffaf_text(), overwrite=overwrite)
-
-
 __all__ = [
     "VIEW_AXES", "AffineFit", "Facility", "ReferenceMark", "Station", "View", "Wire",
     "affine_inverse", "apply_affine", "default_hffaf_text", "fit_affine_to_wires",
-    "nominal_image_to_plane", "write_default_facility",
+    "nominal_image_to_plane", "SCHEMA_VERSION",
 ]

@@ -14,33 +14,34 @@ from __future__ import annotations
 
 import math
 import os
+import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
 from cadra.facility.reference import (
+    REPO_ROOT,
+    SCHEMA_VERSION,
     VIEW_AXES,
     Facility,
     ReferenceMark,
     Station,
     View,
     Wire,
+    default_hffaf_text,
     fit_affine_to_wires,
     nominal_image_to_plane,
 )
+from cadra.io.atomic import atomic_write_text
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
-#: Current facility-file schema version.
-SCHEMA_VERSION = 1
 #: Projections the loader knows; only the first ones are supported.
 PROJECTIONS_SUPPORTED = ("parallel",)
 PROJECTIONS_KNOWN = ("parallel", "point_source")
 BIT_DEPTHS = (8, 16)
 #: Minimum number of wires per view (an affine has 6 unknowns; each wire line gives 2).
 MIN_WIRES = 3
-
-REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 class FacilityFileError(ValueError):
@@ -276,8 +277,17 @@ def load_facility(path_or_name: str | os.PathLike) -> Facility:
     return fac
 
 
+def write_default_facility(path: str | os.PathLike | None = None,
+                           overwrite: bool = False) -> Path:
+    """Write :func:`~cadra.facility.reference.default_hffaf_text` to ``path`` (default
+    ``<repo>/facilities/hffaf.toml``), validated first, atomically."""
+    path = Path(path) if path is not None else REPO_ROOT / "facilities" / "hffaf.toml"
+    facility_from_dict(tomllib.loads(default_hffaf_text()))  # validate before writing
+    return atomic_write_text(path, default_hffaf_text(), overwrite=overwrite)
+
+
 __all__ = [
-    "BIT_DEPTHS", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED", "SCHEMA_VERSION",
+    "BIT_DEPTHS", "MIN_WIRES", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED", "SCHEMA_VERSION",
     "FacilityFileError", "UnsupportedProjectionError", "facility_from_dict", "load_facility",
-    "resolve_facility_path",
+    "resolve_facility_path", "write_default_facility",
 ]

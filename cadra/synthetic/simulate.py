@@ -19,290 +19,40 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from cadra.aero import AeroModel, load_model
-from cadra.aero.model import MODELS_DIR
+from cadra.aero import AeroModel, ModelNotFoundError, resolve_model
 from cadra.atmosphere import Atmosphere
 from cadra.body import Body, body_from_spec, silhouette
 from cadra.conventions import body_to_facility_matrix
-from cadra.dynamics.effects import Effects
 from cadra.dynamics.setup import (
     DT_MAX_DEFAULT,
-    DT_MAX_TRUTH,
     RigidBody,
     propagate_states,
     rigid_body_from_mass,
 )
 from cadra.dynamics.trajectory import Launch, crossing_times, truth_table
-from cadra.facility import Facility, load_facility
-from cadra.io import units
-from cadra.io.seed004 import load_seed004_table
-
-BUNDLED_MODELS = MODELS_DIR
+from cadra.facility import Facility
+from cadra.io.facility_file import load_facility
+from cadra.io.spec_file import (
+    BIAS_KEYS,
+    BIAS_POSITION_MAX_M,
+    BIAS_TIME_MAX_S,
+    FilmPlacement,
+    ShotSpec,
+    SpecError,
+    load_shot_spec,
+    spec_from_dict,
+)
 
 #: Kerr-cell exposure of seed 004 (30-40 ns); the motion blur is V * exposure
 EXPOSURE_S = 35e-9
 
-#: keys of one station's entry in ``[station_biases]`` (m, m, m, s), in this order
-BIAS_KEYS = ("x_m", "y_m", "z_m", "time_s")
-#: plausibility limits of an injected bias: each position component (m), the time (s)
-BIAS_POSITION_MAX_M = 0.01
-BIAS_TIME_MAX_S = 1e-4
 _NO_BIAS = (0.0, 0.0, 0.0, 0.0)
-
-
-class SpecError(ValueError):
-    """A shot specification that cannot be simulated; the message names the key."""
-
-
-def resolve_model(name_or_path: str | os.PathLike, base_dir: Path | None = None) -> AeroModel:
-    """An aero model from a bundled name (``"m2_m070"``) or a file path."""
-    p = Path(name_or_path)
-    candidates = [p] if p.suffix else []
-    if base_dir is not None and p.suffix:
-        candidates.insert(0, base_dir / p)
-    candidates.append(BUNDLED_MODELS / f"{p.stem}.toml")
-    for c in candidates:
-        if c.is_file():
-            return load_model(c)
-    raise SpecError(f"aero_model: no bundled model or file named {str(name_or_path)!r} "
-                    f"(bundled: {sorted(x.stem for x in BUNDLED_MODELS.glob('*.toml'))})")
-
-
-@dataclass(frozen=True)
-class FilmPlacement:
-    """Per-image random placement of the film/scan relative to the nominal image map (1-sigma).
-
-    Stage one must solve each image's map from its fiducial wires; this makes that necessary.
-    """
-
-    shift_px: float = 4.0
-    rotation_deg: float = 0.05
-    scale_rel: float = 5e-4
-
-
-@dataclass(frozen=True)
-class ShotSpec:
-    """Everything that defines a synthetic shot (SI inside; see docs/simulation.md)."""
-
-    shot_id: str
-    model: dict
-    mass_kg: float
-    cg_model_m: tuple[float, float, float]          # nominal cg minus reference point, model axes
-    inertia_model_kg_m2: tuple                      # 3x3 about the cg, model axes
-    pressure_pa: float
-    temperature_k: float
-    aero_model: str
-    launch: Launch
-    effects: Effects = field(default_factory=Effects)
-    aero_values: dict = field(default_factory=dict)  # parameter overrides (SI)
-    facility: str = "hffaf"
-    n_stations: int | None = None
-    trigger_offset_mean_m: float = 0.004
-    trigger_offset_sd_m: float = 0.002
-    film: FilmPlacement = field(default_factory=FilmPlacement)
-    render: dict = field(default_factory=dict)
-    seed: int = 0
-    dt_max_s: float = DT_MAX_TRUTH
-    source_path: str | None = None
-    seed004_shot: int | None = None
-    aim: str = "none"            # "centre": slant the gun so the path stays centred in view
-    # injected biases: station id -> (x_m, y_m, z_m, time_s); absent = unbiased
-    station_biases: dict = field(default_factory=dict)
-
-
-def _get(d: dict, key: str, where: str, kind=float):
-    if key not in d:
-        raise SpecError(f"{where}{key}: missing")
-    try:
-        return kind(d[key])
-    except (TypeError, ValueError) as exc:
-        raise SpecError(f"{where}{key}: {exc}") from None
-
-
-def load_shot_spec(path: str | os.PathLike) -> ShotSpec:
-    """Read a shot specification TOML; errors name the offending key."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise SpecError(f"{path}: {exc}") from None
-    return spec_from_dict(data, source_path=path)
-
-
-def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
-    """Build a :class:`ShotSpec` from plain data (file units: see docs/simulation.md)."""
-    data = dict(data)
-    known = {"shot_id", "seed004_shot", "model", "mass", "range", "aero_model", "aero_values",
-             "launch", "effects", "facility", "n_stations", "trigger", "film", "render", "seed",
-             "dt_max_s", "aim", "station_biases"}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise SpecError(f"unknown key(s) {unknown}; known: {sorted(known)}")
-    row = None
-    if "seed004_shot" in data:
-        table = load_seed004_table()
-        hit = table[table["shot"] == int(data["seed004_shot"])]
-        if hit.empty:
-            raise SpecError(f"seed004_shot: no shot {data['seed004_shot']} in Tables 2/3")
-        row = hit.iloc[0]
-    model = dict(data.get("model") or {})
-    if not model:
-        raise SpecError("model: missing (e.g. {kind = \"capsule\", preset = \"M2\"})")
-    if row is not None and model.get("kind") == "capsule":
-        model.setdefault("d_cm", float(row["d_cm"]))
-        model.setdefault("h_cm", float(row["h_cm"]))
-    try:
-        body = body_from_spec(model)
-    except ValueError as exc:
-        raise SpecError(f"model: {exc}") from None
-
-    mass = dict(data.get("mass") or {})
-    if row is not None:
-        mass.setdefault("mass_g", float(row["mass_g"]))
-        mass.setdefault("x_cg_from_base_cm", float(row["x_cg_from_base_cm"]))
-        mass.setdefault("y_cg_cm", float(row["y_cg_cm"]))
-        mass.setdefault("z_cg_cm", float(row["z_cg_cm"]))
-        mass.setdefault("inertia_g_cm2", [float(row["Ixx_g_cm2"]), float(row["Iyy_g_cm2"]),
-                                          float(row["Izz_g_cm2"])])
-    mass_kg = units.g_to_kg(_get(mass, "mass_g", "mass."))
-    if not mass_kg > 0:
-        raise SpecError(f"mass.mass_g: must be positive, got {mass['mass_g']}")
-    if "x_cg_from_base_cm" in mass:
-        x_cg = body.base_s_m + units.cm_to_m(_get(mass, "x_cg_from_base_cm", "mass."))
-    else:
-        x_cg = units.cm_to_m(_get(mass, "x_cg_from_ref_cm", "mass."))
-    cg_model = (x_cg, units.cm_to_m(float(mass.get("y_cg_cm", 0.0))),
-                units.cm_to_m(float(mass.get("z_cg_cm", 0.0))))
-    inertia = np.asarray(mass.get("inertia_g_cm2"), dtype=float) if "inertia_g_cm2" in mass \
-        else None
-    if inertia is None:
-        raise SpecError("mass.inertia_g_cm2: missing ([Ixx, Iyy, Izz] or a 3x3 tensor)")
-    if inertia.shape == (3,):
-        inertia = np.diag(inertia)
-    if inertia.shape != (3, 3):
-        raise SpecError("mass.inertia_g_cm2: expected [Ixx, Iyy, Izz] or a 3x3 tensor")
-    inertia = units.g_cm2_to_kg_m2(inertia)
-    if not np.allclose(inertia, inertia.T) or np.any(np.linalg.eigvalsh(inertia) <= 0):
-        raise SpecError("mass.inertia_g_cm2: not a symmetric positive-definite tensor")
-
-    rng_ = dict(data.get("range") or {})
-    if row is not None:
-        rng_.setdefault("pressure_torr", float(row["pressure_torr"]))
-        rng_.setdefault("temperature_k", float(row["temperature_k"]))
-    p_pa = units.torr_to_pa(_get(rng_, "pressure_torr", "range."))
-    t_k = _get(rng_, "temperature_k", "range.")
-    if not (1.0 < p_pa < 1e6):
-        raise SpecError(
-            f"range.pressure_torr: {rng_['pressure_torr']} torr is not a range pressure")
-    if not (150.0 < t_k < 400.0):
-        raise SpecError(f"range.temperature_k: {t_k} K is not a range temperature")
-
-    la = dict(data.get("launch") or {})
-    if row is not None:
-        la.setdefault("speed_m_s", float(row["velocity_m_s"]))
-    launch_kw = {}
-    for key, value in la.items():
-        if key.endswith("_deg"):
-            launch_kw[key[:-4] + "_rad"] = np.radians(float(value))
-        elif key.endswith("_deg_s"):
-            launch_kw[key[:-6] + "_rad_s"] = np.radians(float(value))
-        else:
-            launch_kw[key] = float(value)
-    try:
-        launch = Launch(**launch_kw)
-    except TypeError as exc:
-        raise SpecError(f"launch: {exc}") from None
-    if not launch.speed_m_s > 0:
-        raise SpecError("launch.speed_m_s: must be positive")
-    try:
-        effects = Effects.from_dict(data.get("effects"))
-    except ValueError as exc:
-        raise SpecError(str(exc)) from None
-    if "aero_model" not in data:
-        raise SpecError("aero_model: missing (a bundled name such as \"m2_m070\" or a path)")
-    trig = dict(data.get("trigger") or {})
-    film = dict(data.get("film") or {})
-    try:
-        film_placement = FilmPlacement(**{k: float(v) for k, v in film.items()})
-    except TypeError as exc:
-        raise SpecError(f"film: {exc}") from None
-    aero_values = {}
-    for k, v in dict(data.get("aero_values") or {}).items():
-        aero_values[k[:-4] if k.endswith("_deg") else k] = (
-            np.radians(float(v)) if k.endswith("_deg") else float(v))
-    return ShotSpec(
-        shot_id=str(data.get("shot_id") or (f"{row['model']}-{int(row['shot'])}"
-                                             if row is not None else "")) or "shot",
-        model=body.to_spec(), mass_kg=mass_kg, cg_model_m=cg_model,
-        inertia_model_kg_m2=tuple(map(tuple, inertia)), pressure_pa=p_pa, temperature_k=t_k,
-        aero_model=str(data["aero_model"]), launch=launch, effects=effects,
-        aero_values=aero_values, facility=str(data.get("facility", "hffaf")),
-        n_stations=int(data["n_stations"]) if "n_stations" in data else None,
-        trigger_offset_mean_m=float(trig.get("offset_mean_m", 0.004)),
-        trigger_offset_sd_m=float(trig.get("offset_sd_m", 0.002)),
-        film=film_placement, render=dict(data.get("render") or {}),
-        seed=int(data.get("seed", 0)), dt_max_s=float(data.get("dt_max_s", DT_MAX_TRUTH)),
-        source_path=str(source_path) if source_path else None,
-        seed004_shot=int(data["seed004_shot"]) if "seed004_shot" in data else None,
-        aim=_aim(data.get("aim", "none")),
-        station_biases=_station_biases(data.get("station_biases")),
-    )
-
-
-def _station_biases(table) -> dict[int, tuple[float, float, float, float]]:
-    """Parse ``[station_biases]``: ``{"5": {"y_m": 5e-4}, ...}`` -> ``{5: (0, 5e-4, 0, 0)}``.
-
-    Keys are station ids (strings in TOML); each value a table with any of ``x_m``, ``y_m``,
-    ``z_m`` (m) and ``time_s`` (s), the rest 0. Each position component must be within
-    :data:`BIAS_POSITION_MAX_M` and the time within :data:`BIAS_TIME_MAX_S`. Whether the
-    stations exist is checked against the facility by :func:`simulate_shot`.
-    """
-    if table is None:
-        return {}
-    if not isinstance(table, dict):
-        raise SpecError("station_biases: expected a table of station id -> "
-                        "{x_m, y_m, z_m, time_s}")
-    out = {}
-    for key, entry in table.items():
-        where = f"station_biases.{key}"
-        try:
-            station = int(str(key).strip())
-        except ValueError:
-            raise SpecError(f"{where}: not a station id (an integer such as \"5\")") from None
-        if station in out:
-            raise SpecError(f"{where}: station {station} given twice")
-        if not isinstance(entry, dict):
-            raise SpecError(f"{where}: expected a table with any of {list(BIAS_KEYS)}, "
-                            f"got {entry!r}")
-        unknown = sorted(set(entry) - set(BIAS_KEYS))
-        if unknown:
-            raise SpecError(f"{where}.{unknown[0]}: unknown key; known: {list(BIAS_KEYS)}")
-        values = []
-        for name in BIAS_KEYS:
-            value = entry.get(name, 0.0)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not np.isfinite(value):
-                raise SpecError(f"{where}.{name}: expected a finite number, got {value!r}")
-            limit = BIAS_TIME_MAX_S if name == "time_s" else BIAS_POSITION_MAX_M
-            if abs(value) > limit:
-                raise SpecError(f"{where}.{name}: {value:g} is not a plausible bias "
-                                f"(|{name}| <= {limit:g})")
-            values.append(float(value))
-        out[station] = tuple(values)
-    return out
-
-
-def _aim(value) -> str:
-    if value not in ("none", "centre"):
-        raise SpecError(f"aim: expected \"none\" or \"centre\", got {value!r}")
-    return value
 
 
 def aim_launch(launch: Launch, rigid: RigidBody, program, params, x_first: float,
@@ -394,8 +144,11 @@ def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> Simulated
     facility = facility or load_facility(spec.facility)
     body = body_from_spec(spec.model)
     rigid = rigid_body(spec, body)
-    model = resolve_model(spec.aero_model,
-                          Path(spec.source_path).parent if spec.source_path else None)
+    try:
+        model = resolve_model(spec.aero_model,
+                              Path(spec.source_path).parent if spec.source_path else None)
+    except ModelNotFoundError as exc:
+        raise SpecError(f"aero_model: {exc}") from None
     if spec.aero_values:
         try:
             model = model.with_values(spec.aero_values)
@@ -624,5 +377,6 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
     return out_dir
 
 
-__all__ = ["ShotSpec", "SimulatedShot", "SpecError", "load_shot_spec", "simulate_shot",
-           "spec_from_dict", "write_shot", "rigid_body"]
+__all__ = ["BIAS_KEYS", "BIAS_POSITION_MAX_M", "BIAS_TIME_MAX_S", "EXPOSURE_S", "FilmPlacement",
+           "ShotSpec", "SimulatedShot", "SpecError", "load_shot_spec", "rigid_body",
+           "simulate_shot", "spec_from_dict", "write_shot"]
