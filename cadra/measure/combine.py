@@ -7,12 +7,14 @@ views' rays through their measured points (:func:`cadra.optics.projection.inters
 through each view's :class:`~cadra.optics.projection.Projection`). For the two orthogonal
 parallel views of the default facility (top sees (x, y), side (x, z)) that is the
 inverse-variance mean of x, seen twice, with y from the top view and z from the side view;
-the x difference is a consistency figure. The projected angles give the axis and so the
-seed-004 inclinations theta, psi. Pure functions on plain numbers (SI, radians).
+the x difference is a consistency figure. The in-plane angles give the axis (each view's
+plane through its ray along the measured direction; the two planes meet in the axis) and so
+the seed-004 inclinations theta, psi. Pure functions on plain numbers (SI, radians).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,14 +64,35 @@ class StationPose:
 
 
 def inclinations_from_views(theta_p: float, psi_p: float) -> tuple[float, float]:
-    """(theta, psi) inclinations from the side-view and top-view projected angles."""
+    """(theta, psi) inclinations from the side-view and top-view projected angles (the
+    nominal parallel views)."""
     return inclinations_from_axis(axis_from_projected_angles(theta_p, psi_p))
+
+
+def axis_from_views(projections, plane_points, angles) -> np.ndarray:
+    """Unit nose axis in F (a_x > 0) from two views' in-plane axis angles.
+
+    View k sees the axis through its view-plane point ``plane_points[k]`` along the in-plane
+    direction ``e_k = cos(phi_k) plane_basis[0] + sin(phi_k) plane_basis[1]``; the 3-D axis
+    lies in the plane spanned by ``e_k`` and the view's ray there (normal ``e_k x d_k``), so it
+    is the cross product of the two views' normals. For the nominal parallel views this is
+    :func:`cadra.conventions.axis_from_projected_angles` (to rounding).
+    """
+    normals = []
+    for proj, ab, phi in zip(projections, plane_points, angles, strict=True):
+        e = math.cos(phi) * proj.plane_basis[0] + math.sin(phi) * proj.plane_basis[1]
+        _, d = proj.plane_ray(np.asarray(ab, dtype=float))
+        normals.append(np.cross(e, d))
+    a = np.cross(normals[0], normals[1])
+    a = a / np.linalg.norm(a)
+    return -a if a[0] < 0 else a
 
 
 def combine_views(top: ViewPose, side: ViewPose) -> StationPose:
     """3-D pose from the two views: the position by the rays' weighted least-squares
-    intersection (module docstring), theta, psi from the projected angles with first-order
-    error propagation. ``x_top_minus_side_m`` is the x difference of the two rays' points
+    intersection (module docstring), the axis from the two views' planes through it
+    (:func:`axis_from_views`) and so theta, psi, with first-order error propagation of the
+    in-plane angles. ``x_top_minus_side_m`` is the x difference of the two rays' points
     closest to the intersection (for parallel views, of the two measured x), and
     ``x_consistency_sigma`` the square root of the intersection's chi-square (one degree of
     freedom: ``|x_top - x_side| / sqrt(s_top^2 + s_side^2)`` for parallel views)."""
@@ -80,13 +103,18 @@ def combine_views(top: ViewPose, side: ViewPose) -> StationPose:
                          [np.diag([v.sigma_a_m**2, v.sigma_b_m**2]) for v in views])
     sig = np.sqrt(np.diag(hit.cov))
     dx = hit.closest[0, 0] - hit.closest[1, 0]
-    theta, psi = inclinations_from_views(side.angle_rad, top.angle_rad)
+    points = [(v.a_m, v.b_m) for v in views]
+
+    def inclinations(theta_p, psi_p):
+        return inclinations_from_axis(axis_from_views(projections, points, (psi_p, theta_p)))
+
+    theta, psi = inclinations(side.angle_rad, top.angle_rad)
     # first-order propagation: d(theta, psi) / d(theta_p, psi_p), central differences
     h = 1e-7
     J = np.empty((2, 2))
     for j, (dtp, dpp) in enumerate(((h, 0.0), (0.0, h))):
-        plus = inclinations_from_views(side.angle_rad + dtp, top.angle_rad + dpp)
-        minus = inclinations_from_views(side.angle_rad - dtp, top.angle_rad - dpp)
+        plus = inclinations(side.angle_rad + dtp, top.angle_rad + dpp)
+        minus = inclinations(side.angle_rad - dtp, top.angle_rad - dpp)
         J[:, j] = (np.array(plus) - np.array(minus)) / (2 * h)
     C = J @ np.diag([side.sigma_angle_rad**2, top.sigma_angle_rad**2]) @ J.T
     return StationPose(

@@ -35,7 +35,7 @@ from cadra.measure.loading import load_station_image
 from cadra.measure.locate import locate_model, pose_from_coarse
 from cadra.measure.silhouette_lsq import FitSettings, ViewFit, fit_silhouette
 from cadra.measure.template import make_template, outline_px
-from cadra.optics.projection import ParallelProjection
+from cadra.optics.projection import Projection
 
 VIEWS = ("top", "side")
 
@@ -58,7 +58,7 @@ class ViewResult:
     warnings: tuple[str, ...] = ()
     seconds: float = 0.0
     overlay_png: bytes | None = None
-    projection: ParallelProjection | None = None   # the view's optics with that affine
+    projection: Projection | None = None   # the view's optics with that affine
 
 
 @dataclass(frozen=True)
@@ -143,7 +143,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     template = _template(body, view.name, tilt)
     if prev is None:
         if coarse is None:
-            coarse = locate_model(img, template, ParallelProjection.from_view(view))
+            coarse = locate_model(img, template, view.optics())
         if not coarse.ok:
             return None, coarse.reason, None, None, ()
         H, W = img.shape
@@ -224,7 +224,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             continue
         images[name] = img
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
-    nominal = {n: ParallelProjection.from_view(v) for n, v in station.views.items()}
+    nominal = {n: v.optics() for n, v in station.views.items()}
     coarse = {n: locate_model(img, _template(body, n, 0.0, 256), nominal[n])
               for n, img in images.items()}
     tilts = {"top": 0.0, "side": 0.0}

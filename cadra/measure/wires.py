@@ -61,7 +61,7 @@ import cv2
 import numpy as np
 
 from cadra.facility.reference import View, fit_affine_to_wires
-from cadra.optics.projection import ParallelProjection
+from cadra.optics.projection import Projection
 
 __all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_mask"]
 
@@ -147,8 +147,8 @@ class WireMeasurement:
     affine_rms_m, affine_rms_px : rms distance of the found lines' points from their
         surveyed lines after the fit (m; px at the image scale).
     n_found : number of wires found.
-    projection : the view's :class:`~cadra.optics.projection.ParallelProjection` with the
-        solved affine (what the silhouette fit and the combination use), or None.
+    projection : the view's optics with the solved affine (:meth:`View.optics`; what the
+        silhouette fit and the combination use), or None.
     """
 
     ok: bool
@@ -159,7 +159,7 @@ class WireMeasurement:
     affine_rms_m: float
     affine_rms_px: float
     n_found: int
-    projection: ParallelProjection | None = None
+    projection: Projection | None = None
 
     def position_sigma_m(self, uv) -> np.ndarray:
         """1-sigma (a, b) (m) of the view-plane image of pixel ``uv`` from the affine's
@@ -569,7 +569,7 @@ def _solve_affine(view: View, fits: list[WireFit]) -> WireMeasurement:
         out.append(f)
     rms_m = float(np.sqrt(np.mean(res ** 2)))
     return WireMeasurement(True, reason, np.array(M, float), cov, tuple(out), rms_m, rms_m / px,
-                           n_found, ParallelProjection.from_view(view, M))
+                           n_found, view.optics(M))
 
 
 def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],

@@ -19,7 +19,7 @@ import numpy as np
 from cadra.body import Body
 from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import ReferenceMark, View, nominal_image_to_plane
-from cadra.optics.projection import ParallelProjection
+from cadra.optics.projection import Projection
 from cadra.synthetic.render import RenderConfig, render
 from cadra.synthetic.simulate import FilmPlacement, film_affine, view_scene
 
@@ -46,9 +46,9 @@ class ViewCase:
     r_ref_F: np.ndarray
 
     @property
-    def projection(self) -> ParallelProjection:
+    def projection(self) -> Projection:
         """The view's optics with the image's true affine."""
-        return ParallelProjection.from_view(self.view, self.affine)
+        return self.view.optics(self.affine)
 
 
 def small_view(name: str = "top", size_px: int = 512, x_m: float = 0.0) -> View:
