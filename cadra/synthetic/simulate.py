@@ -220,17 +220,21 @@ def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: 
 
     ``affine`` is the image->view-plane map actually used (film placement included), ``R_FB``
     the attitude, ``r_ref_F`` the reference point (m), ``v_F`` the velocity (m/s, for motion
-    blur and the flow-clutter direction). Truth: reference-point pixel position, image-plane
-    axis angle (atan2(dv, du) of the nose direction), motion blur, the affine's entries.
+    blur and the flow-clutter direction). Points reach the image through the view's
+    :class:`~cadra.optics.projection.Projection` with that affine (``view.optics``). Truth:
+    reference-point pixel position, image-plane axis angle (atan2(dv, du) of the nose
+    direction), motion blur, the affine's entries.
     """
     from cadra.synthetic.render import Scene
 
+    projection = view.optics(affine)
+
     def to_px(points_F):
-        return view.plane_to_pixels(np.atleast_2d(points_F) @ view.P_view.T, affine=affine)
+        return projection.to_image(np.atleast_2d(points_F))
 
     r_ref = np.asarray(r_ref_F, float)
     v = np.asarray(v_F, float)
-    poly_px = view.plane_to_pixels(silhouette(body, R_FB, r_ref, view.P_view), affine=affine)
+    poly_px = projection.from_plane(silhouette(body, R_FB, r_ref, projection.plane_basis))
     ref_px = to_px(r_ref)[0]
     axis_px = to_px(r_ref + 0.01 * R_FB[:, 0])[0] - ref_px
     blur_px = to_px(r_ref + v * exposure_s)[0] - ref_px
