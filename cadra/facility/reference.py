@@ -208,16 +208,18 @@ class View:
 
         One entry per wire, in :attr:`wires` order; ``None`` for a wire whose image misses
         the (margin-expanded) picture (never for a valid facility file with the nominal
-        affine). The image extends to the outer pixel edges,
+        affine). The surveyed end points reach the image through :meth:`optics` (with
+        ``affine``, or the nominal one). The image extends to the outer pixel edges,
         ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``; ``margin_px`` > 0 expands that box (a renderer
         wants the wire to run on past the border so blur does not fade it at the edge; the
         surveyed end points lie far enough outside the picture in the default facility).
         """
         lo = np.array([-0.5, -0.5]) - margin_px
         hi = np.array([self.width_px - 0.5, self.height_px - 0.5]) + margin_px
+        projection = self.optics(affine)
         out = []
-        for a0, a1 in self.wire_lines_plane():
-            uv = self.plane_to_pixels(np.array([a0, a1]), affine=affine)
+        for w in self.wires:
+            uv = projection.to_image(np.array([w.p0_m, w.p1_m]))
             seg = _clip_segment(uv[0], uv[1], lo, hi)
             out.append(None if seg is None else
                        ((float(seg[0][0]), float(seg[0][1])), (float(seg[1][0]),
