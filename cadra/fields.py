@@ -62,6 +62,16 @@ def prefixed_by(path: str | os.PathLike, *errors: type[Exception]) -> Iterator[N
         raise type(exc)(f"{path}: {exc}") from None
 
 
+def frozen_array(value, shape: tuple[int, ...] | int | None = None) -> np.ndarray:
+    """A read-only float64 copy of ``value`` (reshaped to ``shape``): what frozen dataclasses
+    hold, so their arrays cannot change under them."""
+    a = np.array(value, dtype=float)
+    if shape is not None:
+        a = a.reshape(shape)
+    a.setflags(write=False)
+    return a
+
+
 def _is_number(value) -> bool:
     return (isinstance(value, int | float | np.integer | np.floating)
             and not isinstance(value, bool | np.bool_))
@@ -172,4 +182,4 @@ class Fields:
         return units.to_si(x, key[len(base) + 1:]), key
 
 
-__all__ = ["Fields", "prefixed_by", "read_toml"]
+__all__ = ["Fields", "frozen_array", "prefixed_by", "read_toml"]

@@ -157,17 +157,44 @@ def test_unknown_model_and_bad_hold(shots, capsys):
     assert not out.exists()
 
 
-def test_hold_value_in_file_units(shots):
-    """--hold alpha_ref=21.21 is degrees (the model file's unit), stored as radians."""
-    from cadra.cli.cadra2 import _apply_holds, build_parser
-    from cadra.synthetic.simulate import resolve_model
+def test_hold_value_in_file_units():
+    """--hold alpha_ref=20 is degrees (the model file's unit), stored as radians; bounds of a
+    degree parameter too; an empty side of a bound is no bound."""
+    from cadra.aero import resolve_model
+    from cadra.cli.cadra2 import _model, build_parser
 
     args = build_parser().parse_args(["fit", "x", "--model", "m2_m070", "-o", "y",
-                                      "--hold", "alpha_ref=20.0", "--bound", "CD_A1=0.5:1.5"])
-    m = _apply_holds(resolve_model("m2_m070"), args)
-    assert m.parameter("alpha_ref").value == pytest.approx(math.radians(20.0), rel=1e-15)
+                                      "--hold", "alpha_ref=20.0", "--bound", "CD_A1=0.5:1.5",
+                                      "--free", "Cmq_A3", "--bound", "Cm_A1=:-0.1"])
+    m = _model(args)
+    assert m.parameter("alpha_ref").value == math.radians(20.0)
     assert not m.parameter("alpha_ref").vary
     assert (m.parameter("CD_A1").min, m.parameter("CD_A1").max) == (0.5, 1.5)
+    assert (m.parameter("Cm_A1").min, m.parameter("Cm_A1").max) == (-math.inf, -0.1)
+    assert not resolve_model("m2_m070").parameter("Cmq_A3").vary and m.parameter("Cmq_A3").vary
+
+
+def test_apply_holds_library_function():
+    """The CLI's holds are the library's: degree bounds and held values in SI, unknown names
+    and malformed values refused by name."""
+    from cadra.aero import resolve_model
+    from cadra.fitting.inputs import apply_holds, parse_assignments, values_to_si
+
+    base = resolve_model("m2_m070")
+    m = apply_holds(base, hold=["CD_A1"], bound=["alpha_ref=15:25"])
+    assert base.parameter("CD_A1").vary and not m.parameter("CD_A1").vary
+    assert m.parameter("CD_A1").value == base.parameter("CD_A1").value
+    assert m.parameter("alpha_ref").min == math.radians(15.0)
+    assert m.parameter("alpha_ref").max == math.radians(25.0)
+    assert values_to_si(base, "alpha_ref", [90.0, 0.0]) == [math.radians(90.0), 0.0]
+    assert values_to_si(base, "Cnr_A1", [0.81]) == [0.81]
+    assert parse_assignments([" A = 1", "B"]) == {"A": "1", "B": None}
+    with pytest.raises(KeyError, match="Cx_A9"):
+        apply_holds(base, hold=["Cx_A9=1"])
+    with pytest.raises(ValueError, match="alpha_ref: 'ten' is not a number"):
+        apply_holds(base, hold=["alpha_ref=ten"])
+    with pytest.raises(ValueError, match="expected NAME=LO:HI"):
+        apply_holds(base, bound=["CD_A1=0.5"])
 
 
 def test_single_fits_and_quasi_linear(shots, capsys):

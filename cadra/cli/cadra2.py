@@ -54,15 +54,15 @@ def _simulate(args) -> int:
     from cadra.synthetic.simulate import SpecError, load_shot_spec, simulate_shot, write_shot
 
     out = Path(args.output)
-    if _exists(out, args, "simulate"):
-        return 1
     try:
         spec = load_shot_spec(args.spec)
         shot = simulate_shot(spec)
         write_shot(shot, out, images=not args.no_images, overwrite=args.overwrite,
                    progress=not args.quiet)
     except (SpecError, ValueError, FileNotFoundError) as exc:
-        print(f"cadra2 simulate: {args.spec}: {exc}", file=sys.stderr)
+        msg = str(exc)  # errors of the spec file name it already
+        where = "" if msg.startswith(str(args.spec)) else f"{args.spec}: "
+        print(f"cadra2 simulate: {where}{msg}", file=sys.stderr)
         return 1
     t = shot.truth
     print(f"{spec.shot_id}: {len(t)} stations, x {t.x_m.iloc[0]:.3f}..{t.x_m.iloc[-1]:.3f} m, "
@@ -75,80 +75,47 @@ def _simulate(args) -> int:
     return 0
 
 
-def _trajectory_and_shot(item: str, shot: str | None) -> tuple[Path, Path]:
-    from cadra.fitting import FitDataError
-    from cadra.io.trajectory import TrajectoryFileError, load_trajectory
+def _model(args):
+    """The aero model named by --model (bundled name or file) with --hold/--free/--bound."""
+    from cadra.aero import resolve_model
+    from cadra.fitting.inputs import apply_holds
 
-    traj = Path(item)
-    if traj.is_dir():
-        traj = traj / "trajectory.csv"
-    if not traj.is_file():
-        raise FitDataError(f"{item}: no trajectory file (give stage one's trajectory.csv or "
-                           "its output directory)")
-    if shot is not None:
-        return traj, Path(shot)
-    try:
-        meta = load_trajectory(traj).meta
-    except TrajectoryFileError as exc:
-        raise FitDataError(str(exc)) from None
-    if not meta.get("shot_file"):
-        raise FitDataError(f"{traj}: names no shot file; pass it with --shot")
-    return traj, Path(meta["shot_file"])
+    return apply_holds(resolve_model(args.model), args.hold, args.free, args.bound)
 
 
-def _parse_assignments(items, what: str) -> dict:
-    out = {}
-    for item in items or []:
-        name, sep, value = item.partition("=")
-        out[name.strip()] = value.strip() if sep else None
-    return out
+def _shots(args):
+    """The shots named on the command line and their trajectory files."""
+    from cadra.fitting.inputs import load_shots
+
+    return load_shots(args.trajectories, args.shot, sigma_time_s=args.sigma_time_s,
+                      min_sigma_position_m=args.min_sigma_position_m,
+                      min_sigma_angle_deg=args.min_sigma_angle_deg)
 
 
-def _apply_holds(model, args):
-    """--hold NAME[=VALUE] / --free NAME / --bound NAME=LO:HI, values in the file's unit."""
-    import math
-
-    def si(name, text):
-        p = model.parameter(name)
-        v = float(text)
-        return math.radians(v) if p.unit == "deg" else v
-
-    for name, value in _parse_assignments(args.hold, "hold").items():
-        model = model.with_vary({name: False})
-        if value is not None:
-            model = model.with_values({name: si(name, value)})
-    for name in args.free or []:
-        model = model.with_vary({name: True})
-    for name, value in _parse_assignments(args.bound, "bound").items():
-        lo, sep, hi = (value or "").partition(":")
-        if not sep:
-            raise ValueError(f"--bound {name}: expected NAME=LO:HI")
-        model = model.with_bounds({name: (si(name, lo) if lo else -math.inf,
-                                          si(name, hi) if hi else math.inf)})
-    return model
+#: what a refused input raises (FitDataError, SpecError, CalibrationError and a missing model
+#: are ValueErrors; unknown parameter names KeyErrors)
+_REFUSED = (ValueError, KeyError, FileNotFoundError)
 
 
 def _fit(args) -> int:
     import tomli_w
 
-    from cadra.fitting import FitDataError, FitOptions, fit_shots
+    from cadra.calibration.bias_table import correct_by_bias_table
+    from cadra.fitting import FitOptions, fit_shots
     from cadra.fitting.report import write_fit_outputs
-    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
-    if _exists(out, args, "fit"):
-        return 1
     try:
-        model = _apply_holds(resolve_model(args.model), args)
-        shots = _load_shots(args)
+        model = _model(args)
+        shots, _ = _shots(args)
         notes = []
         if args.bias_table:
-            shots, note = _apply_bias_table(shots, args)
+            shots, note = correct_by_bias_table(shots, args.bias_table, args.stations_root)
             notes.append(note)
         options = FitOptions(max_iterations=args.max_iterations, progress=not args.quiet)
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start)
-    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+    except _REFUSED as exc:
         return _refused("fit", exc)
     config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
     extra = {"model_fitted.toml": "# CADRA aerodynamic model (docs/aero_models.md): the fitted "
@@ -165,45 +132,21 @@ def _fit(args) -> int:
     return 0
 
 
-def _load_shots(args, return_paths: bool = False):
-    """The shots named on the command line (and, with ``return_paths``, their trajectory
-    files)."""
-    import math
-
-    from cadra.fitting import load_shot_data
-
-    if args.shot and len(args.shot) != len(args.trajectories):
-        raise ValueError("give one --shot per trajectory file (same order), or none")
-    shots, paths = [], []
-    for k, item in enumerate(args.trajectories):
-        traj, shot_path = _trajectory_and_shot(item, args.shot[k] if args.shot else None)
-        shots.append(load_shot_data(
-            shot_path, traj, sigma_t_s=args.sigma_time_s,
-            min_sigma={"position_m": args.min_sigma_position_m,
-                       "angle_rad": math.radians(args.min_sigma_angle_deg)}))
-        paths.append(traj)
-    return (shots, paths) if return_paths else shots
-
-
 def _single(args) -> int:
     from cadra.aero import load_bundled_model
-    from cadra.fitting import FitDataError, FitOptions
+    from cadra.fitting import FitOptions
     from cadra.fitting.studies import linear_template_for, single_fits, write_single_fits
-    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
-    if _exists(out, args, "single"):
-        return 1
     try:
-        shots = _load_shots(args)
-        model = (_apply_holds(resolve_model(args.model), args) if args.model
-                 else linear_template_for(shots[0]))
+        shots, _ = _shots(args)
+        model = _model(args) if args.model else linear_template_for(shots[0])
         if args.model is None and any(linear_template_for(s).name != model.name
                                       for s in shots[1:]):
             model = load_bundled_model("linear_template_alpha_beta")
         table = single_fits(shots, model, None,
                             options=FitOptions(max_iterations=args.max_iterations))
-    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+    except _REFUSED as exc:
         return _refused("single", exc)
     lines = write_single_fits(table, model, out, overwrite=args.overwrite)
     print("\n".join(lines[2:2 + 2 + len(table)]))
@@ -212,22 +155,17 @@ def _single(args) -> int:
 
 
 def _holdone(args) -> int:
-    import math
-
-    from cadra.fitting import FitDataError, FitOptions, fit_shots
+    from cadra.fitting import FitOptions, fit_shots
+    from cadra.fitting.inputs import values_to_si
     from cadra.fitting.studies import hold_one_study, plot_hold_one
     from cadra.io.atomic import atomic_output_dir
-    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
-    if _exists(out, args, "holdone"):
-        return 1
     try:
-        shots = _load_shots(args)
-        model = _apply_holds(resolve_model(args.model), args)
-        p = model.parameter(args.param)
+        shots, _ = _shots(args)
+        model = _model(args)
         values = [float(v) for v in args.values.split(",") if v.strip()]
-        si = [math.radians(v) if p.unit == "deg" else v for v in values]
+        si = values_to_si(model, args.param, values)
         options = FitOptions(max_iterations=args.max_iterations)
         # the study starts from the free fit's solution (its parameters and states)
         free, _ = fit_shots(shots, model, options=options)
@@ -237,7 +175,7 @@ def _holdone(args) -> int:
         start = free.model.with_vary({args.param: model.parameter(args.param).vary})
         table = hold_one_study(shots, start, [sf.state for sf in free.shots], args.param, si,
                                options=options)
-    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+    except _REFUSED as exc:
         return _refused("holdone", exc)
     with atomic_output_dir(out, overwrite=args.overwrite) as tmp:
         table.to_csv(tmp / "hold_one.csv", index=False)
@@ -270,63 +208,23 @@ def _add_data_options(p) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 
 
-def _shot_facility(shot_data) -> str:
-    from cadra.io.shotfile import load_shot
-
-    return load_shot(shot_data.source["shot_file"]).facility
-
-
-def _apply_bias_table(shots, args):
-    """Correct the shots by a station bias table (``current``: the facility history's latest
-    entry; otherwise a bias-table CSV). Returns the shots and the report's note."""
-    from cadra.calibration.history import current_table, load_bias_table, load_history
-    from cadra.calibration.sphere import apply_bias_table
-
-    facilities = {_shot_facility(s) for s in shots}
-    if len(facilities) != 1:
-        raise ValueError(f"the shots come from several facilities {sorted(facilities)}")
-    facility = facilities.pop()
-    if args.bias_table == "current":
-        history, _ = load_history(Path(args.stations_root), facility)
-        table = current_table(history)
-        if table is None:
-            raise ValueError(f"--bias-table current: no station history for facility "
-                             f"{facility!r} under {Path(args.stations_root) / 'stations'}")
-        source = (f"{Path(args.stations_root) / 'stations' / facility / 'bias_history.jsonl'}"
-                  f", latest entry")
-    else:
-        table = load_bias_table(args.bias_table)
-        source = args.bias_table
-    if table.facility != facility:
-        raise ValueError(f"bias table of facility {table.facility!r} given for shots of "
-                         f"facility {facility!r}")
-    note = (f"station bias table applied: {source} (created {table.created_utc}, from shots "
-            f"{', '.join(table.shots)})")
-    return [apply_bias_table(s, table) for s in shots], note
-
-
 def _calibrate(args) -> int:
     import math
 
+    from cadra.calibration.bias_table import shots_facility
     from cadra.calibration.history import append_entry, compare, history_dir, load_history
     from cadra.calibration.report import write_calibration
     from cadra.calibration.sphere import CalibrationError, estimate_station_biases
-    from cadra.fitting import FitDataError
+    from cadra.units import from_si
 
     out = Path(args.output)
-    if _exists(out, args, "calibrate"):
-        return 1
     root = Path(args.stations_root)
     try:
-        shots = _load_shots(args)
-        facilities = {_shot_facility(s) for s in shots}
-        if len(facilities) != 1:
-            raise CalibrationError(f"the shots come from several facilities "
-                                   f"{sorted(facilities)}")
-        facility = facilities.pop()
+        shots, _ = _shots(args)
+        facility = shots_facility(shots, CalibrationError)
         history, hist_warnings = load_history(root, facility)
         est = estimate_station_biases(shots, facility=facility)
-    except (FitDataError, CalibrationError, ValueError, KeyError, FileNotFoundError) as exc:
+    except _REFUSED as exc:
         return _refused("calibrate", exc)
     table = est.to_table(note=args.note or "")
     comparison = compare(table, history, threshold_sigma=args.threshold_sigma)
@@ -336,17 +234,17 @@ def _calibrate(args) -> int:
     if not args.no_history:
         path = append_entry(table, root)
         print(f"appended to {path}")
-    unit = {"x": ("mm", 1e3), "y": ("mm", 1e3), "z": ("mm", 1e3), "time": ("us", 1e6)}
+    unit = {"x": "mm", "y": "mm", "z": "mm", "time": "us"}
     print(f"{facility}: station biases from {len(shots)} sphere shot(s) "
           f"(speeds {', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s)")
     for k, st in enumerate(table.stations):
         cells = []
         for c, name in enumerate(("x", "y", "z", "time")):
-            u, f = unit[name]
+            u = unit[name]
             b, sg = table.bias[k, c], table.sigma[k, c]
             if math.isfinite(sg) and sg > 0:
                 mark = " *" if abs(b) > args.threshold_sigma * sg else ""
-                cells.append(f"{name} {b * f:+.4f}±{sg * f:.4f} {u}{mark}")
+                cells.append(f"{name} {from_si(b, u):+.4f}±{from_si(sg, u):.4f} {u}{mark}")
         print(f"  station {st:2d}: " + ", ".join(cells))
     for w in (*est.warnings, *hist_warnings):
         print(f"warning: {w}")
@@ -355,19 +253,16 @@ def _calibrate(args) -> int:
 
 
 def _diagnose(args) -> int:
-    from cadra.fitting import FitDataError, FitOptions, fit_shots
+    from cadra.fitting import FitOptions, fit_shots
     from cadra.gap.report import write_diagnosis
     from cadra.gap.score import diagnose_gap
     from cadra.gap.where import where_analysis
     from cadra.io.trajectory import load_trajectory
-    from cadra.synthetic.simulate import SpecError, resolve_model
 
     out = Path(args.output)
-    if _exists(out, args, "diagnose"):
-        return 1
     try:
-        model = _apply_holds(resolve_model(args.model), args)
-        shots, trajs = _load_shots(args, return_paths=True)
+        model = _model(args)
+        shots, trajs = _shots(args)
         result, _ = fit_shots(shots, model,
                               options=FitOptions(max_iterations=args.max_iterations))
         if not result:
@@ -380,7 +275,7 @@ def _diagnose(args) -> int:
             if "x_consistency" in table:
                 stage_one[sd.shot_id] = table
         tables = where_analysis(result, shots, result.residuals, stage_one or None)
-    except (FitDataError, SpecError, ValueError, KeyError, FileNotFoundError) as exc:
+    except _REFUSED as exc:
         return _refused("diagnose", exc)
     write_diagnosis(dg, result, out, overwrite=args.overwrite, where_tables=tables)
     print(dg.verdict)
@@ -466,6 +361,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if _exists(Path(args.output), args, args.command):  # every command writes one folder
+        return 1
     return args.func(args)
 
 

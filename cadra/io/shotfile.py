@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cadra.atmosphere import Atmosphere
+from cadra.fields import frozen_array
 from cadra.io import units
 from cadra.io.atomic import atomic_write_text
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
@@ -55,12 +56,6 @@ class ShotFileError(ValueError):
     """A shot file (or ShotFile object) that cannot be right; the message names the key."""
 
 
-def _ro(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
-
-
 @dataclass(frozen=True, eq=False)
 class MassProperties:
     """Measured mass properties, SI, model axes M (docs/conventions.md).
@@ -80,9 +75,9 @@ class MassProperties:
 
     def __post_init__(self):
         object.__setattr__(self, "mass_kg", float(self.mass_kg))
-        object.__setattr__(self, "cg_model_m", _ro(np.reshape(self.cg_model_m, 3)))
+        object.__setattr__(self, "cg_model_m", frozen_array(self.cg_model_m, 3))
         object.__setattr__(self, "inertia_model_kg_m2",
-                           _ro(np.reshape(self.inertia_model_kg_m2, (3, 3))))
+                           frozen_array(self.inertia_model_kg_m2, (3, 3)))
 
     def __eq__(self, other):
         if not isinstance(other, MassProperties):

@@ -1,0 +1,125 @@
+"""Stage two's inputs as a user names them: stage-one folders or trajectory files, their shot
+files, and holds, frees and bounds of the model's parameters in the model file's units.
+
+What ``cadra2`` does with its arguments before fitting, as library functions (docs/fitting.md)::
+
+    shots, paths = load_shots(["out/m2_2429/cadra1"], sigma_time_s=1e-7)
+    model = apply_holds(resolve_model("m2_m070"), hold=["alpha_ref=21.21"], free=["Cnr_A1"],
+                        bound=["CD_A1=0.5:1.5"])
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from cadra.aero import AeroModel
+from cadra.fitting.data import FitDataError, ShotData, load_shot_data
+from cadra.units import deg_to_rad
+
+#: stage one's trajectory file in its output folder
+TRAJECTORY_FILE = "trajectory.csv"
+
+
+def trajectory_and_shot(item: str | os.PathLike, shot: str | os.PathLike | None = None
+                        ) -> tuple[Path, Path]:
+    """The trajectory file and shot file of one shot.
+
+    ``item`` is stage one's ``trajectory.csv`` or its output folder; ``shot`` the shot file,
+    by default the one the trajectory file names (its ``shot_file`` metadata). Raises
+    :class:`FitDataError` saying what is missing.
+    """
+    from cadra.io.trajectory import TrajectoryFileError, load_trajectory
+
+    traj = Path(item)
+    if traj.is_dir():
+        traj = traj / TRAJECTORY_FILE
+    if not traj.is_file():
+        raise FitDataError(f"{item}: no trajectory file (give stage one's {TRAJECTORY_FILE} "
+                           "or its output directory)")
+    if shot is not None:
+        return traj, Path(shot)
+    try:
+        meta = load_trajectory(traj).meta
+    except TrajectoryFileError as exc:
+        raise FitDataError(str(exc)) from None
+    if not meta.get("shot_file"):
+        raise FitDataError(f"{traj}: names no shot file; pass it with --shot")
+    return traj, Path(meta["shot_file"])
+
+
+def load_shots(trajectories: Sequence[str | os.PathLike],
+               shots: Sequence[str | os.PathLike] | None = None, *, sigma_time_s: float = 0.0,
+               min_sigma_position_m: float = 0.0, min_sigma_angle_deg: float = 0.0
+               ) -> tuple[list[ShotData], list[Path]]:
+    """The measurements of each shot (:func:`load_shot_data`) and its trajectory file.
+
+    ``shots`` gives the shot file of each trajectory, same order (default: the ones the
+    trajectory files name, :func:`trajectory_and_shot`); ``sigma_time_s`` the spark-time
+    sigma (s); the ``min_sigma_*`` floors of the stage-one sigmas (m, deg).
+    """
+    if shots and len(shots) != len(trajectories):
+        raise ValueError("give one --shot per trajectory file (same order), or none")
+    min_sigma = {"position_m": min_sigma_position_m,
+                 "angle_rad": deg_to_rad(min_sigma_angle_deg)}
+    data, paths = [], []
+    for k, item in enumerate(trajectories):
+        traj, shot_path = trajectory_and_shot(item, shots[k] if shots else None)
+        data.append(load_shot_data(shot_path, traj, sigma_t_s=sigma_time_s,
+                                   min_sigma=min_sigma))
+        paths.append(traj)
+    return data, paths
+
+
+def parse_assignments(items: Iterable[str] | None) -> dict[str, str | None]:
+    """``["A=1", "B"]`` -> ``{"A": "1", "B": None}`` (names and values stripped)."""
+    out = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        out[name.strip()] = value.strip() if sep else None
+    return out
+
+
+def apply_holds(model: AeroModel, hold: Iterable[str] | None = None,
+                free: Iterable[str] | None = None, bound: Iterable[str] | None = None
+                ) -> AeroModel:
+    """``model`` with parameters held, freed and bounded as a user writes them.
+
+    ``hold``: ``"NAME"`` or ``"NAME=VALUE"`` (held at VALUE); ``free``: ``"NAME"``;
+    ``bound``: ``"NAME=LO:HI"`` (either side may be empty: unbounded). Values are in the
+    parameter's unit in the model file (degrees for ``alpha_ref``), converted to SI through
+    the unit table (:meth:`cadra.aero.Parameter.to_si`). Unknown names raise ``KeyError``,
+    malformed values ``ValueError``.
+    """
+    def si(name: str, text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"{name}: {text!r} is not a number") from None
+        return model.parameter(name).to_si(value)
+
+    for name, value in parse_assignments(hold).items():
+        model = model.with_vary({name: False})
+        if value is not None:
+            model = model.with_values({name: si(name, value)})
+    for name in free or []:
+        model = model.with_vary({name.strip(): True})
+    for name, value in parse_assignments(bound).items():
+        lo, sep, hi = (value or "").partition(":")
+        if not sep:
+            raise ValueError(f"--bound {name}: expected NAME=LO:HI")
+        model = model.with_bounds({name: (si(name, lo) if lo.strip() else -math.inf,
+                                          si(name, hi) if hi.strip() else math.inf)})
+    return model
+
+
+def values_to_si(model: AeroModel, name: str, values: Iterable[float]) -> list[float]:
+    """Values of parameter ``name`` written in the model file's unit -> SI."""
+    p = model.parameter(name)
+    return [p.to_si(v) for v in values]
+
+
+__all__ = ["TRAJECTORY_FILE", "apply_holds", "load_shots", "parse_assignments",
+           "trajectory_and_shot", "values_to_si"]
