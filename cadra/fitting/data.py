@@ -21,15 +21,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cadra import channels as channel_registry
 from cadra.atmosphere import Atmosphere
 from cadra.body import body_from_spec
 from cadra.dynamics.effects import Effects
 from cadra.dynamics.setup import RigidBody, rigid_body_from_mass
 
-#: measured channels, SI (m, m, m, rad, rad)
-CHANNELS = ("x", "y", "z", "theta", "psi")
-CHANNEL_UNITS = ("m", "m", "m", "rad", "rad")
-N_CHANNELS = len(CHANNELS)
+#: measured channels, SI (m, m, m, rad, rad): names and units from the channel registry
+#: (:mod:`cadra.channels`; these names stay as aliases)
+CHANNELS = channel_registry.NAMES
+CHANNEL_UNITS = channel_registry.UNITS
+N_CHANNELS = channel_registry.N_CHANNELS
+_POS, _ANG = channel_registry.POSITION, channel_registry.ANGLE
 #: typical film-range measurement noise (seed 004 era): 0.1 mm, 0.1 deg, 10 ns
 FILM_SIGMAS = {"position_m": 1e-4, "angle_rad": math.radians(0.1), "time_s": 1e-8}
 
@@ -97,7 +100,7 @@ class ShotData:
 
     @property
     def has_angles(self) -> bool:
-        return bool(self.mask[:, 3:].any())
+        return bool(self.mask[:, _ANG].any())
 
     def with_effects(self, effects: Effects) -> ShotData:
         return replace(self, rigid=self.rigid.with_effects(effects))
@@ -105,8 +108,8 @@ class ShotData:
 
 def _floor(sigma: np.ndarray, floor: dict) -> np.ndarray:
     out = sigma.copy()
-    out[:, :3] = np.fmax(out[:, :3], floor.get("position_m", 0.0))
-    out[:, 3:] = np.fmax(out[:, 3:], floor.get("angle_rad", 0.0))
+    out[:, _POS] = np.fmax(out[:, _POS], floor.get("position_m", 0.0))
+    out[:, _ANG] = np.fmax(out[:, _ANG], floor.get("angle_rad", 0.0))
     return out
 
 
@@ -175,9 +178,8 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
             raise FitDataError(f"{trajectory_path}: station {st} time {t} s differs from the "
                                f"shot file's {shot_times[st]} s: the files do not belong together")
     table = table.sort_values("t_s")
-    meas = table[["x_m", "y_m", "z_m", "theta_rad", "psi_rad"]].to_numpy(float)
-    sigma = table[["sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_rad",
-                   "sigma_psi_rad"]].to_numpy(float)
+    meas = table[[c.si_column for c in channel_registry.OBSERVED]].to_numpy(float)
+    sigma = table[[c.si_sigma_column for c in channel_registry.OBSERVED]].to_numpy(float)
     if min_sigma:
         sigma = _floor(sigma, min_sigma)
     bad = ~np.isfinite(sigma) | ~(sigma > 0)
@@ -203,16 +205,17 @@ def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, bo
     ``angles=False`` drops theta and psi (a sphere shows none); default: not for a sphere.
     """
     n = len(truth)
-    meas = truth[["x_m", "y_m", "z_m", "theta_deg", "psi_deg"]].to_numpy(float).copy()
-    meas[:, 3:] = np.radians(meas[:, 3:])
+    meas = np.column_stack([channel_registry.to_si(truth[c.value_column].to_numpy(float),
+                                                   c.file_unit)
+                            for c in channel_registry.OBSERVED])
     t_s = truth["t_s"].to_numpy(float).copy()
     sigma = np.empty((n, N_CHANNELS))
-    sigma[:, :3] = sigma_position_m
-    sigma[:, 3:] = sigma_angle_rad
+    sigma[:, _POS] = sigma_position_m
+    sigma[:, _ANG] = sigma_angle_rad
     if angles is None:
         angles = body_kind != "sphere"
     if not angles:
-        meas[:, 3:] = np.nan
+        meas[:, _ANG] = np.nan
     stations = truth["station"].to_numpy(int)
     if rng is not None:
         meas = meas + rng.standard_normal(meas.shape) * sigma

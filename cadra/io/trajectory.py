@@ -30,17 +30,19 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
+from cadra.channels import OBSERVED, to_si, trajectory_sigma_columns, trajectory_value_columns
 from cadra.io.atomic import atomic_write_text
 
 FORMAT = "cadra-trajectory-1"
 
+#: the file's columns; the value and sigma columns come from the channel registry
+#: (:mod:`cadra.channels`: a channel added there is a column pair here)
 COLUMNS = (
     "station", "t_s", "status",
-    "x_m", "y_m", "z_m", "theta_deg", "psi_deg",
-    "sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_deg", "sigma_psi_deg",
+    *trajectory_value_columns(),
+    *trajectory_sigma_columns(),
     "x_top_minus_side_m", "x_consistency", "reason", "warnings",
 )
 STATUSES = ("ok", "warning", "failed")
@@ -114,9 +116,10 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
         raise TrajectoryFileError(f"{path}: station listed twice")
     for c in ("reason", "warnings"):
         table[c] = table[c].fillna("")
-    for name in ("theta", "psi"):
-        table[f"{name}_rad"] = np.radians(table[f"{name}_deg"])
-        table[f"sigma_{name}_rad"] = np.radians(table[f"sigma_{name}_deg"])
+    for ch in OBSERVED:       # SI columns beside the file's (theta_rad beside theta_deg)
+        if ch.si_column != ch.value_column:
+            table[ch.si_column] = to_si(table[ch.value_column], ch.file_unit)
+            table[ch.si_sigma_column] = to_si(table[ch.sigma_column], ch.file_unit)
     return Trajectory(table=table, meta=meta)
 
 

@@ -1,0 +1,177 @@
+"""The observed channels as data: one registry for names, units, file columns and display.
+
+Each channel stage one measures per station and stage two fits is one :class:`Channel`
+entry of :data:`OBSERVED`; the order of that tuple is the order of the columns of
+:class:`cadra.fitting.data.ShotData`'s ``meas`` and ``sigma`` and of every prediction
+(``(n, N_CHANNELS)`` arrays). Code that needs "the angles" or "the positions" asks the
+registry (:func:`indices`) instead of slicing ``[:, 3:]``, so a channel added later (a roll
+angle ``phi``, the spark time as an observed channel) is one more entry here plus the
+observation model that predicts it.
+
+Units: values inside CADRA are SI (m, rad, s); the trajectory file (``docs/stage1.md``)
+stores angles in degrees (``file_unit``) and reports display angles in degrees
+(``display_unit``, ``display_scale`` = display value per SI value). Conversions go through
+:func:`to_si` / :func:`from_si`, which use numpy's ``radians`` / ``degrees`` (bit-identical
+to what the file reader always did).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: kinds of channel (what a channel measures)
+KINDS = ("position", "angle", "time")
+_SI_UNIT = {"position": "m", "angle": "rad", "time": "s"}
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One observed channel.
+
+    Attributes
+    ----------
+    name : short name (``"x"``, ``"theta"``), the ``channel`` column of residual tables.
+    kind : ``"position"``, ``"angle"`` or ``"time"`` (:data:`KINDS`).
+    file_unit : the unit of the trajectory file's columns (``"m"``, ``"deg"``, ``"s"``).
+    display_unit : the unit of reports and residual files.
+    label : the name on plots (``"θ"``).
+    description : one line, for documentation.
+    """
+
+    name: str
+    kind: str
+    file_unit: str
+    display_unit: str
+    label: str
+    description: str = ""
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"channel {self.name!r}: kind must be one of {KINDS}")
+        for u in (self.file_unit, self.display_unit):
+            if u not in _SCALE[self.kind]:
+                raise ValueError(f"channel {self.name!r}: unit {u!r} is not a "
+                                 f"{self.kind} unit ({sorted(_SCALE[self.kind])})")
+
+    @property
+    def unit(self) -> str:
+        """SI unit (inside CADRA)."""
+        return _SI_UNIT[self.kind]
+
+    @property
+    def display_scale(self) -> float:
+        """Display value per SI value (180/pi for an angle shown in degrees)."""
+        return _SCALE[self.kind][self.display_unit]
+
+    @property
+    def value_column(self) -> str:
+        """Trajectory-file column of the value (``theta_deg``)."""
+        return f"{self.name}_{self.file_unit}"
+
+    @property
+    def sigma_column(self) -> str:
+        """Trajectory-file column of the 1-sigma (``sigma_theta_deg``)."""
+        return f"sigma_{self.name}_{self.file_unit}"
+
+    @property
+    def si_column(self) -> str:
+        """Column of the value in SI (``theta_rad``: the loaded table, histories)."""
+        return f"{self.name}_{self.unit}"
+
+    @property
+    def si_sigma_column(self) -> str:
+        """Column of the 1-sigma in SI (``sigma_theta_rad``)."""
+        return f"sigma_{self.name}_{self.unit}"
+
+    @property
+    def display_column(self) -> str:
+        """Column name in display units (``theta_deg``)."""
+        return f"{self.name}_{self.display_unit}"
+
+
+#: unit -> value in that unit per SI value, by kind
+_SCALE = {"position": {"m": 1.0, "mm": 1e3},
+          "angle": {"rad": 1.0, "deg": 180.0 / math.pi},
+          "time": {"s": 1.0, "us": 1e6}}
+
+#: the observed channels, in the order of every (n, N_CHANNELS) array
+OBSERVED: tuple[Channel, ...] = (
+    Channel("x", "position", "m", "m", "x", "reference point along the range, F"),
+    Channel("y", "position", "m", "m", "y", "reference point across the range, F"),
+    Channel("z", "position", "m", "m", "z", "reference point, up, F"),
+    Channel("theta", "angle", "deg", "deg", "θ",
+            "inclination of the nose axis to the x-y plane, + up"),
+    Channel("psi", "angle", "deg", "deg", "ψ",
+            "inclination of the nose axis to the x-z plane, + port"),
+)
+
+#: channel names in order (``("x", "y", "z", "theta", "psi")``)
+NAMES: tuple[str, ...] = tuple(c.name for c in OBSERVED)
+#: SI units in order
+UNITS: tuple[str, ...] = tuple(c.unit for c in OBSERVED)
+N_CHANNELS = len(OBSERVED)
+#: name -> channel
+BY_NAME: dict[str, Channel] = {c.name: c for c in OBSERVED}
+
+
+def channel(name: str) -> Channel:
+    """The registry's entry for ``name`` (KeyError naming the known channels)."""
+    try:
+        return BY_NAME[name]
+    except KeyError:
+        raise KeyError(f"unknown channel {name!r} (known: {NAMES})") from None
+
+
+def indices(kind: str) -> np.ndarray:
+    """Column indices (into an (n, N_CHANNELS) array) of the channels of ``kind``."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}")
+    return np.array([i for i, c in enumerate(OBSERVED) if c.kind == kind], dtype=int)
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+#: column indices of the position channels (x, y, z) and of the angle channels (theta, psi)
+POSITION = _read_only(indices("position"))
+ANGLE = _read_only(indices("angle"))
+
+
+def to_si(values, unit: str):
+    """``values`` in ``unit`` converted to SI (deg -> rad by ``np.radians``)."""
+    if unit == "deg":
+        return np.radians(values)
+    for table in _SCALE.values():
+        if unit in table:
+            return values / table[unit] if table[unit] != 1.0 else values
+    raise ValueError(f"unknown unit {unit!r}")
+
+
+def from_si(values, unit: str):
+    """SI ``values`` converted to ``unit`` (rad -> deg by ``np.degrees``)."""
+    if unit == "deg":
+        return np.degrees(values)
+    for table in _SCALE.values():
+        if unit in table:
+            return values * table[unit] if table[unit] != 1.0 else values
+    raise ValueError(f"unknown unit {unit!r}")
+
+
+def trajectory_value_columns() -> list[str]:
+    """The trajectory file's value columns in channel order (``x_m`` .. ``psi_deg``)."""
+    return [c.value_column for c in OBSERVED]
+
+
+def trajectory_sigma_columns() -> list[str]:
+    """The trajectory file's sigma columns in channel order."""
+    return [c.sigma_column for c in OBSERVED]
+
+
+__all__ = ["ANGLE", "BY_NAME", "Channel", "KINDS", "NAMES", "N_CHANNELS", "OBSERVED",
+           "POSITION", "UNITS", "channel", "from_si", "indices", "to_si",
+           "trajectory_sigma_columns", "trajectory_value_columns"]
