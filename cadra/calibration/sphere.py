@@ -41,8 +41,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from cadra.aero import AeroModel, load_bundled_model
+from cadra.channels import POSITION
 from cadra.fitting import FitOptions, ShotData, fit_shots
-from cadra.fitting.sensitivity import predict_with_jacobian
+from cadra.fitting.problem import result_problem
 
 #: bias channels: position x, y, z (m) and spark time (s)
 BIAS_CHANNELS = ("x", "y", "z", "time")
@@ -191,16 +192,15 @@ def _corrected(shots, designs, beta):
 
 def _joint_fit(shots: list[ShotData], model: AeroModel, options: FitOptions):
     """Multi-fit of the sphere shots (one drag law, each shot's own position and velocity);
-    per shot the prediction and the Jacobian (n, 5, 6 + n_aero) at the solution."""
+    per shot the prediction, the Jacobian (n, N_CHANNELS, n_local + n_aero: the shot's free
+    locals -- position and velocity for a sphere --, then the drag law's free parameters)
+    at the solution, the cg velocity at the stations and the number of local columns. All
+    from the fit's own forward model (:class:`cadra.fitting.problem.FitProblem`)."""
     res, _ = fit_shots(shots, model, options=options)
-    program = res.model.compile()
-    out = []
-    for s, sf in zip(shots, res.shots, strict=True):
-        pred, J, states = predict_with_jacobian(
-            sf.state, sf.t0_s, s.t_s, s.rigid.phys(), program, res.model.values(),
-            s.rigid.ref_from_cg_body_m(), np.arange(6), res.model.free_indices(),
-            options.integration, with_states=True)
-        out.append((pred, J, states[:, 3:6]))
+    problem = replace(result_problem(res, shots), integration=options.integration)
+    preds, jacs, states = problem.predict_with_jacobian(with_states=True)
+    out = [(pred, J, y[:, 3:6], int(lf.size))
+           for pred, J, y, lf in zip(preds, jacs, states, problem.local_free, strict=True)]
     return res, out
 
 
@@ -256,18 +256,21 @@ def estimate_station_biases(shots: Sequence[ShotData], *, facility: str = "",
         corrected = _corrected(shots, designs, beta)
         res, fits = _joint_fit(corrected, model, options)
         n_aero = len(res.aero_names)
-        new_designs = [_design(s, index, nc, v) for s, (_, _, v) in zip(shots, fits,
-                                                                          strict=True)]
+        new_designs = [_design(s, index, nc, v) for s, (_, _, v, _) in zip(shots, fits,
+                                                                             strict=True)]
         rows_J, rows_D, rows_r = [], [], []
-        for k, (s, sc, D, (pred, J, _)) in enumerate(zip(shots, corrected, new_designs, fits,
-                                                         strict=True)):
-            ok = np.isfinite(sc.meas[:, :3])
-            w = 1.0 / s.sigma[:, :3][ok]
-            rows_r.append(((sc.meas[:, :3] - pred[:, :3])[ok]) * w)
-            Jk = J[:, :3, :][ok] * w[:, None]
-            block = np.zeros((Jk.shape[0], 6 * len(shots) + n_aero))
-            block[:, 6 * k:6 * k + 6] = Jk[:, :6]
-            block[:, 6 * len(shots):] = Jk[:, 6:]
+        n_loc = sum(f[3] for f in fits)
+        at = 0
+        for s, sc, D, (pred, J, _, nl) in zip(shots, corrected, new_designs, fits,
+                                              strict=True):
+            ok = np.isfinite(sc.meas[:, POSITION])
+            w = 1.0 / s.sigma[:, POSITION][ok]
+            rows_r.append(((sc.meas[:, POSITION] - pred[:, POSITION])[ok]) * w)
+            Jk = J[:, POSITION, :][ok] * w[:, None]
+            block = np.zeros((Jk.shape[0], n_loc + n_aero))
+            block[:, at:at + nl] = Jk[:, :nl]
+            block[:, n_loc:] = Jk[:, nl:]
+            at += nl
             rows_J.append(block)
             rows_D.append(D[ok] * w[:, None])
             rms = {c: float(np.sqrt(np.nanmean((sc.meas[:, j] - pred[:, j]) ** 2)))
@@ -299,7 +302,7 @@ def estimate_station_biases(shots: Sequence[ShotData], *, facility: str = "",
     # final pass: residual after correction
     corrected = _corrected(shots, designs, beta)
     _, fits = _joint_fit(corrected, model, options)
-    for sc, (pred, _, _) in zip(corrected, fits, strict=True):
+    for sc, (pred, _, _, _) in zip(corrected, fits, strict=True):
         rms_after[sc.shot_id] = {c: float(np.sqrt(np.nanmean((sc.meas[:, j] - pred[:, j]) ** 2)))
                                  for j, c in enumerate("xyz")}
     beta, cov_b = robust_gauge(beta, cov_b, null)

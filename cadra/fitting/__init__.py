@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from cadra.aero import AeroModel
+from cadra.channels import ANGLE, POSITION
 from cadra.fitting.data import (
     CHANNELS,
     FILM_SIGMAS,
@@ -57,8 +58,8 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
     options = options or FitOptions()
     shots = list(shots)
     staged = continuation is not None and any(
-        np.nanmin(s.sigma[:, :3]) < continuation["position_m"]
-        or (s.has_angles and np.nanmin(s.sigma[:, 3:]) < continuation["angle_rad"])
+        np.nanmin(s.sigma[:, POSITION]) < continuation["position_m"]
+        or (s.has_angles and np.nanmin(s.sigma[:, ANGLE]) < continuation["angle_rad"])
         for s in shots)
     # starting values (and the roll grid's chi^2) under the weights of the first stage
     first_shots = [floor_sigmas(s, continuation) for s in shots] if staged else shots

@@ -39,9 +39,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cadra.channels import NAMES as CHANNELS
+from cadra.channels import POSITION
 from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET
 
 MEASURES = ("position_x", "position_y", "position_z", "timing", "scale")
+#: the lateral position channels (y, z) a scale error acts on
+_YZ = np.array([CHANNELS.index("y"), CHANNELS.index("z")])
 
 
 @dataclass(frozen=True)
@@ -103,17 +107,17 @@ def station_columns(extras: Sequence[Extra], shot_id: str, stations: np.ndarray,
     """(n, 5, len(extras)) d(prediction)/d(value) of the station extras (0 for the others and
     for extras that do not apply to the shot)."""
     n = len(stations)
-    C = np.zeros((n, 5, len(extras)))
+    C = np.zeros((n, len(CHANNELS), len(extras)))
     for j, e in enumerate(extras):
         if e.is_phys or not e.applies(shot_id):
             continue
         rows = np.flatnonzero(np.asarray(stations) == e.station)
         if e.measure.startswith("position_"):
-            C[rows, "xyz".index(e.measure[-1]), j] = 1.0
+            C[rows, CHANNELS.index(e.measure[-1]), j] = 1.0
         elif e.measure == "timing":
-            C[rows, :3, j] = states[rows, 3:6]
+            C[rows[:, None], POSITION, j] = states[rows, 3:6]
         else:
-            C[rows, 1:3, j] = pred[rows, 1:3]
+            C[rows[:, None], _YZ, j] = pred[rows[:, None], _YZ]
     return C
 
 

@@ -25,14 +25,16 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero.program import COEFFICIENTS
+from cadra.channels import BY_NAME, POSITION
 from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.histories import fitted_histories
 from cadra.fitting.result import FitResult
 
 #: display names of the coefficients (mathtext)
 COEFFICIENT_LABELS = {"CD": "$C_D$", "CL": "$C_L$", "CC": "$C_C$", "Cl": "$C_l$",
                       "Cm": "$C_m$", "Cn": "$C_n$", "Clp": "$C_{l_p}$", "Cmq": "$C_{m_q}$",
                       "Cnr": "$C_{n_r}$"}
-_CHANNEL_LABELS = {"x": "x", "y": "y", "z": "z", "theta": "θ", "psi": "ψ"}
+_CHANNEL_LABELS = {name: c.label for name, c in BY_NAME.items()}
 _EPS = 1e-20   # complex step
 
 
@@ -56,8 +58,6 @@ def _new_figure(fig, figsize):
 def _histories(result, shots, histories):
     if histories is not None:
         return histories
-    from cadra.fitting.report import fitted_histories
-
     return fitted_histories(result, shots)
 
 
@@ -241,10 +241,11 @@ def plot_angle_histories(result: FitResult, shots: Sequence[ShotData], *, fig=No
         xm = sd.meas[:, 0]
         x_st = np.where(np.isfinite(xm), xm, np.interp(sd.t_s, h["t_s"], h["x_m"]))
         if sd.has_angles:
-            panels = (("theta_deg", 3, deg, "θ (deg, + nose up)"),
-                      ("psi_deg", 4, deg, "ψ (deg, + nose to port)"))
+            panels = (("theta_deg", CHANNELS.index("theta"), deg, "θ (deg, + nose up)"),
+                      ("psi_deg", CHANNELS.index("psi"), deg, "ψ (deg, + nose to port)"))
         else:   # no attitude measured (a sphere): the lateral positions instead
-            panels = (("z_m", 2, 1e3, "z (mm, + up)"), ("y_m", 1, 1e3, "y (mm, + port)"))
+            panels = (("z_m", CHANNELS.index("z"), 1e3, "z (mm, + up)"),
+                      ("y_m", CHANNELS.index("y"), 1e3, "y (mm, + port)"))
         for c, (col, j, f, label) in enumerate(panels):
             ax = axes[r, c]
             hf = 1e3 if col.endswith("_m") else 1.0
@@ -309,7 +310,8 @@ def plot_residuals(result: FitResult, *, fig=None):
         for y, ls in ((0, "-"), (1, "--"), (-1, "--"), (3, ":"), (-3, ":")):
             ax.axhline(y, color="0.5", lw=0.8, ls=ls)
         v = rms[ch]
-        unit = f"{v * 1e6:.3g} µm" if ch in ("x", "y", "z") else f"{math.degrees(v):.3g} deg"
+        unit = (f"{v * 1e6:.3g} µm" if BY_NAME[ch].kind == "position"
+                else f"{math.degrees(v):.3g} deg")
         sel = r[r["channel"] == ch]["normalized"]
         ax.set_title(f"{_CHANNEL_LABELS[ch]}: rms {unit}, normalized rms "
                      f"{np.sqrt(np.mean(sel**2)):.2f}", fontsize=9, loc="left")
@@ -414,7 +416,7 @@ def _scene(result, shots, bodies, histories, lateral_scale, model_scale):
             P[..., 1] += k * ref[i, 1]
             P[..., 2] += k * ref[i, 2] + zoff
             meshes.append(P)
-        meas = sd.meas[:, :3]
+        meas = sd.meas[:, POSITION]
         ok = np.all(np.isfinite(meas), axis=1)
         measured = np.stack([meas[ok, 0], k * meas[ok, 1], k * meas[ok, 2] + zoff], axis=1)
         label_pts = np.stack([ref[:, 0], k * ref[:, 1],

@@ -43,10 +43,13 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero import AeroModel
-from cadra.dynamics.observe import air_angles, observe
+from cadra.channels import BY_NAME, OBSERVED
+from cadra.dynamics.observe import air_angles
 from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.histories import fitted_histories
+from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local, predict_states
+from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local, observables
 
 #: results.json format tag
 RESULTS_FORMAT = "cadra.fit-results/1"
@@ -55,9 +58,8 @@ REPORT_CORRELATION = 0.9
 #: plot files written by :func:`write_fit_outputs` (key -> file name under ``plots/``)
 PLOT_FILES = {"coefficients": "coefficients.png", "angles": "angles.png",
               "residuals": "residuals.png", "trajectory3d": "trajectory3d.png"}
-#: residual channel -> (unit in the files, factor from SI)
-CHANNEL_OUTPUT_UNITS = {"x": ("m", 1.0), "y": ("m", 1.0), "z": ("m", 1.0),
-                        "theta": ("deg", 180.0 / math.pi), "psi": ("deg", 180.0 / math.pi)}
+#: residual channel -> (unit in the files, factor from SI), from the channel registry
+CHANNEL_OUTPUT_UNITS = {c.name: (c.display_unit, c.display_scale) for c in OBSERVED}
 #: finite-difference step of the local unknowns (m, m/s, rad, rad/s) for derived sigmas;
 #: the maps are linear in position and smooth in rotation (error ~ step^2 ~ 1e-12 relative)
 _FD_STEP = 1e-6
@@ -90,43 +92,8 @@ def _shots_by_id(shots: Sequence[ShotData]) -> dict[str, ShotData]:
     return {s.shot_id: s for s in shots}
 
 
-def fitted_histories(result: FitResult, shots: Sequence[ShotData], n_points: int = 400,
-                     ) -> dict[str, pd.DataFrame]:
-    """Each shot's fitted trajectory, densely sampled over its measured span.
-
-    The fitted state at the epoch is propagated with the fitted model as the fit integrates
-    (:func:`cadra.fitting.sensitivity.predict_states`). Returns ``{shot_id: DataFrame}``
-    with columns ``t_s``, ``x_m``, ``y_m``, ``z_m`` (reference point, facility frame),
-    ``theta_deg``, ``psi_deg``, ``alpha_deg``, ``beta_deg``, ``sigma_deg``, ``mach``,
-    ``p_hat``, ``q_hat``, ``r_hat`` and the cg state ``state_0`` .. ``state_12``.
-    """
-    by_id = _shots_by_id(shots)
-    program = result.model.compile()
-    params = result.model.values()
-    out = {}
-    for sf in result.shots:
-        sd = by_id.get(sf.shot_id)
-        if sd is None:
-            raise ValueError(f"no ShotData given for shot {sf.shot_id!r} of the result")
-        t = np.linspace(float(sd.t_s[0]), float(sd.t_s[-1]), int(n_points))
-        states = predict_states(sf.state, sf.t0_s, t, sd.rigid.phys(), program, params)
-        obs = observe(states, sd.rigid.ref_from_cg_body_m())
-        air = air_angles(states, sd.rigid)
-        df = pd.DataFrame({
-            "t_s": t, "x_m": obs["x_m"], "y_m": obs["y_m"], "z_m": obs["z_m"],
-            "theta_deg": np.degrees(obs["theta_rad"]), "psi_deg": np.degrees(obs["psi_rad"]),
-            "alpha_deg": np.degrees(air["alpha_rad"]), "beta_deg": np.degrees(air["beta_rad"]),
-            "sigma_deg": np.degrees(air["sigma_rad"]), "mach": air["mach"],
-            "p_hat": air["p_hat"], "q_hat": air["q_hat"], "r_hat": air["r_hat"]})
-        for j in range(states.shape[1]):
-            df[f"state_{j}"] = states[:, j]
-        out[sf.shot_id] = df
-    return out
-
-
 def _epoch_observables(y: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    o = observe(y[None, :], ref)
-    return np.array([o["x_m"][0], o["y_m"][0], o["z_m"][0], o["theta_rad"][0], o["psi_rad"][0]])
+    return observables(y[None, :], ref)[0]
 
 
 def shot_epoch_table(result: FitResult, shots: Sequence[ShotData]) -> list[dict]:
@@ -139,12 +106,14 @@ def shot_epoch_table(result: FitResult, shots: Sequence[ShotData]) -> list[dict]
     sigmas infinite.
     """
     by_id = _shots_by_id(shots)
+    problem = result_problem(result, shots)
     rows = []
     for sf in result.shots:
         sd = by_id.get(sf.shot_id)
         if sd is None:
             raise ValueError(f"no ShotData given for shot {sf.shot_id!r} of the result")
-        ref = sd.rigid.ref_from_cg_body_m()
+        # the fit's physics (a cg-offset extra moves the reference point, a wind extra the air)
+        phys, ref = problem.physics(problem.shot_ids.index(sf.shot_id))
         y = np.asarray(sf.state, dtype=float)
         obs0 = _epoch_observables(y, ref)
         free = list(sf.local_free_indices)
@@ -163,7 +132,7 @@ def shot_epoch_table(result: FitResult, shots: Sequence[ShotData]) -> list[dict]
         inf_cols = [c for c, k in enumerate(free) if math.isinf(local_sig[k])]
         for c in inf_cols:
             sig_obs[np.abs(J[:, c]) > 1e-12] = math.inf
-        air = air_angles(y[None, :], sd.rigid)
+        air = air_angles(y[None, :], sd.rigid, phys=phys)
         deg = 180.0 / math.pi
         rms = {f"{ch}_{CHANNEL_OUTPUT_UNITS[ch][0]}": sf.rms.get(ch, math.nan)
                * CHANNEL_OUTPUT_UNITS[ch][1] for ch in CHANNELS}
@@ -470,7 +439,7 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
             v = rms.get(ch, math.nan)
             if not math.isfinite(v):
                 out.append("—")
-            elif ch in ("x", "y", "z"):
+            elif BY_NAME[ch].kind == "position":
                 out.append(f"{v * 1e6:.3g}")
             else:
                 out.append(f"{v * deg:.3g}")

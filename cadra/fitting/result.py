@@ -32,7 +32,7 @@ import pandas as pd
 from scipy import sparse
 
 from cadra.aero import AeroModel
-from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.data import CHANNELS
 from cadra.fitting.sensitivity import LOCAL_NAMES
 
 #: eigenvalue ratio (correlation form of the normal matrix) below which a direction is reported
@@ -93,6 +93,10 @@ class FitResult:
     #: ``residuals``, columns ``param_names`` (SI, radians); sparse (``scipy.sparse.csr_array``:
     #: a shot's rows touch only the shared unknowns and its own); None when the fit had none
     jacobian: sparse.csr_array | None = None
+    #: the fit's forward model at the final point (:class:`cadra.fitting.problem.FitProblem`:
+    #: the fitted model, the extras at their values, each shot's fitted state): what the
+    #: report, its plots and the gap diagnosis predict with -- the solver's own physics
+    problem: object | None = None
 
     def __bool__(self) -> bool:
         return self.status == "converged"
@@ -299,16 +303,25 @@ def _near_singular(N: np.ndarray, names: list[str], n_aero: int) -> list[dict]:
     return out
 
 
-def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, states,
-                 aero_idx: np.ndarray, status: str, message: str, history, warnings,
-                 iterations: int, t_start: float, options, lam, extras=(),
-                 extra_values=None, held_extras=()) -> FitResult:
-    """Assemble the :class:`FitResult` at the solver's final point (see module doc)."""
+def build_result(problem, params: np.ndarray, states, status: str, message: str, history,
+                 warnings, iterations: int, t_start: float, options, lam,
+                 extra_values=None) -> FitResult:
+    """Assemble the :class:`FitResult` at the solver's final point (see module doc):
+    ``problem`` is the fit's :class:`cadra.fitting.problem.FitProblem`, ``params`` the full
+    aero parameter vector, ``states`` the solver's per-shot states (final reference states,
+    predictions and Jacobians), ``extra_values`` the free extras' values."""
+    model = problem.model
+    aero_idx = problem.aero_indices
+    extras = problem.free_extras
+    held_extras = problem.held_extras
     na = aero_idx.size
     ns = na + len(extras)
     names_aero = [model.parameters[i].name for i in aero_idx]
     fitted = model.with_values({n: float(params[i]) for n, i in zip(names_aero, aero_idx,
                                                                     strict=True)})
+    extra_values = np.array(extra_values if extra_values is not None else [], dtype=float)
+    final = problem.at(params, extra_values if len(extras) else None,
+                       [st.y_nom.copy() for st in states])
     names = list(names_aero) + [e.name for e in extras]
     offsets = []
     for st in states:
@@ -407,8 +420,9 @@ def build_result(shots: list[ShotData], model: AeroModel, params: np.ndarray, st
         residuals=residuals, near_singular=tuple(near), warnings=tuple(warnings),
         elapsed_s=time.perf_counter() - t_start,
         extras=tuple(extras),
-        extra_values=np.array(extra_values if extra_values is not None else [], dtype=float),
+        extra_values=extra_values,
         extra_sigma=sig[na:ns].copy(), held_extras=tuple(held_extras), jacobian=jacobian,
+        problem=final,
         options={"max_iterations": options.max_iterations,
                  "step_tol_sigma": options.step_tol_sigma,
                  "integration": options.integration.__dict__, "final_lambda": lam})

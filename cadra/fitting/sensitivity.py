@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cadra.channels import N_CHANNELS, OBSERVED
 from cadra.dynamics.integrate import propagate_batch
 from cadra.dynamics.layout import N_STATE, P_CG_OFFSET
 from cadra.dynamics.observe import observe
@@ -96,12 +97,13 @@ def apply_local(y_nom: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def observables(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> np.ndarray:
-    """(..., 5) predicted x, y, z, theta, psi from (..., 13) states."""
+    """(..., N_CHANNELS) predicted channels (:data:`cadra.channels.OBSERVED`: x, y, z,
+    theta, psi, SI) from (..., 13) states."""
     shape = states.shape[:-1]
     with np.errstate(invalid="ignore", divide="ignore"):   # NaN states: a failed run
         o = observe(states.reshape(-1, N_STATE), ref_from_cg_body_m)
-    out = np.stack([o["x_m"], o["y_m"], o["z_m"], o["theta_rad"], o["psi_rad"]], axis=-1)
-    return out.reshape(*shape, 5)
+    out = np.stack([o[c.si_column] for c in OBSERVED], axis=-1)
+    return out.reshape(*shape, N_CHANNELS)
 
 
 def _run(Y0, t0, times, PHYS, program, PARAMS, integ: Integration) -> np.ndarray:
@@ -175,7 +177,7 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     m = local_free.size + aero_free.size + phys_dirs.shape[0]
     if m == 0:
         states = predict_states(y0, t0, times, phys, program, params, integ)
-        out = (observables(states, ref_from_cg_body_m), np.zeros((len(times), 5, 0)))
+        out = (observables(states, ref_from_cg_body_m), np.zeros((len(times), N_CHANNELS, 0)))
         return (*out, states) if with_states else out
     times = np.ascontiguousarray(times, dtype=float)
     Y0 = np.tile(np.asarray(y0, dtype=np.complex128), (m, 1))

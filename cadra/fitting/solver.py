@@ -32,16 +32,9 @@ import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.fitting.data import ShotData
-from cadra.fitting.extras import Extra, add_station_terms, shot_phys, shot_ref, station_columns
-from cadra.fitting.sensitivity import (
-    LOCAL_NAMES,
-    N_LOCAL,
-    Integration,
-    apply_local,
-    observables,
-    predict_states,
-    predict_with_jacobian,
-)
+from cadra.fitting.extras import Extra
+from cadra.fitting.problem import FitProblem, default_local_free
+from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, Integration, apply_local
 
 #: statuses of a fit; only the first counts as a result
 STATUSES = ("converged", "max_iterations", "stalled", "failed")
@@ -72,29 +65,11 @@ class _ShotState:
     y_nom: np.ndarray            # (13,) state at the epoch
     local_free: np.ndarray       # indices into LOCAL_NAMES
     t0: float
-    phys: np.ndarray
-    ref: np.ndarray
-    mask: np.ndarray             # (n, 5)
+    phys: np.ndarray             # the shot's physics with the held extras on
+    ref: np.ndarray              # its reference point from the cg, body axes
+    mask: np.ndarray             # (n, N_CHANNELS)
     pred: np.ndarray | None = None
     jac: np.ndarray | None = None
-
-
-def default_local_free(data: ShotData, model: AeroModel | None = None) -> np.ndarray:
-    """Free local unknowns of a shot (indices into :data:`LOCAL_NAMES`).
-
-    All 12, except what the data cannot see: a shot with no angle measurements (a sphere)
-    fits position and velocity only; a symmetric body (total-angle model, transverse inertia
-    equal within 1e-3, no products of inertia) does not fit its roll angle about the axis --
-    turning such a body about its axis changes no measurement.
-    """
-    if not data.has_angles:
-        return np.arange(6)
-    if model is not None and model.angle_plane == "sigma":
-        I = data.rigid.phys()[1:10].reshape(3, 3)
-        off = np.abs(I - np.diag(np.diag(I))).max()
-        if abs(I[1, 1] - I[2, 2]) <= 1e-3 * I[1, 1] and off <= 1e-3 * I[1, 1]:
-            return np.array([k for k in range(N_LOCAL) if LOCAL_NAMES[k] != "rot_x_rad"])
-    return np.arange(N_LOCAL)
 
 
 def _weighted(st: _ShotState, pred: np.ndarray) -> np.ndarray:
@@ -215,45 +190,23 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     from cadra.fitting.result import build_result
 
     t_start = time.perf_counter()
-    if len(shots) == 0:
-        raise ValueError("fit: no shots")
-    if len(initial_states) != len(shots):
-        raise ValueError("fit: one initial state per shot is needed")
-    if len({s.shot_id for s in shots}) != len(shots):
-        raise ValueError("fit: a shot is listed twice")
-    program = model.compile()
+    # the forward model: every prediction of the fit goes through it (cadra.fitting.problem)
+    problem = FitProblem(tuple(shots), model, tuple(initial_states), tuple(extras),
+                         None if local_free is None else tuple(local_free),
+                         options.integration)
     params = model.values()
-    aero_idx = model.free_indices()
-    extras = tuple(extras)
-    if len({e.name for e in extras}) != len(extras) or any(e.name in model.names
-                                                            for e in extras):
-        raise ValueError("fit: extra unknowns need names of their own")
-    held = tuple(e for e in extras if e.held)
-    extras = tuple(e for e in extras if not e.held)
-    held_values = np.array([e.value for e in held], dtype=float)
+    aero_idx = problem.aero_indices
+    extras = problem.free_extras
     xvals = np.array([e.value for e in extras], dtype=float)
     ne = len(extras)
     na = aero_idx.size
     ns = na + ne                # shared unknowns: free aero parameters, then the extras
     lo = np.array([model.parameters[i].min for i in aero_idx])
     hi = np.array([model.parameters[i].max for i in aero_idx])
-    integ = options.integration
-    states = []
-    for k, (sd, y0) in enumerate(zip(shots, initial_states, strict=True)):
-        y0 = np.asarray(y0, dtype=float)
-        if y0.shape != (13,) or not np.all(np.isfinite(y0)):
-            raise ValueError(f"fit: initial state of shot {sd.shot_id} must be 13 finite "
-                             "numbers")
-        lf = np.asarray(local_free[k] if local_free is not None
-                        else default_local_free(sd, model),
-                        dtype=int)
-        # held extras: part of the shot's nominal physics (and reference point)
-        phys0 = sd.rigid.phys()
-        phys_held = shot_phys(phys0, held, held_values, sd.shot_id)
-        states.append(_ShotState(sd, y0.copy(), lf, float(sd.t_s[sd.epoch_index]),
-                                 phys_held,
-                                 shot_ref(sd.rigid.ref_from_cg_body_m(), phys0, phys_held),
-                                 sd.mask))
+    states = [_ShotState(sd, y0.copy(), lf, t0, *problem.held_physics(k), sd.mask)
+              for k, (sd, y0, lf, t0) in enumerate(zip(problem.shots, problem.epoch_states,
+                                                       problem.local_free, problem.epochs,
+                                                       strict=True))]
     n_obs = sum(st.mask.sum() for st in states)
     n_free = ns + sum(st.local_free.size for st in states)
     warnings: list[str] = []
@@ -264,38 +217,13 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         warnings.append(message)
 
     def evaluate_jac(p, xv):
-        for st in states:
-            sid = st.data.shot_id
-            phys = shot_phys(st.phys, extras, xv, sid)
-            ref = shot_ref(st.ref, st.phys, phys)
-            on = [j for j, e in enumerate(extras) if e.is_phys and e.applies(sid)]
-            dirs = np.array([extras[j].phys_direction for j in on]) if on else None
-            pred, jac, y = predict_with_jacobian(
-                st.y_nom, st.t0, st.data.t_s, phys, program, p, ref, st.local_free,
-                aero_idx, integ, phys_dirs=dirs, with_states=True)
-            if ne:
-                base = st.local_free.size + na
-                full = np.zeros(jac.shape[:2] + (base + ne,))
-                full[:, :, :base] = jac[:, :, :base]
-                full[:, :, base + np.array(on, dtype=int)] = jac[:, :, base:]
-                C = station_columns(extras, sid, st.data.stations, pred, y)
-                full[:, :, base:] += C
-                jac = full
-                pred = pred + C @ xv
-            pred = add_station_terms(pred, held, held_values, sid, st.data.stations, y)
+        preds, jacs = problem.jacobian_from(p, xv, [st.y_nom for st in states])
+        for st, pred, jac in zip(states, preds, jacs, strict=True):
             st.pred, st.jac = pred, jac
         return _chi2(states, [st.pred for st in states])
 
     def evaluate(p, xv, ys):
-        out = []
-        for st, y0 in zip(states, ys, strict=True):
-            sid = st.data.shot_id
-            phys = shot_phys(st.phys, extras, xv, sid)
-            y = predict_states(y0, st.t0, st.data.t_s, phys, program, p, integ)
-            pred = observables(y, shot_ref(st.ref, st.phys, phys))
-            pred = add_station_terms(pred, extras, xv, sid, st.data.stations, y)
-            out.append(add_station_terms(pred, held, held_values, sid, st.data.stations, y))
-        return out
+        return problem.predict_from(p, xv, ys)
 
     history = []
     status = "failed"
@@ -310,15 +238,13 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         chi2 = evaluate_jac(params, xvals)
         if n_obs < n_free:
             history.append(chi2)
-            return build_result(shots, model, params, states, aero_idx, "failed", message,
-                                history, warnings, iterations, t_start, options, lam,
-                                extras, xvals, held)
+            return build_result(problem, params, states, "failed", message, history,
+                                warnings, iterations, t_start, options, lam, xvals)
         if not math.isfinite(chi2):
             message = ("the starting point gives a non-finite prediction (the trajectory "
                        "diverges or tumbles); better starting values are needed")
-            return build_result(shots, model, params, states, aero_idx, status, message,
-                                history, warnings, iterations, t_start, options, lam,
-                                extras, xvals, held)
+            return build_result(problem, params, states, status, message, history,
+                                warnings, iterations, t_start, options, lam, xvals)
         history.append(chi2)
         while True:
             if iterations >= options.max_iterations:
@@ -396,8 +322,8 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     finally:
         if bar is not None:
             bar.close()
-    return build_result(shots, model, params, states, aero_idx, status, message, history,
-                        warnings, iterations, t_start, options, lam, extras, xvals, held)
+    return build_result(problem, params, states, status, message, history, warnings,
+                        iterations, t_start, options, lam, xvals)
 
 
-__all__ = ["STATUSES", "FitOptions", "LOCAL_NAMES", "default_local_free", "fit"]
+__all__ = ["STATUSES", "FitOptions", "FitProblem", "LOCAL_NAMES", "default_local_free", "fit"]

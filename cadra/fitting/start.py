@@ -31,11 +31,14 @@ from scipy.optimize import least_squares, minimize
 from cadra.aero import AeroModel
 from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
 from cadra.dynamics.setup import state_from_reference
-from cadra.fitting.data import ShotData
-from cadra.fitting.sensitivity import Integration, predict
+from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.problem import FitProblem
+from cadra.fitting.sensitivity import Integration
 
 #: roll angles (deg) tried for a shot whose roll the images do not show
 ROLL_GRID_DEG = tuple(range(0, 360, 30))
+#: the axis-inclination channels (columns of ``ShotData.meas``)
+_THETA, _PSI = CHANNELS.index("theta"), CHANNELS.index("psi")
 
 
 @dataclass(frozen=True)
@@ -148,14 +151,14 @@ def estimate_motion(shot: ShotData) -> MotionEstimate:
     sig_mean = sig_rms = 0.0
     if shot.has_angles:
         t = shot.t_s
-        wp, lp, _ = _damped_sine(t, shot.meas[:, 3])
-        wy, ly, _ = _damped_sine(t, shot.meas[:, 4])
+        wp, lp, _ = _damped_sine(t, shot.meas[:, _THETA])
+        wy, ly, _ = _damped_sine(t, shot.meas[:, _PSI])
         # total angle: between the measured axis and the local flight direction
         sig = []
         tt = t - t[shot.epoch_index]
         dpos = [np.polyder(_polyfit(tt, shot.meas[:, j], 2)) for j in range(3)]
         for i in range(len(t)):
-            th, ps = shot.meas[i, 3], shot.meas[i, 4]
+            th, ps = shot.meas[i, _THETA], shot.meas[i, _PSI]
             if not (np.isfinite(th) and np.isfinite(ps)):
                 continue
             a = axis_from_inclinations(th, ps)
@@ -270,7 +273,7 @@ def _axis_and_rate(shot: ShotData):
     tt = t[lo:hi] - t[k]
     axes = []
     for i in range(lo, hi):
-        th, ps = shot.meas[i, 3], shot.meas[i, 4]
+        th, ps = shot.meas[i, _THETA], shot.meas[i, _PSI]
         axes.append(axis_from_inclinations(th, ps) if np.isfinite(th) and np.isfinite(ps)
                     else np.full(3, np.nan))
     axes = np.array(axes)
@@ -310,15 +313,13 @@ def initial_state(shot: ShotData, model: AeroModel,
     cands = state_candidates(shot)
     if len(cands) == 1:
         return cands[0]
-    program = model.compile()
+    # the fit's forward model (cadra.fitting.problem), as the solver will predict
+    problem = FitProblem((shot,), model, (cands[0],), integration=integ)
     params = model.values()
-    phys = shot.rigid.phys()
-    ref = shot.rigid.ref_from_cg_body_m()
-    t0 = shot.t_s[shot.epoch_index]
     best, best_chi2 = cands[0], math.inf
     mask = shot.mask
     for y in cands:
-        pred = predict(y, t0, shot.t_s, phys, program, params, ref, integ)
+        pred = problem.predict_from(params, np.zeros(0), [y])[0]
         r = ((shot.meas - pred) / shot.sigma)[mask]
         chi2 = float(r @ r) if np.all(np.isfinite(r)) else math.inf
         if chi2 < best_chi2:

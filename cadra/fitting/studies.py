@@ -35,16 +35,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 
 from cadra.aero import AeroModel, load_bundled_model
+from cadra.channels import OBSERVED
 from cadra.conventions import axis_from_inclinations
 from cadra.dynamics.observe import air_angles, observe
 from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.problem import FitProblem, result_problem
 from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import Integration, predict_states
+from cadra.fitting.sensitivity import Integration
 from cadra.fitting.solver import FitOptions, fit
 
 #: an initial-state source: per-shot (13,) states, or ``f(shot, model) -> (13,) state``
@@ -56,8 +59,8 @@ LINE_P_THRESHOLD = 0.05
 #: cg offset from the symmetry axis (m) above which a body counts as lifting
 LIFTING_CG_OFFSET_M = 1e-6
 
-_CHANNEL_SCALE = {"x": (1.0, "m"), "y": (1.0, "m"), "z": (1.0, "m"),
-                  "theta": (180.0 / math.pi, "deg"), "psi": (180.0 / math.pi, "deg")}
+#: channel -> (display scale from SI, display unit), from the channel registry
+_CHANNEL_SCALE = {c.name: (c.display_scale, c.display_unit) for c in OBSERVED}
 
 
 # --------------------------------------------------------------------------- helpers
@@ -102,33 +105,45 @@ def _alpha_centre(model: AeroModel) -> float:
 
 def fitted_states(shot: ShotData, model: AeroModel, state: np.ndarray, t0_s: float,
                   times_s: np.ndarray | None = None,
-                  integration: Integration | None = None) -> np.ndarray:
+                  integration: Integration | None = None, extras: Sequence = ()
+                  ) -> np.ndarray:
     """(n, 13) states of the trajectory through ``state`` at ``t0_s`` (a fitted shot's
-    :class:`cadra.fitting.result.ShotFit` ``state``/``t0_s``) with ``model``'s values, at
-    ``times_s`` (any order; default: the shot's spark times), integrated as the fitter
-    integrates (:func:`cadra.fitting.sensitivity.predict_states`). (The fixed-step
+    :class:`cadra.fitting.result.ShotFit` ``state``/``t0_s``: the shot's epoch) with
+    ``model``'s values and the fit's ``extras`` (physics extras on at their values), at
+    ``times_s`` (any order; default: the shot's spark times), predicted by the fit's forward
+    model (:class:`cadra.fitting.problem.FitProblem`). (The fixed-step
     :func:`cadra.dynamics.setup.propagate_states` at the simulator's 25 us truth step is off by
     up to 2e-5 deg on M1-2366 at the kinks of Table 4's max(...) C_mq; the adaptive run agrees
     with a 1 us fixed-step run to 2e-7 deg.)
     """
-    times = shot.t_s if times_s is None else times_s
-    return predict_states(state, t0_s, times, shot.rigid.phys(), model.compile(),
-                          model.values(), integration)
+    problem = _problem(shot, model, state, t0_s, integration, extras)
+    return problem.states_of(0, times=shot.t_s if times_s is None else times_s)
 
 
-def aero_angle_history(shot: ShotData, states: np.ndarray) -> dict[str, np.ndarray]:
+def _problem(shot, model, state, t0_s, integration, extras) -> FitProblem:
+    if float(t0_s) != float(shot.t_s[shot.epoch_index]):
+        raise ValueError(f"{shot.shot_id}: t0_s = {t0_s} s is not the shot's epoch "
+                         f"({shot.t_s[shot.epoch_index]} s, its middle station)")
+    return FitProblem((shot,), model, (np.asarray(state, dtype=float),), tuple(extras),
+                      integration=integration or Integration())
+
+
+def aero_angle_history(shot: ShotData, states: np.ndarray,
+                       phys: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Aerodynamic angles (rad) and Mach number along (n, 13) states of ``shot``
-    (:func:`cadra.dynamics.observe.air_angles`): ``alpha``, ``beta``, ``sigma``, ``mach`` and
-    ``air_dir_F`` (n, 3) unit air-relative velocity in F.
+    (:func:`cadra.dynamics.observe.air_angles`; ``phys``: the physics the states were
+    integrated with, a fit's wind extras included): ``alpha``, ``beta``, ``sigma``, ``mach``
+    and ``air_dir_F`` (n, 3) unit air-relative velocity in F.
     """
-    a = air_angles(states, shot.rigid)
+    a = air_angles(states, shot.rigid, phys=phys)
     return {"alpha": a["alpha_rad"], "beta": a["beta_rad"], "sigma": a["sigma_rad"],
             "mach": a["mach"], "air_dir_F": a["air_dir_F"]}
 
 
 def amplitude_measures(shot: ShotData, model: AeroModel, state: np.ndarray, t0_s: float, *,
                        samples: int | None = None,
-                       integration: Integration | None = None) -> dict[str, float]:
+                       integration: Integration | None = None,
+                       extras: Sequence = ()) -> dict[str, float]:
     """A shot's amplitude measures along the trajectory fitted to it.
 
     Parameters
@@ -141,6 +156,8 @@ def amplitude_measures(shot: ShotData, model: AeroModel, state: np.ndarray, t0_s
         an integer: that many equally spaced times from the first to the last station (an
         rms over the motion rather than over the sparks).
     integration : integrator settings (:func:`fitted_states`).
+    extras : the fit's extras (:meth:`cadra.fitting.result.FitResult.extras_at_values`):
+        their physics flies the trajectory.
 
     Returns
     -------
@@ -159,10 +176,11 @@ def amplitude_measures(shot: ShotData, model: AeroModel, state: np.ndarray, t0_s
     """
     times = shot.t_s if samples is None else np.linspace(shot.t_s[0], shot.t_s[-1],
                                                           int(samples))
-    states = fitted_states(shot, model, state, t0_s, times, integration)
+    problem = _problem(shot, model, state, t0_s, integration, extras)
+    states = problem.states_of(0, times=times)
     if not np.all(np.isfinite(states)):
         return dict.fromkeys(_AMPLITUDE_KEYS, math.nan)
-    h = aero_angle_history(shot, states)
+    h = aero_angle_history(shot, states, problem.physics(0)[0])
     a, b, s = (np.degrees(h[k]) for k in ("alpha", "beta", "sigma"))
     ac = math.degrees(_alpha_centre(model))
     return {
@@ -191,17 +209,22 @@ def sigma_residual_rms_deg(result: FitResult, shots: Sequence[ShotData],
     each station; the experimental one takes the measured nose axis (from theta, psi), the
     calculated one the fitted axis. NaN when no shot has angle measurements.
     """
+    problem = result_problem(result, shots)
+    if integration is not None:
+        problem = replace(problem, integration=integration)
+    theta, psi = CHANNELS.index("theta"), CHANNELS.index("psi")
     diffs = []
-    for sd, sf in zip(shots, result.shots, strict=True):
+    for k, sd in enumerate(problem.shots):
         if not sd.has_angles:
             continue
-        states = fitted_states(sd, result.model, sf.state, sf.t0_s, None, integration)
+        states = problem.states_of(k)
         if not np.all(np.isfinite(states)):
             return math.nan
-        e_v = aero_angle_history(sd, states)["air_dir_F"]
-        axis_fit = observe(states, sd.rigid.ref_from_cg_body_m())["axis"]
+        phys, ref = problem.physics(k)
+        e_v = aero_angle_history(sd, states, phys)["air_dir_F"]
+        axis_fit = observe(states, ref)["axis"]
         for i in range(len(sd.t_s)):
-            th, ps = sd.meas[i, 3], sd.meas[i, 4]
+            th, ps = sd.meas[i, theta], sd.meas[i, psi]
             if not (np.isfinite(th) and np.isfinite(ps)):
                 continue
             a_meas = axis_from_inclinations(th, ps)
@@ -275,7 +298,8 @@ def single_fit(shot: ShotData, model: AeroModel, initial_state: np.ndarray | Non
     row.update(_parameter_columns(res))
     row.update(_rms_columns(sf.rms))
     row.update(amplitude_measures(shot, res.model, sf.state, sf.t0_s, samples=samples,
-                                  integration=options.integration))
+                                  integration=options.integration,
+                                  extras=res.extras_at_values()))
     return row
 
 

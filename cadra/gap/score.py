@@ -33,7 +33,8 @@ from scipy import stats
 
 from cadra.aero import AeroModel
 from cadra.fitting.data import ShotData
-from cadra.fitting.extras import Extra, shot_phys, shot_ref, station_columns
+from cadra.fitting.extras import Extra, station_columns
+from cadra.fitting.problem import result_problem
 from cadra.fitting.profile import profile_parameter
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import (
@@ -66,44 +67,34 @@ def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candi
              integ: Integration):
     """Per shot: weighted residual, the fit's Jacobian (locals, free aero parameters, the
     fit's extras) and each candidate's columns (unweighted rows masked, divided by sigma).
-    A dynamics candidate has its parameters per shot: its columns for other shots are 0."""
-    fitted = result.model
-    program = fitted.compile()
+    A dynamics candidate has its parameters per shot: its columns for other shots are 0.
+    Predictions and the fit's columns come from the fit's own forward model
+    (:func:`cadra.fitting.problem.result_problem`, held extras included), integrated with
+    ``integ``; a dynamics candidate's columns are further complex-step runs of the same
+    call."""
+    problem = replace(result_problem(result, shots), integration=integ)
+    fitted = problem.model
     params = fitted.values()
-    aero_free = fitted.free_indices()
-    ids = [sf.shot_id for sf in result.shots]
-    fit_extras = tuple(result.extras)
-    xv = np.asarray(result.extra_values, dtype=float)
+    ids = list(problem.shot_ids)
+    xv = np.array([e.value for e in problem.free_extras], dtype=float)
     phys_cands = [c for c in cands if c.kind == "dynamics"]
     aero_cands = [c for c in cands if c.kind == "aero"]
     meas_cands = [c for c in cands if c.kind == "measurement"]
-    by_id = {s.shot_id: s for s in shots}
+    more = [np.concatenate([c.phys_dirs for c in phys_cands]) if phys_cands else None
+            for _ in ids]
+    preds, jacs, sts = problem.jacobian_from(params, xv, list(problem.epoch_states),
+                                             extra_phys_dirs=more, with_states=True)
     out = []
-    for k_shot, sf in enumerate(result.shots):
-        sd = by_id[sf.shot_id]
+    for k_shot, sd in enumerate(problem.shots):
         sid = sd.shot_id
-        local = sf.local_free_indices
-        phys0 = sd.rigid.phys()
-        ref0 = sd.rigid.ref_from_cg_body_m()
-        phys = shot_phys(phys0, fit_extras, xv, sid)
-        ref = shot_ref(ref0, phys0, phys)
-        on = [j for j, e in enumerate(fit_extras) if e.is_phys and e.applies(sid)]
-        dirs = [fit_extras[j].phys_direction for j in on]
-        for c in phys_cands:
-            dirs += list(c.phys_dirs)
-        pred, J, states = predict_with_jacobian(
-            sf.state, sf.t0_s, sd.t_s, phys, program, params, ref, local, aero_free, integ,
-            phys_dirs=np.array(dirs) if dirs else None, with_states=True)
-        n_base = local.size + aero_free.size
-        # the fit's own extras: physics columns from the runs, station columns analytic
-        Jx = np.zeros(J.shape[:2] + (len(fit_extras),))
-        Jx[:, :, on] = J[:, :, n_base:n_base + len(on)]
-        Cx = station_columns(fit_extras, sid, sd.stations, pred, states)
-        Jx += Cx
-        pred = pred + Cx @ xv
-        Jfit = np.concatenate([J[:, :, :n_base], Jx], axis=2)
+        sf = result.shots[k_shot]
+        local = problem.local_free[k_shot]
+        pred, J, states = preds[k_shot], jacs[k_shot], sts[k_shot]
+        n_fit = local.size + problem.n_shared
+        Jfit = J[:, :, :n_fit]
+        phys, ref = problem.physics(k_shot, xv)
         cols = {}
-        at = n_base + len(on)
+        at = n_fit
         for c in phys_cands:
             k = c.phys_dirs.shape[0]
             C = np.zeros(J.shape[:2] + (len(_param_names(c, ids)),))
@@ -114,8 +105,9 @@ def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candi
         for c in aero_cands:
             aug = augmented_model(fitted, c)
             idx = [aug.index(n) for n in c.params]
-            _, Ja = predict_with_jacobian(sf.state, sf.t0_s, sd.t_s, phys, aug.compile(),
-                                          aug.values(), ref, [], idx, integ)
+            _, Ja = predict_with_jacobian(problem.epoch_states[k_shot], problem.epochs[k_shot],
+                                          sd.t_s, phys, aug.compile(), aug.values(), ref, [],
+                                          idx, integ)
             cols[c.name] = Ja
         for c in meas_cands:
             cols[c.name] = station_columns(_extras(c, ids), sid, sd.stations, pred, states)

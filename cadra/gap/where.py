@@ -30,10 +30,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from cadra.dynamics.observe import observe
-from cadra.fitting.data import ShotData
+from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import predict_states
 
 #: p-value below which a "where" test is reported as significant (before the one-page
 #: summary's own multiplicity note)
@@ -92,25 +91,38 @@ def _dominant_frequency(t: np.ndarray, y: np.ndarray) -> float:
     return float(f[k]) if f[k] * (t[-1] - t[0]) >= 1.0 else math.nan
 
 
+def fitted_channels(result: FitResult, shots: Sequence[ShotData] | None = None, *,
+                    times=None, n_points: int = 512) -> dict[str, np.ndarray]:
+    """Per shot, the fitted (n, N_CHANNELS) channels the where-tests analyse (reference
+    point and axis inclinations, SI), predicted by the fit's own forward model
+    (:func:`cadra.fitting.problem.result_problem`: the fitted model with every effect the
+    fit used) at ``times`` (one array for every shot, or ``{shot_id: array}``; default
+    ``n_points`` equally spaced over each shot's stations)."""
+    problem = result_problem(result, shots)
+    if times is None:
+        times = {sd.shot_id: np.linspace(sd.t_s.min(), sd.t_s.max(), n_points)
+                 for sd in problem.shots}
+    return {sd.shot_id: h["channels"]
+            for sd, h in zip(problem.shots, problem.histories(times=times), strict=True)}
+
+
 def motion_frequencies(result: FitResult, shots: Sequence[ShotData]) -> dict:
     """Per shot: {"pitch": Hz, "yaw": Hz, "roll": Hz} of the fitted motion (dense fitted
-    theta / psi histories; roll from the fitted roll rate; NaN for a motion with less than
-    one cycle over the record)."""
-    by_id = {s.shot_id: s for s in shots}
-    program = result.model.compile()
-    params = result.model.values()
+    theta / psi histories of the fit's forward model; roll from the fitted roll rate; NaN
+    for a motion with less than one cycle over the record)."""
+    problem = result_problem(result, shots)
+    theta, psi = CHANNELS.index("theta"), CHANNELS.index("psi")
     out = {}
-    for sf in result.shots:
-        sd = by_id[sf.shot_id]
+    for k, sd in enumerate(problem.shots):
         if not sd.has_angles:
-            out[sf.shot_id] = {"pitch": math.nan, "yaw": math.nan, "roll": math.nan}
+            out[sd.shot_id] = {"pitch": math.nan, "yaw": math.nan, "roll": math.nan}
             continue
         t = np.linspace(sd.t_s.min(), sd.t_s.max(), 512)
-        y = predict_states(sf.state, sf.t0_s, t, sd.rigid.phys(), program, params)
-        o = observe(y, sd.rigid.ref_from_cg_body_m())
+        h = problem.histories(times={sd.shot_id: t})[k]
+        y, o = h["states"], h["channels"]
         f_roll = abs(float(np.median(y[:, 10]))) / (2 * math.pi)
-        out[sf.shot_id] = {"pitch": _dominant_frequency(t, o["theta_rad"]),
-                           "yaw": _dominant_frequency(t, o["psi_rad"]),
+        out[sd.shot_id] = {"pitch": _dominant_frequency(t, o[:, theta]),
+                           "yaw": _dominant_frequency(t, o[:, psi]),
                            # under one turn over the record: no roll frequency to test
                            "roll": f_roll if f_roll * (t[-1] - t[0]) >= 1.0 else math.nan}
     return out
@@ -238,5 +250,5 @@ def findings(tables: dict) -> list[str]:
 
 
 __all__ = ["ALPHA", "by_group", "cross_shot", "findings", "frequency_content",
-           "motion_frequencies", "runs_test", "sequence_tests", "stage_one_consistency",
-           "where_analysis"]
+           "fitted_channels", "motion_frequencies", "runs_test", "sequence_tests",
+           "stage_one_consistency", "where_analysis"]
