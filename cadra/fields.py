@@ -146,6 +146,10 @@ class Fields:
         if not isinstance(value, int | np.integer) or isinstance(value, bool):
             raise self.fail(key, f"expected an integer, got {value!r}")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
+            if hi is None:
+                raise self.fail(key, f"must be >= {lo}, got {value!r}")
+            if lo is None:
+                raise self.fail(key, f"must be <= {hi}, got {value!r}")
             raise self.fail(key, f"{value!r} outside [{lo}, {hi}]")
         return int(value)
 

@@ -364,3 +364,63 @@ def test_file_units_and_model_from_dict(tmp_path):
     with pytest.raises(ValueError, match="not valid TOML"):
         (tmp_path / "broken.toml").write_text("name = ")
         load_model(tmp_path / "broken.toml")
+
+
+# --- one resolver of model names ---------------------------------------------------------------
+
+
+def test_bundled_name_resolves_to_the_bundled_file():
+    from cadra.aero import MODELS_DIR, resolve_model, resolve_model_path
+
+    assert resolve_model_path("m2_m070") == MODELS_DIR / "m2_m070.toml"
+    model = resolve_model("m2_m070")
+    assert model == load_model(MODELS_DIR / "m2_m070.toml") == load_bundled_model("m2_m070")
+    assert model.parameter("alpha_ref").value == math.radians(21.21)  # Table 4, printed
+
+
+def test_a_path_is_a_path_never_the_bundled_model_of_its_stem(tmp_path, monkeypatch):
+    """A name with a directory part or a suffix is a file path; if the file is not there the
+    bundled model of the same stem must not be loaded silently."""
+    from cadra.aero import ModelNotFoundError, is_model_path, resolve_model
+
+    monkeypatch.chdir(tmp_path)
+    for name in ("no_such_dir/m2_m070.toml", "no_such_dir/m2_m070", "m2_m070.toml",
+                 "./m2_m070", tmp_path / "m2_m070"):
+        assert is_model_path(name)
+        with pytest.raises(ModelNotFoundError) as exc:
+            resolve_model(name)
+        msg = str(exc.value)
+        assert msg.startswith(f"aero model file '{name}' not found (looked at ")
+        assert "the bundled model 'm2_m070' is named without a directory or suffix" in msg
+        assert isinstance(exc.value, KeyError) and isinstance(exc.value, ValueError)
+    assert not is_model_path("m2_m070")
+    with pytest.raises(ModelNotFoundError, match=r"^no bundled aero model 'm2_m07' \(bundled: "
+                                                 r"cone_linear, linear_template_alpha_beta"):
+        resolve_model("m2_m07")
+    with pytest.raises(KeyError, match="is a path, not a bundled model name"):
+        load_bundled_model("models/m2_m070")
+
+
+def test_a_local_file_with_a_bundled_stem_is_that_file(tmp_path, monkeypatch):
+    from cadra.aero import resolve_model
+
+    local = load_bundled_model("m2_m070").with_values({"Cnr_A1": 0.5})
+    (tmp_path / "models").mkdir()
+    save_model(local, tmp_path / "models" / "m2_m070.toml")
+    monkeypatch.chdir(tmp_path)
+    assert resolve_model("models/m2_m070.toml").parameter("Cnr_A1").value == 0.5
+    assert resolve_model("m2_m070").parameter("Cnr_A1").value == 0.810   # the bundled one
+    # relative paths are tried against base_dir first (a spec's folder), then the cwd
+    other = tmp_path / "spec_dir"
+    (other / "models").mkdir(parents=True)
+    save_model(local.with_values({"Cnr_A1": 0.25}), other / "models" / "m2_m070.toml")
+    assert resolve_model("models/m2_m070.toml", base_dir=other).parameter("Cnr_A1").value \
+        == 0.25
+    assert resolve_model("models/m2_m070.toml", base_dir=tmp_path / "nowhere"
+                         ).parameter("Cnr_A1").value == 0.5
+
+
+def test_parameter_to_si_uses_the_file_unit():
+    p = Parameter("alpha_ref", math.radians(20.0), unit="deg")
+    assert p.to_si(21.21) == math.radians(21.21)
+    assert Parameter("Cm_A1", -0.15).to_si(-0.1532) == -0.1532

@@ -6,15 +6,15 @@ import tomllib
 import numpy as np
 import pytest
 
-from cadra.facility import (
+from cadra.facility import fit_affine_to_wires, nominal_image_to_plane
+from cadra.facility.reference import REPO_ROOT, default_hffaf_text
+from cadra.io.facility_file import (
     FacilityFileError,
     UnsupportedProjectionError,
     facility_from_dict,
-    fit_affine_to_wires,
     load_facility,
-    nominal_image_to_plane,
+    write_default_facility,
 )
-from cadra.facility.reference import REPO_ROOT, default_hffaf_text
 
 FAC = load_facility("hffaf")
 RAW = tomllib.loads((REPO_ROOT / "facilities" / "hffaf.toml").read_text())
@@ -249,3 +249,35 @@ def test_frozen_and_read_only():
         view.wires[0].p0_m[0] = 1.0
     with pytest.raises(AttributeError):
         view.scale_m_per_px = 1.0
+
+
+def test_the_file_format_lives_in_cadra_io_and_stays_importable_from_cadra_facility():
+    import cadra.facility
+    import cadra.facility.reference
+    from cadra.io import facility_file
+
+    for name in ("FacilityFileError", "UnsupportedProjectionError", "facility_from_dict",
+                 "load_facility", "resolve_facility_path"):
+        assert getattr(cadra.facility, name) is getattr(facility_file, name)
+        assert getattr(cadra.facility.reference, name) is getattr(facility_file, name)
+    with pytest.raises(AttributeError):
+        cadra.facility.reference.no_such_name  # noqa: B018
+
+
+def test_write_default_facility_reproduces_the_committed_file(tmp_path):
+    path = write_default_facility(tmp_path / "hffaf.toml")
+    assert path.read_text() == (REPO_ROOT / "facilities" / "hffaf.toml").read_text()
+    with pytest.raises(FileExistsError):
+        write_default_facility(path)
+
+
+def test_load_errors_name_file_and_key_path(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(default_hffaf_text().replace("diameter_m = 0.00025 }", "diameter_m = 0.5 }",
+                                                1))
+    with pytest.raises(FacilityFileError) as exc:
+        load_facility(bad)
+    assert str(exc.value) == (f"{bad}: stations[0].views.top.wires[0].diameter_m: 0.5 is "
+                              f"implausibly large (> 0.005; check the unit)")
+    with pytest.raises(FileNotFoundError, match=r"no_such\.toml: cannot read"):
+        load_facility(tmp_path / "no_such.toml")

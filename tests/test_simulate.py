@@ -405,3 +405,63 @@ def test_per_image_truth_reports_what_the_biased_image_shows(tmp_path):
             r_F = r_F + b
         # truth.csv and truth_images.csv carry 12 significant digits (~1e-11 m, 1e-9 px)
         assert np.abs(ab - r_F[list(view.axes)]).max() < 1e-9
+
+
+# --------------------------------------------------------------------------- spec file
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["launch"].update(theta_dg=1.0), "launch.theta_dg: unknown key"),
+    (lambda d: d["launch"].update(theta_rad=0.1), "launch.theta_rad: 'theta' is given twice"),
+    (lambda d: d["launch"].update(q_deg_s="40"), "launch.q_deg_s: expected a number"),
+    (lambda d: d.update(mass={"y_cg_mm": 1.0}), "mass.y_cg_mm: unknown key"),
+    (lambda d: d.update(mass={"x_cg_from_ref_cm": 0.1, "x_cg_from_base_cm": 1.0}),
+     "mass.x_cg_from_ref_cm: give x_cg_from_base_cm or x_cg_from_ref_cm, not both"),
+    (lambda d: d.update(trigger={"offset_m": 0.004}), "trigger.offset_m: unknown key"),
+    (lambda d: d.update(film={"shift": 4.0}), "film.shift: unknown key"),
+    (lambda d: d.update(range={"pressure_torr": "340"}), "range.pressure_torr: expected a number"),
+    (lambda d: d.update(seed004_shot=1), "seed004_shot: no shot 1 in Tables 2/3"),
+    (lambda d: d.update(n_stations=0), "n_stations: must be >= 1, got 0"),
+    (lambda d: d.update(aero_model=""), "aero_model: expected a bundled name"),
+])
+def test_spec_keys_are_checked_in_every_table(change, message):
+    data = spec_dict("m2_2429")
+    change(data)
+    with pytest.raises(SpecError) as exc:
+        spec_from_dict(data)
+    assert str(exc.value).startswith(message)
+
+
+def test_spec_units_through_the_table():
+    """Launch angles and rates in degrees arrive in radians exactly as the standard library
+    converts them; the seed-004 row fills what the spec does not give (Table 3: V = 236.3)."""
+    spec = load_shot_spec(SPECS / "m2_2429.toml")
+    la = spec.launch
+    assert (la.theta_rad, la.psi_rad, la.roll_rad) == (np.radians(-19.70), np.radians(0.60),
+                                                        np.radians(180.0))
+    assert (la.q_rad_s, la.r_rad_s) == (np.radians(40.0), np.radians(-25.0))
+    assert la.speed_m_s == 236.3 and la.x_m == -0.5
+    assert spec.pressure_pa == 340.1 * 101325.0 / 760.0
+    data = spec_dict("m2_2429")
+    data["launch"] = {"x_cm": -50.0, "speed_m_s": 236.3, "theta_rad": -0.25}
+    la = spec_from_dict(data).launch
+    assert (la.x_m, la.theta_rad) == (-0.5, -0.25)
+
+
+def test_a_spec_model_path_never_falls_back_to_the_bundled_model(tmp_path):
+    """aero_model = "no_such_dir/m2_m070.toml" is a file that is not there: refused, although
+    a bundled model m2_m070 exists; the same path relative to the spec's folder is found."""
+    data = spec_dict("m2_2429", n_stations=2, aero_model="no_such_dir/m2_m070.toml")
+    spec_path = tmp_path / "spec.toml"
+    import tomli_w
+
+    spec_path.write_text(tomli_w.dumps(data))
+    with pytest.raises(SpecError, match=r"^aero_model: aero model file "
+                                        r"'no_such_dir/m2_m070\.toml' not found"):
+        simulate_shot(load_shot_spec(spec_path))
+    from cadra.aero import load_bundled_model, save_model
+
+    (tmp_path / "no_such_dir").mkdir()
+    save_model(load_bundled_model("m2_m070").with_values({"Cnr_A1": 0.5}),
+               tmp_path / "no_such_dir" / "m2_m070.toml")
+    assert simulate_shot(load_shot_spec(spec_path)).model.parameter("Cnr_A1").value == 0.5
