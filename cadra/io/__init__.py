@@ -1,12 +1,21 @@
-"""File boundaries: shot files, unit conversions, atomic writes, seed-004 tables.
+"""File boundaries: every file format of CADRA and its validation, unit conversions, atomic
+writes, seed-004 tables.
 
 Submodules (import what you need; none imports a heavy dependency at package import):
 
-* :mod:`cadra.io.units` -- torr/Pa, cm/m, g/kg, g cm^2/kg m^2, deg/rad: the one place where
-  file units meet SI;
+* :mod:`cadra.io.units` -- the unit table (:mod:`cadra.units`): torr/Pa, cm/m, g/kg,
+  g cm^2/kg m^2, deg/rad ...: the one place where file units meet SI;
+* :mod:`cadra.io.toml_file` -- the shared TOML helpers: ``read_toml`` (errors name the file),
+  ``Fields`` (typed getters naming the key path), ``prefixed_by``, ``write_toml`` (atomic);
 * :mod:`cadra.io.atomic` -- ``atomic_write_text``, ``atomic_write_bytes``,
   ``atomic_output_dir``;
 * :mod:`cadra.io.shotfile` -- ``load_shot``, ``save_shot``, ``ShotFile`` (docs/shot_file.md);
+* :mod:`cadra.io.facility_file` -- ``load_facility``, ``FacilityFileError``
+  (docs/facility_file.md);
+* :mod:`cadra.io.spec_file` -- ``load_shot_spec``, ``ShotSpec``, ``SpecError``
+  (docs/simulation.md);
+* :mod:`cadra.io.shot_check` -- ``check_shot``: a shot's files and images before stage one;
+* :mod:`cadra.io.trajectory` -- stage one's trajectory files;
 * :mod:`cadra.io.seed004` -- ``load_seed004_table`` (seed 004 Tables 2 and 3).
 """
 
