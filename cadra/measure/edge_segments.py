@@ -45,6 +45,9 @@ class Outline:
 
 
 def outline_geometry(poly: np.ndarray, corner_clear_px: float) -> Outline:
+    """Per-edge geometry of the pixel outline ``poly`` (N, 2): normals, vertex curvature,
+    flats, arc length and the sharp corners (turn > :data:`CORNER_TURN_RAD`, or curvature
+    > :data:`MAX_EDGE_CURVATURE`) that stage A keeps clear of."""
     d = np.roll(poly, -1, axis=0) - poly
     ell = np.hypot(d[:, 0], d[:, 1])
     keep = ell > 1e-9
@@ -459,7 +462,14 @@ def _segment_geometry(d, k, K, w, L, D, delta, s, e, t, normal, p0, dv, kap_px):
 
 
 def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
-             noise_coef=None):
+            noise_coef=None) -> EdgeSegments | None:
+    """Stage A at one trial outline: every usable segment's edge offset with its variance.
+
+    ``img`` float (H, W); ``geo`` the outline (:func:`outline_geometry`); ``settings`` the
+    :class:`cadra.measure.silhouette_lsq.FitSettings`; ``exclude`` True on pixels not to use;
+    ``profile0`` the starting edge profile ``(s0, a0, s4, a4)``; ``noise_coef`` a previous
+    noise model (a warm start: fewer rounds). None when fewer than 8 segments are usable.
+    """
     lin, d, e, t = band_pixels(geo, settings.band_px, img.shape)
     if len(lin) == 0:
         return None
