@@ -98,11 +98,10 @@ _REFUSED = (ValueError, KeyError, FileNotFoundError)
 
 
 def _fit(args) -> int:
-    import tomli_w
-
     from cadra.calibration.bias_table import correct_by_bias_table
     from cadra.fitting import FitOptions, fit_shots
     from cadra.fitting.report import write_fit_outputs
+    from cadra.io.toml_file import toml_text
 
     out = Path(args.output)
     try:
@@ -118,10 +117,10 @@ def _fit(args) -> int:
     except _REFUSED as exc:
         return _refused("fit", exc)
     config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
-    extra = {"model_fitted.toml": "# CADRA aerodynamic model (docs/aero_models.md): the fitted "
-                                  "values, written by cadra2 fit\n"
-                                  + tomli_w.dumps(result.model.to_dict()),
-             "config.toml": "# cadra2 fit: the command's settings\n" + tomli_w.dumps(config)}
+    extra = {"model_fitted.toml": toml_text(result.model.to_dict(), "CADRA aerodynamic model "
+                                            "(docs/aero_models.md): the fitted values, written "
+                                            "by cadra2 fit"),
+             "config.toml": toml_text(config, "cadra2 fit: the command's settings")}
     write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
                       start_model=start, extra_files=extra, notes=notes)
     _print_summary(result)

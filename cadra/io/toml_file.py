@@ -13,20 +13,24 @@ from cadra.fields import Fields, prefixed_by, read_toml
 from cadra.io.atomic import atomic_write_text
 
 
-def write_toml(path: str | os.PathLike, data: Mapping, *, header: str = "",
-               overwrite: bool = False) -> Path:
-    """Write ``data`` (``tomli_w``) with an optional comment ``header``, atomically
-    (:func:`cadra.io.atomic.atomic_write_text`); an existing file is refused
-    (:class:`FileExistsError`) unless ``overwrite``."""
+def toml_text(data: Mapping, header: str = "") -> str:
+    """TOML text of ``data`` (``tomli_w``), after ``header`` as comment lines (``# ...``)."""
     import tomli_w
 
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; refusing to overwrite (pass overwrite=True)")
     text = tomli_w.dumps(dict(data))
     if header:
         text = "".join(f"# {line}\n" if line else "#\n" for line in header.split("\n")) + text
-    return atomic_write_text(path, text, overwrite=overwrite)
+    return text
 
 
-__all__ = ["Fields", "prefixed_by", "read_toml", "write_toml"]
+def write_toml(path: str | os.PathLike, data: Mapping, *, header: str = "",
+               overwrite: bool = False) -> Path:
+    """Write :func:`toml_text` of ``data`` atomically (:func:`cadra.io.atomic.atomic_write_text`);
+    an existing file is refused (:class:`FileExistsError`) unless ``overwrite``."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; refusing to overwrite (pass overwrite=True)")
+    return atomic_write_text(path, toml_text(data, header), overwrite=overwrite)
+
+
+__all__ = ["Fields", "prefixed_by", "read_toml", "toml_text", "write_toml"]
