@@ -321,3 +321,29 @@ def test_calibrate_refusals(shots, sphere_trajectories, capsys):
     assert main(["calibrate", *trajs, "-o", str(out), "--stations-root", str(root)]) == 1
     assert "line" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_trajectory_and_shot_from_a_folder_or_a_file(shots, tmp_path):
+    """Stage one's folder stands for its trajectory.csv; the shot file is the one the
+    trajectory names unless given; what is missing is said."""
+    import shutil
+
+    from cadra.fitting import FitDataError
+    from cadra.fitting.inputs import load_shots, trajectory_and_shot
+
+    sim, shot_file, traj = shots["m2_2429"]
+    folder = tmp_path / "cadra1"
+    folder.mkdir()
+    shutil.copyfile(traj, folder / "trajectory.csv")
+    assert trajectory_and_shot(folder) == (folder / "trajectory.csv", shot_file.resolve())
+    assert trajectory_and_shot(traj, "other.toml") == (traj, Path("other.toml"))
+    with pytest.raises(FitDataError, match=r"empty: no trajectory file \(give stage one's "
+                                           r"trajectory\.csv"):
+        (tmp_path / "empty").mkdir()
+        trajectory_and_shot(tmp_path / "empty")
+    data, paths = load_shots([folder], min_sigma_angle_deg=90.0)
+    assert paths == [folder / "trajectory.csv"] and data[0].shot_id == "M2-2429"
+    # the angle floor arrives in radians: every angle sigma is at least pi/2
+    assert np.all(data[0].sigma[:, 3:] >= math.radians(90.0))
+    with pytest.raises(ValueError, match="one --shot per trajectory"):
+        load_shots([folder, traj], [shot_file])
