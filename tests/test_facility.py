@@ -251,19 +251,6 @@ def test_frozen_and_read_only():
         view.scale_m_per_px = 1.0
 
 
-def test_the_file_format_lives_in_cadra_io_and_stays_importable_from_cadra_facility():
-    import cadra.facility
-    import cadra.facility.reference
-    from cadra.io import facility_file
-
-    for name in ("FacilityFileError", "UnsupportedProjectionError", "facility_from_dict",
-                 "load_facility", "resolve_facility_path"):
-        assert getattr(cadra.facility, name) is getattr(facility_file, name)
-        assert getattr(cadra.facility.reference, name) is getattr(facility_file, name)
-    with pytest.raises(AttributeError):
-        cadra.facility.reference.no_such_name  # noqa: B018
-
-
 def test_write_default_facility_reproduces_the_committed_file(tmp_path):
     path = write_default_facility(tmp_path / "hffaf.toml")
     assert path.read_text() == (REPO_ROOT / "facilities" / "hffaf.toml").read_text()

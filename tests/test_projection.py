@@ -118,7 +118,7 @@ def test_ray_intersection_of_oblique_views_recovers_the_point():
 
 def test_view_optics_equals_the_view_maps():
     """View.optics() is the view's own plane/pixel maps (the projection is the one source)."""
-    from cadra.facility import load_facility
+    from cadra.io.facility_file import load_facility
 
     view = load_facility("hffaf").view(3, "side")
     proj = view.optics()

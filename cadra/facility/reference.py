@@ -30,25 +30,7 @@ VIEW_AXES = {"top": (0, 1), "side": (0, 2)}
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
-#: The file format (reading, validation, errors) lives in :mod:`cadra.io.facility_file`;
-#: these names stay importable from here.
-#: Transition shim, to be deleted: it is this package's one import of cadra.io, which the import
-#: contract "the numerical core imports no formats" (pyproject.toml) refuses. It stays while
-#: cadra/measure/shot.py, cadra/measure/station.py, tests/test_wires.py and
-#: tests/test_projection.py import these names from here rather than cadra.io.facility_file.
-_FILE_FORMAT_NAMES = (
-    "BIT_DEPTHS", "MIN_WIRES", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED",
-    "FacilityFileError", "UnsupportedProjectionError", "facility_from_dict", "load_facility",
-    "resolve_facility_path", "write_default_facility",
-)
-
-
-def __getattr__(name: str):
-    if name in _FILE_FORMAT_NAMES:  # imported late: the file format imports this module
-        from cadra.io import facility_file
-
-        return getattr(facility_file, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+#: The file format (reading, validation, errors) is :mod:`cadra.io.facility_file`.
 
 
 # --------------------------------------------------------------------------- affine helpers

@@ -113,7 +113,7 @@ class ShotFile:
         ``{"kind": "capsule", "preset": "M2", "d_cm": 3.556}``).
     mass : :class:`MassProperties` (SI, model axes).
     pressure_pa, temperature_k : range air.
-    facility : facility reference-file name or path (``cadra.facility.load_facility``).
+    facility : facility reference-file name or path (:func:`cadra.io.facility_file.load_facility`).
     stations : per-station records, in increasing station id.
     notes : free text.
     source_path : the file this was read from (None if built in memory).

@@ -119,8 +119,7 @@ def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None
     """
     import time
 
-    from cadra.facility import load_facility
-    from cadra.facility.reference import resolve_facility_path
+    from cadra.io.facility_file import load_facility, resolve_facility_path
     from cadra.io.shotfile import load_shot
 
     t0 = time.perf_counter()

@@ -201,7 +201,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
     """
     import time
 
-    from cadra.facility import load_facility
+    from cadra.io.facility_file import load_facility
 
     settings = FitSettings() if settings is None else settings
     body = _body(body_spec)
