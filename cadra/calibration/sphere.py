@@ -146,7 +146,7 @@ def check_sphere_shot(shot: ShotData) -> None:
     if shot.body_kind != "sphere":
         raise CalibrationError(f"{shot.shot_id} is a {shot.body_kind} shot: the sphere check "
                                "needs sphere calibration shots (point-mass aerodynamics)")
-    n = int(np.isfinite(shot.meas[:, :3]).all(axis=1).sum())
+    n = int(np.isfinite(shot.meas[:, POSITION]).all(axis=1).sum())
     if n < MIN_STATIONS:
         raise CalibrationError(f"{shot.shot_id}: {n} stations with a position; the sphere "
                                f"check needs at least {MIN_STATIONS}")
@@ -185,7 +185,7 @@ def _corrected(shots, designs, beta):
     out = []
     for s, D in zip(shots, designs, strict=True):
         meas = s.meas.copy()
-        meas[:, :3] -= D @ beta
+        meas[:, POSITION] -= D @ beta
         out.append(replace(s, meas=meas))
     return out
 

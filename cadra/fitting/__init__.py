@@ -4,6 +4,7 @@ Public API:
 
 - :class:`ShotData`, :func:`load_shot_data`, :func:`shot_data_from_truth` -- the measurements;
 - :func:`fit` (the solver), :class:`FitOptions`, :class:`Integration`, :class:`FitResult`;
+- :class:`FitProblem` (the forward model behind every prediction), :func:`result_problem`;
 - :func:`starting_model`, :func:`initial_states` -- linear-theory starting values;
 - :func:`fit_shots` -- starting values + fit in one call (what ``cadra2 fit`` runs).
 """
@@ -26,6 +27,7 @@ from cadra.fitting.data import (
     load_shot_data,
     shot_data_from_truth,
 )
+from cadra.fitting.problem import FitProblem, result_problem
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
 from cadra.fitting.solver import FitOptions, fit
@@ -83,5 +85,6 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
 
 
 __all__ = ["CHANNELS", "FILM_SIGMAS", "LOCAL_NAMES", "FitDataError", "FitOptions",
-           "FitResult", "Integration", "ShotData", "estimate_motion", "fit", "fit_shots",
-           "initial_states", "load_shot_data", "shot_data_from_truth", "starting_model"]
+           "FitProblem", "FitResult", "Integration", "ShotData", "estimate_motion", "fit",
+           "fit_shots", "initial_states", "load_shot_data", "result_problem",
+           "shot_data_from_truth", "starting_model"]

@@ -20,8 +20,8 @@ Every consumer -- the solver (:func:`cadra.fitting.solver.fit`), the report's hi
 (:func:`cadra.fitting.histories.fitted_histories`), the gap's scores and where-tests
 (:mod:`cadra.gap`), the sphere calibration and the studies -- predicts through this object,
 so none can integrate a model other than the one fitted (lmfit's ``Model.eval``). A
-:class:`cadra.fitting.result.FitResult` rebuilds its problem at the fitted point with
-:meth:`FitResult.problem`.
+:class:`cadra.fitting.result.FitResult` carries its problem at the fitted point
+(``result.problem``; :func:`result_problem` rebuilds it for a result without one).
 
 Picklable (a frozen dataclass of arrays, the model and frozen extras): a campaign can ship it
 to workers. Numerics: exactly the solver's (same calls, same order of the floating-point

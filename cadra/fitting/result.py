@@ -26,6 +26,7 @@ import math
 import re
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -34,6 +35,9 @@ from scipy import sparse
 from cadra.aero import AeroModel
 from cadra.fitting.data import CHANNELS
 from cadra.fitting.sensitivity import LOCAL_NAMES
+
+if TYPE_CHECKING:
+    from cadra.fitting.problem import FitProblem
 
 #: eigenvalue ratio (correlation form of the normal matrix) below which a direction is reported
 #: as not determined by the data
@@ -96,7 +100,7 @@ class FitResult:
     #: the fit's forward model at the final point (:class:`cadra.fitting.problem.FitProblem`:
     #: the fitted model, the extras at their values, each shot's fitted state): what the
     #: report, its plots and the gap diagnosis predict with -- the solver's own physics
-    problem: object | None = None
+    problem: FitProblem | None = None
 
     def __bool__(self) -> bool:
         return self.status == "converged"

@@ -32,6 +32,7 @@ import pandas as pd
 from scipy import stats
 
 from cadra.aero import AeroModel
+from cadra.channels import POSITION
 from cadra.fitting.data import ShotData
 from cadra.fitting.extras import Extra, station_columns
 from cadra.fitting.problem import result_problem
@@ -410,7 +411,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     shots = list(shots)
     ids = [sf.shot_id for sf in result.shots]
     stations = sorted({int(st) for s in shots for st in s.stations})
-    mach = float(np.mean([np.median(np.linalg.norm(np.diff(s.meas[:, :3], axis=0), axis=1)
+    mach = float(np.mean([np.median(np.linalg.norm(np.diff(s.meas[:, POSITION], axis=0), axis=1)
                                     / np.diff(s.t_s)) / s.rigid.speed_of_sound_m_s
                           for s in shots]))
     cands = list(candidates) if candidates is not None else library(model, stations, mach)
