@@ -153,3 +153,25 @@ def test_problem_reproduces_the_fit_and_pickles(fitted):
     back = pickle.loads(pickle.dumps(prob))
     np.testing.assert_array_equal(back.predict()[0], pred)
     assert len(r) == pred[sd.mask].size
+
+
+def test_station_terms_are_in_the_prediction_not_in_the_trajectory(fitted):
+    """A held station bias (a measurement term) moves the predicted y at its station by
+    exactly its value and nothing else; the trajectory (histories) does not see it."""
+    res, sd = fitted
+    prob = res.problem
+    biased = replace(prob, extras=prob.extras + (
+        Extra("st6_y", station=6, measure="position_y", value=1e-5, held=True),))
+    d = biased.predict()[0] - prob.predict()[0]
+    i6 = int(np.flatnonzero(sd.stations == 6)[0])
+    expected = np.zeros_like(d)
+    expected[i6, CHANNEL_ORDER.index("y")] = 1e-5
+    np.testing.assert_allclose(d, expected, rtol=0, atol=1e-15)
+    h0 = prob.histories(times=sd.t_s)[0]["channels"]
+    h1 = biased.histories(times=sd.t_s)[0]["channels"]
+    np.testing.assert_array_equal(h0, h1)
+    # layout: the free extras sit between the aero parameters and the locals
+    lay = prob.layout()
+    names = prob.param_names
+    assert [names[i] for i in range(lay["extras"].start, lay["extras"].stop)] == ["cg_y", "cg_z"]
+    assert names[lay["locals"]["M2-2429"].start] == "M2-2429:x_cg_m"
