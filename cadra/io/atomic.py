@@ -4,16 +4,169 @@ Every writer in CADRA validates first and writes last, through these helpers: th
 temporary file (or directory) beside the target, are flushed to disk, and are moved into place
 with :func:`os.replace`, which is atomic on POSIX and Windows for a path on the same file
 system. Existing outputs are refused unless ``overwrite=True``.
+
+Inputs are never destroyed: :func:`check_output_dir` is the one guard every command runs
+before it writes; it refuses (:class:`UnsafeOutputError`) an output folder that is, or holds,
+one of the command's inputs, the current working folder or one of its parents, or an
+existing file — links and ``..`` resolved first.
+
+Temporary siblings are named ``.NAME.cadra-PID@HOST-XXXXXXXX.tmp`` (and ``.old`` for the
+previous output while it is swapped out), so a run killed before its cleanup (SIGKILL, power
+loss) leaves something recognisable: the next run that writes the same output removes the
+siblings whose creating process is gone (same host, PID no longer running) —
+:func:`clean_stale_temps` — and leaves every other file alone. A ``.old`` folder whose output
+is missing (killed in the middle of the swap) is moved back into place, not deleted.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
+import socket
+import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+
+
+class UnsafeOutputError(ValueError):
+    """An output path that would destroy an input, the working folder or a file."""
+
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname())[:32] or "host"
+
+
+def _temp_prefix(path: Path) -> str:
+    """The prefix of this process's temporary siblings of ``path``."""
+    return f".{path.name}.cadra-{os.getpid()}@{_host()}-"
+
+
+def _stale_pattern(path: Path) -> re.Pattern:
+    return re.compile(rf"\.{re.escape(path.name)}\.cadra-(?P<pid>\d+)@(?P<host>[A-Za-z0-9-]+)"
+                      r"-[A-Za-z0-9_]{6,}\.(?P<kind>tmp|old)")
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie counts as gone; unknown counts as alive)."""
+    if pid == os.getpid():
+        return True
+    if sys.platform == "win32":  # os.kill would terminate it: never guess there
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    try:  # Linux: a killed child nobody has waited for yet is a zombie
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return stat.rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def stale_temps(path: str | os.PathLike) -> list[Path]:
+    """CADRA's temporary siblings of ``path`` left by a process of this host that is gone."""
+    path = Path(path)
+    pattern, host = _stale_pattern(path), _host()
+    found = []
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return []
+    for entry in entries:
+        if not entry.name.startswith(f".{path.name}.cadra-"):
+            continue
+        m = pattern.fullmatch(entry.name)
+        if m and m["host"] == host and not _alive(int(m["pid"])):
+            found.append(path.parent / entry.name)
+    return sorted(found)
+
+
+def clean_stale_temps(path: str | os.PathLike) -> list[Path]:
+    """Remove the stale temporary siblings of ``path`` (:func:`stale_temps`); return them.
+
+    A stale ``.old`` folder holding the previous output (``.../d``) while ``path`` is missing
+    is moved back to ``path`` first: the run was killed between its two renames.
+    """
+    path = Path(path)
+    removed = []
+    for stale in stale_temps(path):
+        try:
+            if stale.is_dir() and not stale.is_symlink():
+                if stale.name.endswith(".old") and (stale / "d").exists() \
+                        and not os.path.lexists(path):
+                    os.replace(stale / "d", path)
+                shutil.rmtree(stale)
+            else:
+                stale.unlink()
+        except FileNotFoundError:  # another run cleaned it first
+            pass
+        removed.append(stale)
+    return removed
+
+
+def _spelled(given: str | os.PathLike, resolved: Path) -> str:
+    """``given``, followed by its resolved form when that reads differently."""
+    return f"{given}" if Path(os.path.abspath(given)) == resolved else f"{given} (= {resolved})"
+
+
+def _input_forms(p: Path) -> set[Path]:
+    """Where an input lives: its target and, for a link, the link itself."""
+    forms = {p.resolve()}
+    absolute = Path(os.path.abspath(p))
+    if absolute.name:
+        forms.add(absolute.parent.resolve() / absolute.name)
+    return forms
+
+
+def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (), *,
+                     cwd: str | os.PathLike | None = None) -> Path:
+    """Refuse an output folder that writing (with or without overwrite) would destroy.
+
+    Refused, with :class:`UnsafeOutputError` (a ``ValueError``) naming the output and the
+    culprit: an output that *is* an input (file or folder), *holds* an input at any depth, is
+    the current working folder or one of its parents, the file system's root, or an existing
+    file. Links and ``..`` are resolved first (:meth:`pathlib.Path.resolve`), so another
+    spelling of the same folder is caught; an input reached through a link counts under both
+    the link's folder and the target's. A new output folder *inside* an input folder is fine.
+
+    Parameters
+    ----------
+    out : the output folder the command will write (atomically).
+    inputs : every file or folder the command reads.
+    cwd : the working folder (default: the process's).
+
+    Returns
+    -------
+    The resolved output path.
+    """
+    out_r = Path(out).resolve()
+    here = Path(os.getcwd() if cwd is None else cwd).resolve()
+    shown = _spelled(out, out_r)
+    if not out_r.name:
+        raise UnsafeOutputError(f"output {shown} is the file system's root; choose another")
+    if out_r == here:
+        raise UnsafeOutputError(f"output {shown} is the current working folder; choose a "
+                                "new folder (inputs are never overwritten)")
+    if out_r in here.parents:
+        raise UnsafeOutputError(f"output {shown} holds the current working folder {here}; "
+                                "choose a new folder")
+    for p in inputs:
+        for form in _input_forms(Path(p)):
+            if form == out_r:
+                raise UnsafeOutputError(f"output {shown} is the input {p}; choose a new "
+                                        "folder (inputs are never overwritten)")
+            if out_r in form.parents:
+                raise UnsafeOutputError(f"output {shown} holds the input {p}; choose a new "
+                                        "folder (inputs are never overwritten)")
+    if out_r.exists() and not out_r.is_dir():
+        raise UnsafeOutputError(f"output {shown} is an existing file, not a folder; choose "
+                                "a new folder")
+    return out_r
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = False) -> Path:
@@ -35,7 +188,8 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = F
     if path.is_dir():
         raise IsADirectoryError(f"{path} is a directory")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    clean_stale_temps(path)
+    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
@@ -74,18 +228,26 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
     overwrite : replace an existing directory at the end (default: refuse up front with
         :class:`FileExistsError`). The old directory is removed only after the new one is
         complete.
+
+    The path is resolved first (a link to a folder replaces the folder, the link stays); the
+    current working folder, its parents and an existing file are refused
+    (:func:`check_output_dir`, which commands call with their inputs before they start).
+    Stale temporary siblings of killed runs are removed first (:func:`clean_stale_temps`).
     """
-    path = Path(path)
+    given = path
+    path = check_output_dir(path)
     if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; refusing to overwrite (pass overwrite=True)")
+        raise FileExistsError(f"{given} exists; refusing to overwrite (pass overwrite=True)")
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    clean_stale_temps(path)
+    tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
     try:
         yield tmp
         if path.exists():
             if not overwrite:
-                raise FileExistsError(f"{path} exists; refusing to overwrite")
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+                raise FileExistsError(f"{given} exists; refusing to overwrite")
+            old = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".old",
+                                        dir=path.parent))
             os.replace(path, old / "d")  # move aside, then swap in, then delete the old one
             try:
                 os.replace(tmp, path)
@@ -100,4 +262,5 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
         raise
 
 
-__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["UnsafeOutputError", "atomic_output_dir", "atomic_write_bytes", "atomic_write_text",
+           "check_output_dir", "clean_stale_temps", "stale_temps"]
