@@ -5,8 +5,10 @@ measured by :func:`cadra.measure.station.measure_station` (pure, picklable), in 
 available cores (a process pool; ``workers=1`` runs in-process), with a progress bar. Outputs go
 to a temporary sibling directory moved into place at the end (:func:`cadra.io.atomic.
 atomic_output_dir`): an interrupted or failed run leaves nothing behind, an existing output
-directory is never overwritten unless asked, and an output directory that holds the inputs is
-refused.
+directory is never overwritten unless asked, and an output directory that is or holds an input
+(shot file, facility file, images; links resolved) is refused
+(:func:`cadra.io.atomic.check_output_dir`). The pool's workers ignore Ctrl-C (the parent
+handles it) and die with the parent, even a SIGKILLed one (:func:`_worker_init`).
 
 Output directory::
 
@@ -21,7 +23,6 @@ from __future__ import annotations
 
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -96,15 +97,45 @@ def quality_rows(results) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _check_out_dir(out_dir: Path, inputs: list[Path]) -> None:
-    out = out_dir.resolve()
-    for p in inputs:
+def _watch_parent(parent_pid: int, period_s: float = 0.5) -> None:
+    """Exit this process (a pool worker) as soon as its parent is gone."""
+    import time
+
+    while True:
+        time.sleep(period_s)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+
+def _worker_init(parent_pid: int) -> None:
+    """Pool worker set-up: die with the parent, leave Ctrl-C to the parent.
+
+    On Linux the kernel sends the worker SIGKILL when its parent dies
+    (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread polls :func:`os.getppid`. So a
+    killed ``cadra1`` (SIGKILL included) leaves no orphan blocked on the pool's pipe. SIGINT is
+    ignored here: a terminal's Ctrl-C reaches the whole process group, and the parent alone
+    handles it (it terminates the pool and exits with status 130).
+    """
+    import signal
+    import sys
+    import threading
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    armed = False
+    if sys.platform.startswith("linux"):
         try:
-            p.resolve().relative_to(out)
-        except ValueError:
-            continue
-        raise ValueError(f"output directory {out_dir} would hold the input {p}; "
-                         f"choose another (inputs are never overwritten)")
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            pr_set_pdeathsig = 1
+            armed = libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if os.getppid() != parent_pid:  # the parent died before the death signal was armed
+        os._exit(1)
+    if not armed:
+        threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True,
+                         name="cadra-parent-watch").start()
 
 
 def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
@@ -127,7 +158,7 @@ def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None
     facility_path = str(resolve_facility_path(shot.facility))
     facility = load_facility(facility_path)
     known = set(facility.station_ids)
-    tasks, inputs = [], [Path(shot_path)]
+    tasks, inputs = [], [Path(shot_path), Path(facility_path)]
     for rec in shot.stations:
         if rec.station not in known:
             raise ValueError(f"shot {shot.shot_id}: station {rec.station} is not in facility "
@@ -136,8 +167,10 @@ def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None
         inputs += [Path(p) for p in paths.values()]
         tasks.append((rec.station, paths, dict(shot.model), facility_path, overlays))
     if out_dir is not None:
+        from cadra.io.atomic import check_output_dir
+
         out_dir = Path(out_dir)
-        _check_out_dir(out_dir, inputs)
+        check_output_dir(out_dir, inputs)  # inputs are never overwritten (UnsafeOutputError)
         if out_dir.exists() and not overwrite:
             raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use --overwrite)")
     workers = (os.cpu_count() or 1) if workers is None else max(int(workers), 1)
@@ -161,8 +194,10 @@ def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None
             # kernels instead of importing them again (seconds per worker otherwise)
             method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
             ctx = mp.get_context(method)
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-                for res in pool.map(_task, tasks):
+            # leaving the block (done, failed or interrupted) terminates the workers at once;
+            # each worker also dies with this process (_worker_init)
+            with ctx.Pool(workers, initializer=_worker_init, initargs=(os.getpid(),)) as pool:
+                for res in pool.imap(_task, tasks):
                     results.append(res)
                     if bar is not None:
                         bar.update()
