@@ -9,7 +9,9 @@
 
 Exit status: 0 all stations measured, 1 some station failed (the others are still measured
 and written), 2 the shot could not be processed at all (bad shot or facility file, output
-directory exists, usage error).
+directory exists, an output that is or holds an input — shot file, facility file, image,
+truth table — or the working folder, usage error), 130 interrupted (Ctrl-C: one line, no
+traceback, nothing written).
 """
 
 from __future__ import annotations
@@ -21,6 +23,15 @@ from cadra.io.shot_check import check_shot
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``cadra1`` console script (module doc); returns the exit status."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("cadra1: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     parser = argparse.ArgumentParser(
         prog="cadra1",
         description="Stage one: measure the model's position and attitude in every station's "
@@ -51,11 +62,14 @@ def main(argv: list[str] | None = None) -> int:
 
     import pandas as pd
 
+    from cadra.io.atomic import check_output_dir
     from cadra.measure.shot import measure_shot
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
-    truth = pd.read_csv(args.truth) if args.truth else None
     try:
+        # the shot's own inputs (facility file, images) are checked by measure_shot
+        check_output_dir(out, [args.shot_file] + ([args.truth] if args.truth else []))
+        truth = pd.read_csv(args.truth) if args.truth else None
         res = measure_shot(args.shot_file, out, workers=args.workers, progress=not args.quiet,
                            overlays=not args.no_overlays, overwrite=args.overwrite,
                            truth=truth)

@@ -23,8 +23,13 @@ Subcommands:
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 
-Exit status: 0 success, 1 the input was refused (message names the key) or the fit did not
-converge (its best point is still written, marked as not converged), 2 usage error.
+Exit status: 0 success, 1 the input was refused (message names the key), the output folder
+would destroy an input (it is or holds one of the command's inputs — trajectory files and
+their folders, shot files and their images, facility, model, spec or bias-table files, the
+station history — or the working folder, or is an existing file; links and ``..`` resolved;
+message names both; with or without ``--overwrite``) or the fit did not converge (its best
+point is still written, marked as not converged), 2 usage error, 130 interrupted (Ctrl-C: one
+line, no traceback, nothing written).
 """
 
 from __future__ import annotations
@@ -41,6 +46,52 @@ def _exists(out: Path, args, command: str) -> bool:
               file=sys.stderr)
         return True
     return False
+
+
+def _input_paths(args) -> list[Path]:
+    """Every file and folder the command reads, for the output guard (best effort: an input
+    that cannot be read here is reported by the command itself, before it writes)."""
+    from contextlib import suppress
+
+    from cadra.io.facility_file import resolve_facility_path
+    from cadra.io.shotfile import load_shot
+
+    paths: list[Path] = []
+    readable = (ValueError, KeyError, OSError)
+
+    def facility(name: str) -> None:
+        with suppress(*readable):
+            paths.append(Path(resolve_facility_path(name)))
+
+    if args.command == "simulate":
+        from cadra.synthetic.simulate import load_shot_spec
+
+        paths.append(Path(args.spec))
+        with suppress(*readable):
+            spec = load_shot_spec(args.spec)
+            facility(spec.facility)
+            if Path(spec.aero_model).exists():
+                paths.append(Path(spec.aero_model))
+        return paths
+    from cadra.fitting.inputs import trajectory_and_shot
+
+    given = args.shot or []
+    paths += [Path(p) for p in (*args.trajectories, *given)]
+    for k, item in enumerate(args.trajectories):
+        with suppress(*readable):
+            traj, shot_path = trajectory_and_shot(item, given[k] if k < len(given) else None)
+            paths += [traj, shot_path]
+            shot = load_shot(shot_path)
+            paths += [shot.image_path(rec.station, view)
+                      for rec in shot.stations for view in rec.images]
+            facility(shot.facility)
+    for name in ("model", "bias_table"):
+        value = getattr(args, name, None)
+        if value and Path(value).exists():
+            paths.append(Path(value))
+    if getattr(args, "stations_root", None):  # the station history (calibrate, fit)
+        paths.append(Path(args.stations_root) / "stations")
+    return paths
 
 
 def _refused(command: str, exc: Exception) -> int:
@@ -359,8 +410,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The ``cadra2`` console script (module doc); returns the exit status."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("cadra2: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
+    from cadra.io.atomic import UnsafeOutputError, check_output_dir
+
     args = build_parser().parse_args(argv)
-    if _exists(Path(args.output), args, args.command):  # every command writes one folder
+    try:  # every command writes one folder, never over its inputs
+        check_output_dir(args.output, _input_paths(args))
+    except UnsafeOutputError as exc:
+        print(f"cadra2 {args.command}: {exc}", file=sys.stderr)
+        return 1
+    if _exists(Path(args.output), args, args.command):
         return 1
     return args.func(args)
 
