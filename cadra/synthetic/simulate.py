@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -319,6 +318,7 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
     so an interrupted or failed run leaves nothing behind; an existing ``out_dir`` is refused
     unless ``overwrite``.
     """
+    from cadra.io.atomic import atomic_output_dir
     from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, save_shot
     from cadra.synthetic.render import write_image
     from cadra.synthetic.render_config import RenderConfig
@@ -326,9 +326,7 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use overwrite=True)")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         records = []
         image_truth = []
         render_config = RenderConfig.from_dict({"seed": shot.spec.seed, **shot.spec.render})
@@ -372,12 +370,6 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
                                              float_format="%.12g")
         if shot.spec.source_path:
             shutil.copyfile(shot.spec.source_path, tmp / "spec.toml")
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        os.replace(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir
 
 
