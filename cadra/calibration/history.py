@@ -1,37 +1,43 @@
 """Per-facility station bias history: an append-only record of sphere-calibration bias tables.
 
-A :class:`BiasTable` is what a calibration estimated for each station of one facility: the
-position bias (x, y, z in m, facility frame F, docs/conventions.md: what the station *adds* to
-the measured position of the model's reference point) and the spark-time error (s), each with
-its 1-sigma. The history of a facility is ``<root>/stations/<facility>/bias_history.jsonl``:
-one JSON object per line, appended and never rewritten (docs/calibration.md, "Station
-history"). A plain bias table for one fit (``cadra2 fit --bias-table FILE``) is a CSV with units
-in the column names (:func:`save_bias_table`, :func:`load_bias_table`).
+The history of a facility is ``<root>/stations/<facility>/bias_history.jsonl``: one JSON
+object per line, one :class:`~cadra.calibration.table.BiasTable` each (the table, its canonical
+JSON and its CSV live in :mod:`cadra.calibration.table`; re-exported here), appended and never
+rewritten (docs/calibration.md, "Station history"). ``<root>`` is :func:`stations_root`: the
+repository root unless the user names another (never the working directory by default).
 
 The history file is the record a facility keeps for years, so every read checks it fully:
 
 * each line carries the SHA-256 of its canonical JSON (:func:`canonical_json`); a line whose
   hash does not match, or that is not JSON, is an error naming the line (never skipped);
 * an entry naming another facility is refused, naming both;
-* an append interrupted midway (power cut, full disk) leaves at most a partial *last* line,
-  which :func:`load_history` reports as a warning and skips. The next append starts a new line
-  (the fragment's bytes stay in place, never rewritten) and records the fragment's line number,
-  length and SHA-256 in the new entry (``after_fragment``); a later read accepts that fragment
-  only because the entry after it vouches for exactly those bytes.
+* an append interrupted midway (power cut, killed process) leaves at most a partial *last*
+  line, which :func:`load_history` reports as a warning and skips. The next append starts a
+  new line (the fragment's bytes stay in place, never rewritten) and records the fragment's
+  line number, length and SHA-256 in the new entry (``after_fragment``); a later read accepts
+  that fragment only because the entry after it vouches for exactly those bytes.
+
+Appends are serialised by a lock file beside the history (``bias_history.jsonl.lock``,
+`filelock`): :func:`append_compared` reads, dates, compares and appends under it, so
+concurrent calibrations each compare with every earlier entry and are recorded in one order.
+A write that fails (a full disk) is cut back off: the file is left as it was.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from datetime import timedelta
 from pathlib import Path
 from statistics import NormalDist
 
 import numpy as np
 import pandas as pd
+from filelock import FileLock, Timeout
 
 from cadra.calibration.table import (
     BIAS_COLUMNS,
@@ -56,11 +62,43 @@ from cadra.calibration.table import (
     table_sha256,
     utc_now,
 )
+from cadra.facility.reference import REPO_ROOT
 
 #: history file name inside ``stations/<facility>/``
 HISTORY_FILENAME = "bias_history.jsonl"
+#: environment variable naming the stations root (the directory holding ``stations/``)
+STATIONS_ROOT_ENV = "CADRA_STATIONS_ROOT"
+#: seconds an append waits for another process's lock on the history before giving up
+LOCK_TIMEOUT_S = 120.0
 
 # --------------------------------------------------------------------------- history file
+
+
+def stations_root(root: str | os.PathLike | None = None) -> Path:
+    """The directory holding ``stations/``, never the working directory unless asked for.
+
+    ``root`` if given (``"."`` is the working directory, by choice); else the environment
+    variable ``CADRA_STATIONS_ROOT``; else the repository root, the folder holding
+    ``facilities/`` (where a bare facility name such as ``hffaf`` resolves first,
+    :func:`cadra.io.facility_file.resolve_facility_path`), so a facility's file and its station
+    history sit side by side whatever folder a command runs in. docs/calibration.md, "Where
+    the history lives".
+
+    Raises
+    ------
+    StationHistoryError : none of the three applies (an installed package without its
+        ``facilities/`` folder): the message says to name the root.
+    """
+    if root is not None and str(root) != "":
+        return Path(root)
+    env = os.environ.get(STATIONS_ROOT_ENV, "")
+    if env:
+        return Path(env)
+    if (REPO_ROOT / "facilities").is_dir():
+        return REPO_ROOT
+    raise StationHistoryError(f"no station history location: {REPO_ROOT / 'facilities'} does "
+                              f"not exist (an installed package); name the directory that "
+                              f"holds stations/ with --stations-root or {STATIONS_ROOT_ENV}")
 
 
 def history_dir(root: str | os.PathLike | None, facility: str) -> Path:
@@ -68,12 +106,12 @@ def history_dir(root: str | os.PathLike | None, facility: str) -> Path:
 
     Parameters
     ----------
-    root : the directory holding ``stations/`` (the repository or working directory root);
-        None means the current working directory.
+    root : the directory holding ``stations/``; None means the default of
+        :func:`stations_root` (``$CADRA_STATIONS_ROOT``, else the repository root).
     facility : facility name, e.g. ``"hffaf"``.
     """
     _check_facility_name(facility)
-    return (Path.cwd() if root is None else Path(root)) / "stations" / facility
+    return stations_root(root) / "stations" / facility
 
 
 def history_path(root: str | os.PathLike | None, facility: str) -> Path:
@@ -212,32 +250,88 @@ def load_history(stations_root: str | os.PathLike | None,
 
 
 @contextlib.contextmanager
-def _locked(fh):
+def _history_lock(path: Path, timeout_s: float):
+    """Hold ``<history>.lock`` (filelock: ``flock`` on POSIX, ``msvcrt`` on Windows) while the
+    history is read, compared and appended; every append takes it, so two appends never
+    interleave and each sees the entries before it. Readers do not take it (a read during an
+    append sees at most a partial last line, which it skips with a warning)."""
+    new_dir = not path.parent.exists()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if new_dir:
+        _fsync_dir(path.parent.parent)
+    lock = FileLock(f"{path}.lock", timeout=timeout_s)
     try:
-        import fcntl
-    except ImportError:  # pragma: no cover - Windows: single-writer by convention
-        yield
-        return
-    fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        lock.acquire()
+    except Timeout:
+        raise TimeoutError(errno.ETIMEDOUT, f"{path}: the history's lock ({path.name}.lock) "
+                           f"was held by another process for {timeout_s:g} s; nothing was "
+                           f"appended") from None
     try:
         yield
     finally:
-        fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+        lock.release()
 
 
-def append_entry(table: BiasTable, stations_root: str | os.PathLike | None) -> Path:
-    """Append ``table`` to ``<stations_root>/stations/<facility>/bias_history.jsonl``.
+def _write_all(fd: int, data: bytes) -> None:
+    """``os.write`` until all of ``data`` is written (the seam a full-disk test replaces)."""
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
 
-    The existing file is verified first (:func:`load_history`; any error refuses the append
-    and nothing is written). The new line (with its SHA-256) is written in one ``write`` call
-    in append mode, flushed and fsynced; the file is never rewritten. After a partial last
-    line (an interrupted write) the new entry starts on a new line and records the fragment
-    (``after_fragment``: line, bytes, sha256) so later reads accept it.
+
+def _write_entry(path: Path, table: BiasTable, s: _Scan) -> int:
+    """Append the entry line for ``table`` to ``path`` (scanned as ``s`` under the lock) and
+    fsync it; on any failure cut the file back to its old length, so it is left as it was.
+    Returns the entry's number (1-based)."""
+    d = _entry_dict(table)
+    if s.fragment is not None:
+        d["after_fragment"] = s.fragment
+    line = canonical_json({**d, "sha256": _sha256(canonical_json(d))})
+    payload = (b"" if s.terminated else b"\n") + line.encode("ascii") + b"\n"
+    existed = path.exists()
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_BINARY", 0),
+                 0o666)
+    try:
+        size = os.fstat(fd).st_size
+        if size != s.size:
+            raise StationHistoryError(f"{path}: changed while locked ({s.size} -> {size} "
+                                      f"bytes: a writer that ignores {path.name}.lock?); "
+                                      f"nothing appended")
+        try:
+            _write_all(fd, payload)
+            os.fsync(fd)
+        except BaseException:
+            with contextlib.suppress(OSError):   # leave the file exactly as it was
+                os.ftruncate(fd, size)
+                os.fsync(fd)
+                if not existed:
+                    os.unlink(path)
+            raise
+    finally:
+        os.close(fd)
+    if size == 0:
+        _fsync_dir(path.parent)
+    return len(s.tables) + 1
+
+
+def append_entry(table: BiasTable, stations_root: str | os.PathLike | None, *,
+                 timeout_s: float = LOCK_TIMEOUT_S) -> Path:
+    """Append ``table``, as dated, to ``<stations_root>/stations/<facility>/bias_history.jsonl``.
+
+    Under the history's lock (:data:`LOCK_TIMEOUT_S`) the existing file is verified
+    (:func:`load_history`; any error refuses the append and nothing is written), then the new
+    line (with its SHA-256) is appended and fsynced; a failed write (a full disk) is cut back
+    off, leaving the file as it was. After a partial last line left by an interrupted process
+    the new entry starts on a new line and records the fragment (``after_fragment``: line,
+    bytes, sha256) so later reads accept it. A calibration records its estimate with
+    :func:`append_compared`, which dates it under the lock; this function keeps the table's
+    own date and so refuses a table older than the latest entry.
 
     Parameters
     ----------
     table : the bias table; its ``facility`` chooses the history.
-    stations_root : the directory holding ``stations/`` (see :func:`history_dir`).
+    stations_root : the directory holding ``stations/`` (see :func:`stations_root`).
+    timeout_s : how long to wait for another append's lock.
 
     Returns
     -------
@@ -247,32 +341,89 @@ def append_entry(table: BiasTable, stations_root: str | os.PathLike | None) -> P
     ------
     StationHistoryError : the history is corrupt or belongs to another facility, the table is
         older than the latest entry, or the same table is already recorded.
+    OSError : the write failed (the file is unchanged) or the lock was not obtained in time
+        (``TimeoutError``).
     """
     path = history_path(stations_root, table.facility)
-    new_dir = not path.parent.exists()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "ab") as fh, _locked(fh):
+    with _history_lock(path, timeout_s):
         s = _scan(path, table.facility)
-        digest = table_sha256(table)
-        if digest in s.hashes:
-            k = s.hashes.index(digest)
-            raise StationHistoryError(f"{path}: this table (created {table.created_utc}) is "
-                                      f"already entry {k + 1}; not appending it twice")
-        if s.tables and _parse_utc(table.created_utc) < _parse_utc(s.tables[-1].created_utc):
-            raise StationHistoryError(
-                f"{path}: table created {table.created_utc} is older than the latest entry "
-                f"({s.tables[-1].created_utc}); the history is kept in time order")
-        d = _entry_dict(table)
-        if s.fragment is not None:
-            d["after_fragment"] = s.fragment
-        line = canonical_json({**d, "sha256": _sha256(canonical_json(d))})
-        payload = (b"" if s.terminated else b"\n") + line.encode("ascii") + b"\n"
-        fh.write(payload)
-        fh.flush()
-        os.fsync(fh.fileno())
-    if new_dir or s.size == 0:
-        _fsync_dir(path.parent)
+        _check_new(path, table, s)
+        _write_entry(path, table, s)
     return path
+
+
+def _check_new(path: Path, table: BiasTable, s: _Scan) -> None:
+    digest = table_sha256(table)
+    if digest in s.hashes:
+        k = s.hashes.index(digest)
+        raise StationHistoryError(f"{path}: this table (created {table.created_utc}) is "
+                                  f"already entry {k + 1}; not appending it twice")
+    if s.tables and _parse_utc(table.created_utc) < _parse_utc(s.tables[-1].created_utc):
+        raise StationHistoryError(
+            f"{path}: table created {table.created_utc} is older than the latest entry "
+            f"({s.tables[-1].created_utc}); the history is kept in time order")
+
+
+@dataclass(frozen=True)
+class Appended:
+    """What :func:`append_compared` recorded.
+
+    Attributes
+    ----------
+    path : the history file.
+    entry : the new entry's number in the file (1-based; ``len(history) + 1``).
+    table : the table as recorded: ``created_utc`` is the time taken under the lock.
+    history : the entries before it, as read and verified under the lock (oldest first).
+    comparison : :func:`compare` of ``table`` with ``history``.
+    warnings : the history's warnings (a skipped fragment of an interrupted write).
+    """
+
+    path: Path
+    entry: int
+    table: BiasTable
+    history: list
+    comparison: pd.DataFrame
+    warnings: list
+
+
+def append_compared(table: BiasTable, stations_root: str | os.PathLike | None = None, *,
+                    threshold_sigma: float = 3.0, family_alpha: float = 0.05,
+                    timeout_s: float = LOCK_TIMEOUT_S) -> Appended:
+    """Record a new estimate: under the history's lock, read, date, compare and append.
+
+    Concurrent calibrations of one facility are serialised by the lock, so each compares its
+    estimate with every entry recorded before it and none is refused as "older than the
+    latest entry": the entry is dated *under the lock* (``created_utc`` = now, or 1 µs after
+    the latest entry if the clock reads earlier: a clock stepped back, another machine's
+    clock), which makes file order, time order and lock order one order.
+
+    Parameters
+    ----------
+    table : the estimate; its ``created_utc`` is replaced by the time of recording.
+    stations_root : the directory holding ``stations/`` (None: :func:`stations_root`).
+    threshold_sigma, family_alpha : as in :func:`compare`.
+    timeout_s : how long to wait for another append's lock.
+
+    Returns
+    -------
+    :class:`Appended` (the recorded table, the history it was compared with, the comparison).
+
+    Raises
+    ------
+    StationHistoryError, OSError : as :func:`append_entry`; nothing is appended.
+    """
+    path = history_path(stations_root, table.facility)
+    with _history_lock(path, timeout_s):
+        s = _scan(path, table.facility)
+        now = _parse_utc(utc_now())
+        if s.tables:
+            now = max(now, _parse_utc(s.tables[-1].created_utc) + timedelta(microseconds=1))
+        table = replace(table, created_utc=now.strftime("%Y-%m-%dT%H:%M:%S.%fZ"))
+        comparison = compare(table, s.tables, threshold_sigma=threshold_sigma,
+                             family_alpha=family_alpha)
+        _check_new(path, table, s)
+        entry = _write_entry(path, table, s)
+    return Appended(path, entry, table, list(s.tables), comparison, list(s.warnings))
 
 
 def _fsync_dir(path: Path) -> None:
@@ -414,10 +565,10 @@ def compare(new: BiasTable, history: list[BiasTable], *, threshold_sigma: float 
     return df
 
 __all__ = [
-    "BIAS_COLUMNS", "CHANNELS", "HISTORY_FILENAME", "HISTORY_FORMAT", "SIGMA_COLUMNS",
-    "TABLE_COLUMNS", "TABLE_FORMAT", "UNITS", "BiasTable", "StationHistoryError",
-    "append_entry", "bias_table_to_frame", "canonical_json", "compare", "current_table",
-    "family_false_alarm", "family_threshold", "frame_to_bias_table", "history_dir",
-    "history_path", "load_bias_table", "load_history", "save_bias_table", "table_sha256",
-    "utc_now",
+    "BIAS_COLUMNS", "CHANNELS", "HISTORY_FILENAME", "HISTORY_FORMAT", "LOCK_TIMEOUT_S",
+    "SIGMA_COLUMNS", "STATIONS_ROOT_ENV", "TABLE_COLUMNS", "TABLE_FORMAT", "UNITS", "Appended",
+    "BiasTable", "StationHistoryError", "append_compared", "append_entry",
+    "bias_table_to_frame", "canonical_json", "compare", "current_table", "family_false_alarm",
+    "family_threshold", "frame_to_bias_table", "history_dir", "history_path", "load_bias_table",
+    "load_history", "save_bias_table", "stations_root", "table_sha256", "utc_now",
 ]
