@@ -38,18 +38,23 @@ def read_toml(path: str | os.PathLike, error: type[Exception] = ValueError,
     """Parse the TOML file ``path``.
 
     Raises ``read_error`` (default ``error``) ``"<path>: cannot read (<why>)"`` when the file
-    cannot be read and ``error`` ``"<path>: not valid TOML (<why>)"`` when it does not parse.
+    cannot be read, and ``error`` ``"<path>: not a text file (...)"`` when it is not UTF-8
+    and ``"<path>: not valid TOML (<why>)"`` when it does not parse.
     """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        raise (read_error or error)(f"{path}: cannot read ({why})") from None
+    except OSError as exc:
+        raise (read_error or error)(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a text file (not UTF-8: byte 0x{exc.object[exc.start]:02x} "
+                    f"at position {exc.start})") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise error(f"{path}: not valid TOML (arrays or tables nested too deeply)") from None
 
 
 @contextlib.contextmanager

@@ -293,6 +293,29 @@ def test_diverging_start_is_reported_not_raised(m2_2429):
     assert result.message
 
 
+@pytest.mark.xfail(raises=np.linalg.LinAlgError, strict=True,
+                   reason="cadra/fitting/result.py: build_result's covariance (eigh) of a NaN "
+                          "Jacobian raises before the message reaches the user (open)")
+def test_nonfinite_start_names_the_coefficient_and_term(m1_2366):
+    """A drag form that overflows above some Mach (finite at Mach 0.3, so the model loads)
+    gives a non-finite start; the failure names the coefficient and the term (issue 17)."""
+    shot = m1_2366
+    sd = _data(shot, np.random.default_rng(4))
+    model = model_from_dict({
+        "name": "overflow", "angle_plane": "sigma",
+        "coefficients": {"CD": "CD_a + exp(CD_k*mach)", "CL": "CL_a*sin(sigma)",
+                         "Cm": "Cm_a*sin(sigma)", "Cmq": "Cmq_0"},
+        "parameters": {"CD_a": {"value": 0.5}, "CD_k": {"value": 1000.0},
+                       "CL_a": {"value": -1.4}, "Cm_a": {"value": -0.12},
+                       "Cmq_0": {"value": -0.9}}}, "overflow.toml")
+    y = shot.states[sd.epoch_index]
+    result = fit([sd], model, [y], options=FitOptions(max_iterations=3))
+    assert not result.converged
+    assert "better starting values" in result.message
+    assert "coefficient CD" in result.message
+    assert "exp(CD_k * mach) is inf" in result.message
+
+
 def test_multifit_shares_parameters(m2_2429):
     """Two shots, one parameter set: the multi-fit's sigma of a shared parameter is smaller
     than either single fit's."""

@@ -32,6 +32,8 @@ from collections.abc import Collection, Mapping, Sequence
 import numpy as np
 
 from cadra.aero import program as P
+from cadra.aero.evaluate import evaluate_tree  # noqa: F401 (re-exported: the reference)
+from cadra.aero.nesting import MAX_DEPTH, ast_depth, deep_recursion
 from cadra.aero.program import COEFFICIENTS, VARIABLES, AeroProgram
 
 #: one-argument functions
@@ -149,17 +151,20 @@ def parse_expression(text: str, parameters: Collection[str] | None = None, *,
     # one logical line with the same character offsets, so ast positions map back to text
     flat = text.replace("\r", " ").replace("\n", " ").replace("\t", " ")
     shift = len(flat) - len(flat.lstrip())  # leading blanks would be an "indent"
+    deep = ExpressionError(f"expression nested more than {MAX_DEPTH} levels deep (a sum of "
+                           f"more than {MAX_DEPTH} terms, or as many signs or brackets)",
+                           context=context)
     try:
-        tree = ast.parse(flat[shift:], mode="eval")
+        with deep_recursion():
+            tree = ast.parse(flat[shift:], mode="eval")
+            if ast_depth(tree.body) > MAX_DEPTH:
+                raise deep
+            return _Builder(text, parameters, context, shift).visit(tree.body)
     except SyntaxError as exc:
         off = (exc.offset - 1 + shift) if exc.offset else None
         raise ExpressionError(f"syntax error: {exc.msg}", text, off, context) from None
     except (RecursionError, MemoryError):
-        raise ExpressionError("expression too deeply nested", context=context) from None
-    try:
-        return _Builder(text, parameters, context, shift).visit(tree.body)
-    except RecursionError:
-        raise ExpressionError("expression too deeply nested", context=context) from None
+        raise deep from None
 
 
 class _Builder:
@@ -184,6 +189,11 @@ class _Builder:
             if isinstance(v, complex):
                 raise self.error(node, "complex literals are not allowed")
             if isinstance(v, int | float):
+                if isinstance(v, int) and abs(v) > 2**1023:
+                    raise self.error(node, f"integer of {len(str(v))} digits is too large "
+                                           "for a float64")
+                if not math.isfinite(v):
+                    raise self.error(node, "number too large for a float64 (it is inf)")
                 return ("num", float(v))
             raise self.error(node, f"constant {v!r} is not allowed")
         if isinstance(node, ast.Name):
@@ -309,6 +319,11 @@ _SYM = {"add": "+", "sub": "-", "mul": "*", "div": "/", "pow": "**", "lt": "<", 
 
 def to_text(node: tuple) -> str:
     """Expression text of a tree; ``parse_expression(to_text(t)) == t`` for parsed trees."""
+    with deep_recursion():
+        return _text(node)
+
+
+def _text(node: tuple) -> str:
     tag = node[0]
     if tag == "num":
         v = node[1]
@@ -316,18 +331,18 @@ def to_text(node: tuple) -> str:
     if tag in ("var", "par"):
         return node[1]
     if tag == "neg":
-        inner = to_text(node[1])
+        inner = _text(node[1])
         return f"-{_wrap(inner, node[1], 4, right=False)}"
     if tag in _SYM:
         p = _PREC[tag]
-        a = _wrap(to_text(node[1]), node[1], p, right=(tag == "pow"))
-        b = _wrap(to_text(node[2]), node[2], p, right=(tag != "pow"))
+        a = _wrap(_text(node[1]), node[1], p, right=(tag == "pow"))
+        b = _wrap(_text(node[2]), node[2], p, right=(tag != "pow"))
         return f"{a} {_SYM[tag]} {b}"
     if tag == "sqr":
-        return f"{_wrap(to_text(node[1]), node[1], 5, right=True)} ** 2"
+        return f"{_wrap(_text(node[1]), node[1], 5, right=True)} ** 2"
     if tag == "powc":
-        return f"{_wrap(to_text(node[1]), node[1], 5, right=True)} ** {node[2]!r}"
-    return f"{tag}({', '.join(to_text(c) for c in node[1:])})"
+        return f"{_wrap(_text(node[1]), node[1], 5, right=True)} ** {node[2]!r}"
+    return f"{tag}({', '.join([_text(c) for c in node[1:]])})"
 
 
 def _wrap(text, node, parent_prec, right):
@@ -365,13 +380,18 @@ def _int_power(x: tuple, n: int) -> tuple:
 
 def simplify(node: tuple) -> tuple:
     """Fold constants, turn integer powers into squares/products, ``x**0.5`` into ``sqrt``."""
+    with deep_recursion():
+        return _simplify(node)
+
+
+def _simplify(node: tuple) -> tuple:
     tag = node[0]
     if tag in ("num", "var", "par"):
         return node
     if tag == "powc":
-        kids = (simplify(node[1]),)
+        kids = (_simplify(node[1]),)
     else:
-        kids = tuple(simplify(c) for c in node[1:])
+        kids = tuple([_simplify(c) for c in node[1:]])
     if all(k[0] == "num" for k in kids) and tag != "powc":
         vals = [k[1] for k in kids]
         try:
@@ -403,82 +423,6 @@ def simplify(node: tuple) -> tuple:
     if tag == "powc":
         return ("powc", kids[0], node[2])
     return (tag, *kids)
-
-
-# --- numpy reference evaluator -------------------------------------------------------------
-
-
-def evaluate_tree(node: tuple, variables: Mapping, params: Mapping) -> np.ndarray:
-    """Evaluate a tree with numpy (the slow, independent reference for the compiled program).
-
-    ``variables`` maps variable names to arrays or numbers (missing ones are 0), ``params``
-    parameter names to values; complex inputs follow the same complex-step rules.
-    """
-    with np.errstate(all="ignore"):
-        return np.asarray(_ev(node, variables, params))
-
-
-def _re(x):
-    return np.real(x)
-
-
-def _ev(n, V, Pm):
-    tag = n[0]
-    if tag == "num":
-        return n[1]
-    if tag == "var":
-        return V.get(n[1], 0.0)
-    if tag == "par":
-        return Pm[n[1]]
-    if tag == "powc":
-        return np.power(_ev(n[1], V, Pm), n[2])
-    a = [_ev(c, V, Pm) for c in n[1:]]
-    if tag == "neg":
-        return -a[0]
-    if tag == "sqr":
-        return a[0] * a[0]
-    if tag == "add":
-        return a[0] + a[1]
-    if tag == "sub":
-        return a[0] - a[1]
-    if tag == "mul":
-        return a[0] * a[1]
-    if tag == "div":
-        return a[0] / a[1]
-    if tag == "pow":
-        return np.power(a[0], a[1])
-    if tag == "abs":
-        return np.where(_re(a[0]) < 0, -a[0], a[0])
-    if tag in ("sin", "cos", "tan", "sqrt", "exp", "log"):
-        return getattr(np, tag)(a[0])
-    if tag in ("asin", "acos", "atan"):
-        return getattr(np, "arc" + tag[1:])(a[0])
-    if tag == "atan2":
-        y, x = np.asarray(a[0]), np.asarray(a[1])
-        if not (np.iscomplexobj(y) or np.iscomplexobj(x)):
-            return np.arctan2(y, x)
-        yr, xr = _re(y), _re(x)
-        base = np.where(xr != 0, np.arctan(y / np.where(xr != 0, x, 1)), 0)
-        side = np.where(yr != 0, np.arctan(x / np.where(yr != 0, y, 1)), 0)
-        return np.where(xr > 0, base,
-               np.where(xr < 0, base + np.where(yr >= 0, np.pi, -np.pi),
-               np.where(yr > 0, np.pi / 2 - side,
-               np.where(yr < 0, -np.pi / 2 - side, 0 * y))))
-    if tag == "max":
-        return np.where(_re(a[0]) > _re(a[1]), a[0], a[1])
-    if tag == "min":
-        return np.where(_re(a[0]) < _re(a[1]), a[0], a[1])
-    if tag == "lt":
-        return (_re(a[0]) < _re(a[1])) * 1.0
-    if tag == "gt":
-        return (_re(a[0]) > _re(a[1])) * 1.0
-    if tag == "le":
-        return (_re(a[0]) <= _re(a[1])) * 1.0
-    if tag == "ge":
-        return (_re(a[0]) >= _re(a[1])) * 1.0
-    if tag == "where":
-        return np.where(_re(a[0]) != 0, a[1], a[2])
-    raise ValueError(f"unknown node {tag!r}")
 
 
 # --- compiler ------------------------------------------------------------------------------
@@ -612,8 +556,8 @@ def _cost(node, temps, memo) -> float:
         return 1.0
     if node in memo:
         return memo[node]
-    c = (8.0 if node[0] in _EXPENSIVE else 1.0) + sum(_cost(k, temps, memo)
-                                                      for k in children(node))
+    c = (8.0 if node[0] in _EXPENSIVE else 1.0) + sum([_cost(k, temps, memo)
+                                                       for k in children(node)])
     memo[node] = c
     return c
 
@@ -625,6 +569,11 @@ def compile_program(forms: Mapping[str, tuple], param_names: Sequence[str],
     Missing coefficients and forms that fold to 0 get empty programs. Sub-expressions used
     more than once anywhere in the model (and worth it) are computed once, in the prelude.
     """
+    with deep_recursion():
+        return _compile(forms, param_names, angle_plane, moment_reference)
+
+
+def _compile(forms, param_names, angle_plane, moment_reference) -> AeroProgram:
     for k in forms:
         if k not in COEFFICIENTS:
             raise ValueError(f"coefficients.{k}: unknown coefficient (expected one of "
@@ -632,7 +581,7 @@ def compile_program(forms: Mapping[str, tuple], param_names: Sequence[str],
     roots = {}
     for k in COEFFICIENTS:
         if k in forms:
-            t = simplify(forms[k])
+            t = _simplify(forms[k])
             if t != ("num", 0.0):
                 roots[k] = t
     # references to each unique sub-expression (a DAG of the whole model)

@@ -24,6 +24,7 @@ import numpy as np
 import tomli_w
 
 from cadra import units as _units
+from cadra.aero.evaluate import nonfinite_constant, nonfinite_origin
 from cadra.aero.expr import (
     NAME_RE,
     RESERVED,
@@ -31,6 +32,7 @@ from cadra.aero.expr import (
     compile_program,
     parameter_names,
     parse_expression,
+    to_text,
 )
 from cadra.aero.program import (
     COEFFICIENTS,
@@ -56,7 +58,19 @@ FILE_FORMAT = "cadra.aero/1"
 #: directory of the bundled model files
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 
-_F = Fields(ValueError)
+#: the points at which a loaded model's coefficients must be finite somewhere (rad, Mach;
+#: with the reference's ``mach_nominal``, Reynolds number 1e6, rates 0 and 0.01)
+CHECK_ALPHA = (-0.2, 0.1, 0.4)
+CHECK_BETA = (-0.1, 0.0, 0.1)
+CHECK_MACH = (0.3, 0.7, 0.95, 1.2, 2.0, 4.0, 8.0, 20.0)
+
+
+class ModelFileError(ValueError):
+    """An aero model file (or dictionary) that cannot be right: the message starts with the
+    file and names the key, the coefficient or the term."""
+
+
+_F = Fields(ModelFileError)
 _MODEL_KEYS = ("format", "name", "description", "angle_plane", "moment_reference", "reference",
                "coefficients", "parameters")
 _PARAM_KEYS = ("value", "vary", "min", "max", "unit", "note")
@@ -324,6 +338,58 @@ class AeroModel:
             raise ValueError(f"expected {len(names)} free values, got {len(x)}")
         return self.with_values(dict(zip(names, (float(v) for v in x), strict=True)))
 
+    # --- finite checks -------------------------------------------------------------------
+
+    def check_points(self) -> dict[str, np.ndarray]:
+        """The points of :meth:`check_finite`: variable name -> (n,) array (a product of
+        :data:`CHECK_ALPHA`, :data:`CHECK_BETA`, :data:`CHECK_MACH` and the reference's
+        ``mach_nominal``, and rates 0 and 0.01)."""
+        mach = list(CHECK_MACH)
+        m0 = self.reference.get("mach_nominal")
+        if _is_number(m0) and math.isfinite(m0) and 0 < m0 < 100:
+            mach.append(float(m0))
+        a, b, m, r = np.meshgrid(CHECK_ALPHA, CHECK_BETA, mach, (0.0, 0.01), indexing="ij")
+        a, b, m, r = a.ravel(), b.ravel(), m.ravel(), r.ravel()
+        return {"alpha": a, "beta": b, "sigma": np.arccos(np.cos(a) * np.cos(b)), "mach": m,
+                "reynolds": np.full_like(a, 1e6), "p_hat": r, "q_hat": r, "r_hat": r}
+
+    def check_finite(self) -> None:
+        """Refuse a form with a constant term that is not finite (``1/0``, ``exp(1000)``) or
+        that is not finite at any of :meth:`check_points` with the current values
+        (``log(-mach)``): :class:`ModelFileError` naming the coefficient and the term."""
+        pts = self.check_points()
+        pmap = {p.name: p.value for p in self.parameters}
+        for k, tree in self._trees.items():
+            const = nonfinite_constant(tree)
+            if const is not None:
+                raise ModelFileError(f"coefficients.{k}: the term {to_text(const[0])} is "
+                                     f"{const[1]} (not a finite number)")
+            bad = nonfinite_origin(tree, pts, pmap, everywhere=True)
+            if bad is not None:
+                v = np.ravel(bad[1])[0]
+                raise ModelFileError(
+                    f"coefficients.{k}: not finite at any of the check points (alpha "
+                    f"{min(CHECK_ALPHA)}..{max(CHECK_ALPHA)} rad, Mach {min(CHECK_MACH)}.."
+                    f"{max(CHECK_MACH)}, the parameters' values): the term "
+                    f"{to_text(bad[0])} is {v}")
+
+    def nonfinite_note(self, params=None) -> str:
+        """``""`` when every coefficient is finite at :meth:`check_points` with ``params``
+        (default :meth:`values`), else ``"; coefficient CD is not finite at alpha=..,
+        mach=..: the term exp(1000.0 * mach) is inf"`` (for a fit's failure message)."""
+        p = self.values() if params is None else np.asarray(params, dtype=float)
+        pts = self.check_points()
+        pmap = dict(zip(self.names, p.tolist(), strict=True))
+        for k, tree in self._trees.items():
+            bad = nonfinite_origin(tree, pts, pmap, everywhere=False)
+            if bad is not None:
+                i = int(np.argmax(~np.isfinite(np.broadcast_to(bad[1], pts["alpha"].shape))))
+                at = ", ".join(f"{n}={pts[n][i]:.3g}" for n in ("alpha", "beta", "mach"))
+                v = np.broadcast_to(bad[1], pts["alpha"].shape)[i]
+                return (f"; coefficient {k} is not finite at {at}: the term "
+                        f"{to_text(bad[0])} is {v}")
+        return ""
+
     # --- evaluation ----------------------------------------------------------------------
 
     def compile(self) -> AeroProgram:
@@ -402,11 +468,13 @@ def model_from_dict(data: Mapping, source: str = "model") -> AeroModel:
     Errors are ``ValueError`` s that start with ``source`` and name the offending key.
     """
     try:
-        return _model_from_dict(data, source)
+        model = _model_from_dict(data, source)
+        model.check_finite()
+        return model
     except ExpressionError as exc:
         raise exc.prefixed(source) from None
     except ValueError as exc:
-        raise ValueError(f"{source}: {exc}") from None
+        raise ModelFileError(f"{source}: {exc}") from None
 
 
 def _model_from_dict(data: Mapping, source: str) -> AeroModel:
@@ -437,6 +505,9 @@ def _model_from_dict(data: Mapping, source: str) -> AeroModel:
             v = entry.get(k, default)
             if not _is_number(v):
                 raise ValueError(f"{key}.{k}: must be a number, got {v!r}")
+            if isinstance(v, int) and abs(v) > 2**1023:
+                raise ValueError(f"{key}.{k}: integer of {len(str(abs(v)))} digits is too "
+                                 "large for a float64")
             conv[k] = _from_file(float(v), unit)
         vary = entry.get("vary", True)
         if not isinstance(vary, bool):
@@ -447,6 +518,8 @@ def _model_from_dict(data: Mapping, source: str) -> AeroModel:
         params.append(Parameter(name=str(name), value=conv["value"], vary=vary,
                                 min=conv["min"], max=conv["max"], unit=unit, note=note))
     name = data.get("name", Path(source).stem)
+    if not isinstance(data.get("reference", {}), Mapping):
+        raise ValueError("reference: must be a table of name = value")
     return AeroModel(
         name=name, angle_plane=data["angle_plane"], coefficients=dict(coefficients),
         parameters=tuple(params), description=data.get("description", ""),
@@ -459,7 +532,7 @@ def load_model(path: str | os.PathLike) -> AeroModel:
     """Read an aerodynamic model file (TOML; docs/aero_models.md); errors name the file and
     the key."""
     path = Path(path)
-    data = read_toml(path, ValueError, read_error=FileNotFoundError)
+    data = read_toml(path, ModelFileError, read_error=FileNotFoundError)
     data.setdefault("name", path.stem)
     return model_from_dict(data, source=str(path))
 

@@ -242,7 +242,8 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                                 warnings, iterations, t_start, options, lam, xvals)
         if not math.isfinite(chi2):
             message = ("the starting point gives a non-finite prediction (the trajectory "
-                       "diverges or tumbles); better starting values are needed")
+                       "diverges or tumbles); better starting values are needed"
+                       + model.nonfinite_note(params))
             return build_result(problem, params, states, status, message, history,
                                 warnings, iterations, t_start, options, lam, xvals)
         history.append(chi2)
