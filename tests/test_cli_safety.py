@@ -1,0 +1,335 @@
+"""No input ever destroyed, and clean faults (issue 17, items 1 and 4).
+
+Every command that writes refuses an output folder that is, or holds, one of its inputs (links
+and ``..`` resolved), the working folder, or an input file, with or without ``--overwrite``:
+the input tree hashes the same before and after, and the one-line message names both. Ctrl-C
+exits 130 with one line and no partial output; a SIGKILLed run's temporary folder is cleaned by
+the next run; a SIGKILLed ``cadra1`` leaves no pool worker behind.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cadra.cli.cadra1 import main as cadra1
+from cadra.cli.cadra2 import main as cadra2
+from cadra.io.atomic import (
+    UnsafeOutputError,
+    atomic_output_dir,
+    check_output_dir,
+    clean_stale_temps,
+    stale_temps,
+)
+from cadra.measure.shot import measure_shot
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEC = ROOT / "sample_shots" / "specs" / "m2_2429.toml"
+POSIX = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+
+
+def tree_hash(root: Path) -> str:
+    """sha256 over every path, file content and link target under ``root``."""
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*")):
+        h.update(str(p.relative_to(root)).encode())
+        if p.is_symlink():
+            h.update(os.readlink(p).encode())
+        elif p.is_file():
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    """A 2-station shot with images (``shot/``), its stage-one folder (``stage1/``) and a
+    3-station spec (``specs/small.toml``), in one folder."""
+    import dataclasses
+
+    base = tmp_path_factory.mktemp("safety")
+    spec = dataclasses.replace(load_shot_spec(SPEC), n_stations=2)
+    write_shot(simulate_shot(spec), base / "shot", images=True, progress=False)
+    measure_shot(base / "shot" / "shot.toml", base / "stage1", workers=1, progress=False,
+                 overlays=False)
+    (base / "specs").mkdir()
+    (base / "specs" / "small.toml").write_text("n_stations = 3\n" + SPEC.read_text())
+    return base
+
+
+def _refused(run, argv, culprit: str, capsys, work: Path, code: int) -> str:
+    before = tree_hash(work)
+    assert run(argv) == code
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert culprit in err and "output" in err, err
+    assert tree_hash(work) == before
+    return err
+
+
+# -- cadra2: an output that is or holds an input -------------------------------------------
+
+@pytest.mark.parametrize("command", ["fit", "single", "holdone", "calibrate", "diagnose"])
+@pytest.mark.parametrize("overwrite", [True, False])
+def test_cadra2_output_is_the_stage_one_folder(work, capsys, command, overwrite):
+    extra = {"fit": ["--model", "m2_m070"], "diagnose": ["--model", "m2_m070"],
+             "holdone": ["--model", "m2_m070", "--param", "Cm_A1", "--values", "1,2"]}
+    argv = [command, str(work / "stage1"), *extra.get(command, []), "-o",
+            str(work / "stage1"), *(["--overwrite"] if overwrite else [])]
+    err = _refused(cadra2, argv, "is the input", capsys, work, 1)
+    assert err.startswith(f"cadra2 {command}: output {work / 'stage1'}")
+
+
+@pytest.mark.parametrize("command", ["fit", "calibrate", "diagnose"])
+def test_cadra2_output_holding_the_inputs(work, capsys, command):
+    model = [] if command == "calibrate" else ["--model", "m2_m070"]
+    # the folder holding the stage-one folder, the shot and its images
+    _refused(cadra2, [command, str(work / "stage1"), *model, "-o", str(work), "--overwrite"],
+             "holds the input", capsys, work, 1)
+    # the folder of --shot, with its images
+    _refused(cadra2, [command, str(work / "stage1"), *model, "--shot",
+                      str(work / "shot" / "shot.toml"), "-o", str(work / "shot"),
+                      "--overwrite"], "shot.toml", capsys, work, 1)
+    # the shot's images folder (the shot file the trajectory names)
+    _refused(cadra2, [command, str(work / "stage1"), *model, "-o",
+                      str(work / "shot" / "images"), "--overwrite"], "st01_", capsys, work, 1)
+
+
+def test_cadra2_output_names_an_input_file(work, capsys):
+    traj = work / "stage1" / "trajectory.csv"
+    _refused(cadra2, ["fit", str(traj), "--model", "m2_m070", "-o", str(traj), "--overwrite"],
+             f"is the input {traj}", capsys, work, 1)
+    assert traj.is_file()
+    spec = work / "specs" / "small.toml"
+    _refused(cadra2, ["simulate", str(spec), "-o", str(spec), "--overwrite"],
+             f"is the input {spec}", capsys, work, 1)
+    _refused(cadra2, ["simulate", str(spec), "-o", str(work / "specs"), "--overwrite"],
+             "holds the input", capsys, work, 1)
+    assert spec.is_file()
+
+
+# -- cadra1 ------------------------------------------------------------------------------------
+
+def test_cadra1_output_holding_its_inputs(work, capsys):
+    shot = work / "shot" / "shot.toml"
+    for out, culprit in [(work / "shot", "holds the input"),
+                         (work / "shot" / "images", "holds the input"),
+                         (work / "shot" / "images" / "st01_top.png", "is the input")]:
+        _refused(cadra1, [str(shot), "-o", str(out), "--overwrite", "-q", "--workers", "1"],
+                 culprit, capsys, work, 2)
+    truth = work / "shot" / "truth.csv"
+    _refused(cadra1, [str(shot), "-o", str(truth), "--truth", str(truth), "--overwrite",
+                      "-q"], "is the input", capsys, work, 2)
+
+
+# -- the same folder by another spelling -------------------------------------------------------
+
+def test_other_spellings_of_an_input_folder(work, capsys, tmp_path, monkeypatch):
+    link = tmp_path / "link"
+    link.symlink_to(work / "shot", target_is_directory=True)
+    shot = work / "shot" / "shot.toml"
+    for out in (str(link), f"{work}/stage1/../shot", f"{work}/./shot/"):
+        err = _refused(cadra1, [str(shot), "-o", out, "--overwrite", "-q"], "holds the input",
+                       capsys, work, 2)
+        assert str(Path(out)) in err
+    # the current folder, and its parent, by any spelling
+    monkeypatch.chdir(work / "shot")
+    for out in (".", "./", "../shot"):
+        _refused(cadra2, ["fit", str(work / "stage1"), "--model", "m2_m070", "-o", out,
+                          "--overwrite"], "output", capsys, work, 1)
+        _refused(cadra1, ["shot.toml", "-o", out, "--overwrite", "-q"], "output", capsys,
+                 work, 2)
+    _refused(cadra2, ["simulate", str(work / "specs" / "small.toml"), "-o", "..",
+                      "--overwrite"], "holds the current working folder", capsys, work, 1)
+    assert not [p for p in work.rglob(".*") if ".cadra-" in p.name]
+
+
+def test_guard_library_function(tmp_path):
+    (tmp_path / "in").mkdir()
+    f = tmp_path / "in" / "a.txt"
+    f.write_text("x")
+    assert check_output_dir(tmp_path / "in" / "new", [f], cwd=tmp_path) == \
+        (tmp_path / "in" / "new").resolve()               # a new folder inside an input one
+    for out in (tmp_path / "in", f, tmp_path, tmp_path / "in" / ".." / "in"):
+        with pytest.raises(UnsafeOutputError, match="input|working"):
+            check_output_dir(out, [f], cwd=tmp_path)
+    with pytest.raises(UnsafeOutputError, match="existing file"):
+        check_output_dir(tmp_path / "in" / "a.txt", [], cwd=tmp_path / "in")
+    # an input reached through a link counts under the link's folder too
+    (tmp_path / "links").mkdir()
+    (tmp_path / "links" / "a.txt").symlink_to(f)
+    with pytest.raises(UnsafeOutputError, match="holds the input"):
+        check_output_dir(tmp_path / "links", [tmp_path / "links" / "a.txt"], cwd=tmp_path / "in")
+
+
+def test_new_output_inside_an_input_folder_is_fine(work, capsys):
+    out = work / "specs" / "new_shot"
+    assert cadra2(["simulate", str(work / "specs" / "small.toml"), "-o", str(out),
+                   "--no-images", "-q"]) == 0
+    assert (out / "shot.toml").is_file() and (work / "specs" / "small.toml").is_file()
+
+
+# -- stale temporaries of killed runs ----------------------------------------------------------
+
+def _dead_pid() -> int:
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+def test_stale_temps_cleaned_only_when_ours_and_dead(tmp_path):
+    from cadra.io.atomic import _host
+
+    out = tmp_path / "out"
+    dead, host = _dead_pid(), _host()
+    stale_tmp = tmp_path / f".out.cadra-{dead}@{host}-abcd1234.tmp"
+    stale_old = tmp_path / f".out.cadra-{dead}@{host}-efgh5678.old"
+    alive = tmp_path / f".out.cadra-{os.getppid()}@{host}-abcd1234.tmp"   # a running process
+    other_host = tmp_path / f".out.cadra-{dead}@elsewhere-abcd1234.tmp"
+    foreign = [tmp_path / ".out.abcd1234.tmp", tmp_path / ".other.cadra-1@x-abcd1234.tmp",
+               tmp_path / ".out.cadra-1@x-abcd1234.txt"]
+    for p in (stale_tmp, stale_old / "d", alive, other_host, *foreign):
+        p.mkdir(parents=True)
+    (stale_old / "d" / "report.md").write_text("the previous output")
+    assert stale_temps(out) == sorted([stale_tmp, stale_old])
+    # the run was killed between its two renames: the previous output is moved back
+    assert sorted(clean_stale_temps(out)) == sorted([stale_tmp, stale_old])
+    assert (out / "report.md").read_text() == "the previous output"
+    assert not stale_tmp.exists() and not stale_old.exists()
+    assert alive.exists() and other_host.exists() and all(p.exists() for p in foreign)
+    # an ordinary write cleans them too (and names its own temporary with its PID)
+    (tmp_path / f".out.cadra-{dead}@{host}-zzzz9999.tmp").mkdir()
+    with atomic_output_dir(out, overwrite=True) as tmp:
+        assert f".cadra-{os.getpid()}@" in tmp.name
+    assert not (tmp_path / f".out.cadra-{dead}@{host}-zzzz9999.tmp").exists()
+
+
+def _wait_for(predicate, timeout_s: float, proc=None):
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        value = predicate()
+        if value:
+            return value
+        if proc is not None and proc.poll() is not None:
+            pytest.fail(f"process ended early with {proc.returncode}: "
+                        f"{proc.stderr.read() if proc.stderr else ''}")
+        time.sleep(0.02)
+    pytest.fail("timed out")
+
+
+def _temps(out: Path) -> list[Path]:
+    return [p for p in out.parent.iterdir() if p.name.startswith(f".{out.name}.")]
+
+
+def _cadra2_proc(*argv) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "cadra.cli.cadra2", *argv], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@POSIX
+def test_sigkill_then_rerun_cleans_the_stale_temporary(work, tmp_path):
+    out = tmp_path / "sim"
+    proc = _cadra2_proc("simulate", str(SPEC), "-o", str(out), "-q")   # 16 stations: ~30 s
+    stale = _wait_for(lambda: _temps(out), 120, proc)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    assert _temps(out) == stale and not out.exists()            # what a SIGKILL leaves
+    assert cadra2(["simulate", str(work / "specs" / "small.toml"), "-o", str(out),
+                   "--no-images", "-q"]) == 0
+    assert (out / "shot.toml").is_file()
+    assert _temps(out) == []
+
+
+@POSIX
+def test_ctrl_c_cadra2_exits_130_one_line_nothing_written(tmp_path):
+    out = tmp_path / "sim"
+    proc = _cadra2_proc("simulate", str(SPEC), "-o", str(out), "-q")
+    _wait_for(lambda: _temps(out), 120, proc)                   # it is writing
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert stderr.strip().splitlines() == ["cadra2: interrupted"], stderr
+    assert not out.exists() and _temps(out) == []
+
+
+# -- cadra1: Ctrl-C and a killed parent with pool workers --------------------------------------
+
+#: cadra1's own main, with each station slowed down so the signal lands while the pool works
+SLOW_CADRA1 = """
+import sys, time
+import cadra.measure.shot as shot
+measure = shot.measure_station
+def slow(*args, **kwargs):
+    time.sleep(3.0)
+    return measure(*args, **kwargs)
+shot.measure_station = slow
+from cadra.cli.cadra1 import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                kids.append(int(d.name))
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except (ProcessLookupError, FileNotFoundError):
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"        # a zombie has exited
+
+
+def _slow_cadra1(work: Path, out: Path, stderr=subprocess.PIPE) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", SLOW_CADRA1, str(work / "shot" / "shot.toml"),
+                             "-o", str(out), "-q", "--workers", "2", "--no-overlays"],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=stderr, text=True)
+
+
+linux_only = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+
+
+@linux_only
+def test_ctrl_c_cadra1_with_workers(work, tmp_path):
+    out = tmp_path / "st1"
+    proc = _slow_cadra1(work, out)
+    workers = _wait_for(lambda: len(_children(proc.pid)) >= 2 and _children(proc.pid), 60,
+                        proc)
+    time.sleep(0.3)                                             # the tasks are running
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert stderr.strip().splitlines() == ["cadra1: interrupted"], stderr
+    assert not out.exists() and _temps(out) == []
+    _wait_for(lambda: not any(_alive(p) for p in workers), 10)
+
+
+@linux_only
+def test_killed_cadra1_leaves_no_worker(work, tmp_path):
+    out = tmp_path / "st1"
+    proc = _slow_cadra1(work, out, stderr=subprocess.DEVNULL)   # an orphan would hold a pipe
+    workers = _wait_for(lambda: len(_children(proc.pid)) >= 2 and _children(proc.pid), 60,
+                        proc)
+    time.sleep(0.3)
+    proc.kill()
+    assert proc.wait() == -signal.SIGKILL
+    _wait_for(lambda: not any(_alive(p) for p in workers), 10)
+    assert not out.exists()
