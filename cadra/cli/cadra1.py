@@ -67,8 +67,7 @@ def _main(argv: list[str] | None) -> int:
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
     try:
-        # the shot's own inputs (facility file, images) are checked by measure_shot
-        check_output_dir(out, [args.shot_file] + ([args.truth] if args.truth else []))
+        check_output_dir(out, _input_paths(args))  # measure_shot checks the shot's inputs too
         truth = pd.read_csv(args.truth) if args.truth else None
         res = measure_shot(args.shot_file, out, workers=args.workers, progress=not args.quiet,
                            overlays=not args.no_overlays, overwrite=args.overwrite,
@@ -88,6 +87,24 @@ def _main(argv: list[str] | None) -> int:
           f"in {res.seconds:.1f} s; wrote {out}/trajectory.csv, quality.csv, trajectory.png, "
           f"overlays/, report.md")
     return 1 if n_fail else 0
+
+
+def _input_paths(args) -> list:
+    """Every file the run reads, for the output guard: shot file, truth table, images and
+    facility file (best effort: a shot that cannot be read is reported by measure_shot)."""
+    from contextlib import suppress
+    from pathlib import Path
+
+    from cadra.io.facility_file import resolve_facility_path
+    from cadra.io.shotfile import load_shot
+
+    paths = [Path(args.shot_file)] + ([Path(args.truth)] if args.truth else [])
+    with suppress(ValueError, KeyError, OSError):
+        shot = load_shot(args.shot_file)
+        paths += [shot.image_path(rec.station, view)
+                  for rec in shot.stations for view in rec.images]
+        paths.append(Path(resolve_facility_path(shot.facility)))
+    return paths
 
 
 __all__ = ["check_shot", "main"]
