@@ -113,3 +113,123 @@ def test_no_warnings_from_the_load_check():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         _model("a*sqrt(mach - 1) + a/sin(sigma)")
+
+
+# --- trajectory files ----------------------------------------------------------------------
+
+SHOT = "sample_shots/m2_2429/shot.toml"
+
+
+def _trajectory(tmp_path, n=6, edit=None):
+    """A trajectory file of the first ``n`` stations of the M2-2429 sample's truth; ``edit``
+    changes the table (file units) before it is written."""
+    import pandas as pd
+
+    from cadra.io.trajectory import COLUMNS, trajectory_to_csv
+
+    t = pd.read_csv("sample_shots/m2_2429/truth.csv").iloc[:n]
+    t = t[["station", "t_s", "x_m", "y_m", "z_m", "theta_deg", "psi_deg"]].copy()
+    t["status"] = "ok"
+    for c, v in (("sigma_x_m", 1e-4), ("sigma_y_m", 1e-4), ("sigma_z_m", 1e-4),
+                 ("sigma_theta_deg", 0.1), ("sigma_psi_deg", 0.1)):
+        t[c] = v
+    t["x_top_minus_side_m"], t["x_consistency"], t["reason"], t["warnings"] = 0.0, 0.0, "", ""
+    t = t[list(COLUMNS)].astype(object)
+    if edit is not None:
+        edit(t)
+    p = tmp_path / "trajectory.csv"
+    p.write_text(trajectory_to_csv(t, {"shot_id": "M2-2429"}))
+    return p
+
+
+def _set(row, column, value):
+    def edit(t):
+        t.loc[row, column] = value
+    return edit
+
+
+@pytest.mark.parametrize(("column", "value", "what"), [
+    ("t_s", "abc", "'abc' is not a number"),
+    ("theta_deg", "ten", "'ten' is not a number"),
+    ("x_m", float("inf"), "inf is not finite"),
+    ("sigma_y_m", float("inf"), "inf is not finite"),
+    ("sigma_z_m", -1e-4, "-0.0001 is not a sigma"),
+    ("sigma_theta_deg", 0.0, "0 is not a sigma"),
+    ("x_m", 1e300, "> 10000 is implausible"),
+    ("psi_deg", -4000.0, "> 180 is implausible"),
+])
+def test_bad_trajectory_cell_names_station_and_column(tmp_path, column, value, what):
+    from cadra.io.trajectory import TrajectoryFileError, load_trajectory
+
+    p = _trajectory(tmp_path, edit=_set(2, column, value))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no RuntimeWarning flood either
+        with pytest.raises(TrajectoryFileError,
+                           match=re.escape(f"{p}: station 3, column {column}: ") + ".*"
+                           + re.escape(what)):
+            load_trajectory(p)
+
+
+def test_all_sigmas_zero_is_refused_naming_the_first(tmp_path):
+    from cadra.fitting.data import FitDataError, load_shot_data
+
+    def zero(t):
+        for c in ("sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_deg", "sigma_psi_deg"):
+            t[c] = 0.0
+
+    p = _trajectory(tmp_path, edit=zero)
+    with pytest.raises(FitDataError, match=re.escape(f"{p}: station 1, column sigma_x_m: 0 is "
+                                                     "not a sigma")):
+        load_shot_data(SHOT, p)
+
+
+def test_nan_still_means_not_measured(tmp_path):
+    from cadra.fitting.data import load_shot_data
+
+    def lose(t):
+        t.loc[1, "theta_deg"] = np.nan
+        t.loc[1, "sigma_theta_deg"] = np.nan
+        t.loc[2, "sigma_psi_deg"] = np.nan
+
+    sd = load_shot_data(SHOT, _trajectory(tmp_path, edit=lose))
+    assert np.isnan(sd.meas[1, 3]) and np.isnan(sd.meas[2, 4])
+    assert sd.n_observations == 6 * 5 - 2
+
+
+@pytest.mark.parametrize(("n", "what"), [(0, "no stations"),
+                                         (1, "1 measured station(s) with a position"),
+                                         (2, "2 measured station(s) with a position")])
+def test_too_few_stations_is_a_clear_error(tmp_path, n, what):
+    from cadra.fitting.data import FitDataError, load_shot_data
+
+    p = _trajectory(tmp_path, n=n)
+    with pytest.raises(FitDataError, match=re.escape(f"{p}: {what}")):
+        load_shot_data(SHOT, p)
+
+
+def test_binary_and_garbled_trajectory_files(tmp_path):
+    from cadra.io.trajectory import TrajectoryFileError, load_trajectory
+
+    p = tmp_path / "t.csv"
+    p.write_bytes(b"# format: cadra-trajectory-1\n" + bytes(range(128, 256)))
+    with pytest.raises(TrajectoryFileError, match=re.escape(f"{p}: not a text file")):
+        load_trajectory(p)
+    p.write_text("# format: cadra-trajectory-1\n")
+    with pytest.raises(TrajectoryFileError, match=re.escape(f"{p}: not a CSV table")):
+        load_trajectory(p)
+
+
+def test_truth_table_missing_or_invalid(tmp_path):
+    from cadra.io.trajectory import TrajectoryFileError, load_truth
+
+    with pytest.raises(TrajectoryFileError, match="nope.csv: truth table not found"):
+        load_truth(tmp_path / "nope.csv")
+    p = tmp_path / "truth.csv"
+    p.write_text("x_m,y_m,z_m,theta_deg\n0,0,0,1\n")
+    with pytest.raises(TrajectoryFileError, match=r"truth\.csv: truth table lacks column\(s\) "
+                                                  r"\['psi_deg'\]"):
+        load_truth(p)
+    p.write_text("x_m,y_m,z_m,theta_deg,psi_deg\n0,0,0,1,0\n1,0,zz,1,0\n")
+    with pytest.raises(TrajectoryFileError, match=r"truth\.csv: row 2, column z_m: 'zz'"):
+        load_truth(p)
+    assert len(load_truth("sample_shots/m2_2429/truth.csv")) > 3

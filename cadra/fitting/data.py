@@ -35,6 +35,9 @@ N_CHANNELS = channel_registry.N_CHANNELS
 _POS, _ANG = channel_registry.POSITION, channel_registry.ANGLE
 #: typical film-range measurement noise (seed 004 era): 0.1 mm, 0.1 deg, 10 ns
 FILM_SIGMAS = {"position_m": 1e-4, "angle_rad": math.radians(0.1), "time_s": 1e-8}
+#: fewest stations with a measured position a trajectory file must give (a fit's starting
+#: values fit a parabola to x(t))
+MIN_STATIONS = 3
 
 
 class FitDataError(ValueError):
@@ -178,6 +181,12 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
             raise FitDataError(f"{trajectory_path}: station {st} time {t} s differs from the "
                                f"shot file's {shot_times[st]} s: the files do not belong together")
     table = table.sort_values("t_s")
+    positions = np.isfinite(table[[c.si_column for c in channel_registry.OBSERVED
+                                   if c.name in ("x", "y", "z")]].to_numpy(float)).all(axis=1)
+    if positions.sum() < MIN_STATIONS:
+        raise FitDataError(f"{trajectory_path}: {int(positions.sum())} measured station(s) with "
+                           f"a position (x_m, y_m, z_m); stage two needs at least "
+                           f"{MIN_STATIONS}")
     meas = table[[c.si_column for c in channel_registry.OBSERVED]].to_numpy(float)
     sigma = table[[c.si_sigma_column for c in channel_registry.OBSERVED]].to_numpy(float)
     if min_sigma:

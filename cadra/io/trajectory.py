@@ -20,7 +20,9 @@ Columns (in this order):
 ``warnings``            what to know about a measured station (``;``-separated)
 ======================  ====================================================================
 
-Missing values (a failed station, a sphere's angles) are empty cells (NaN).
+Missing values (a failed station, a sphere's angles) are empty cells (NaN). Loading refuses,
+naming the station and the column: text where a number belongs, ``inf``, a sigma that is not
+> 0 beside a value, and magnitudes no range produces (:data:`LIMITS`).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from cadra.channels import OBSERVED, to_si, trajectory_sigma_columns, trajectory_value_columns
@@ -46,6 +49,11 @@ COLUMNS = (
     "x_top_minus_side_m", "x_consistency", "reason", "warnings",
 )
 STATUSES = ("ok", "warning", "failed")
+#: largest plausible magnitude of each numeric column, file units (larger is a unit slip or
+#: a corrupted file): positions 10 km, angles 180 deg, times 10 s (as in the shot file)
+LIMITS = {"t_s": 10.0, "x_top_minus_side_m": 1e4, "x_consistency": 1e12,
+          **{c.value_column: (180.0 if c.file_unit == "deg" else 1e4) for c in OBSERVED},
+          **{c.sigma_column: (180.0 if c.file_unit == "deg" else 1e4) for c in OBSERVED}}
 
 
 class TrajectoryFileError(ValueError):
@@ -93,6 +101,9 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise FileNotFoundError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise TrajectoryFileError(f"{path}: not a text file (not UTF-8 at byte {exc.start})"
+                                  ) from None
     meta = {}
     for line in text.splitlines():
         if not line.startswith("#"):
@@ -104,23 +115,114 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
                                   f"{meta.get('format')!r}, expected {FORMAT!r})")
     import io
 
-    table = pd.read_csv(io.StringIO(text), comment="#", keep_default_na=True,
-                        dtype={"reason": str, "warnings": str, "status": str})
+    try:
+        table = pd.read_csv(io.StringIO(text), comment="#", keep_default_na=True,
+                            dtype=str)
+    except (ValueError, pd.errors.ParserError) as exc:  # EmptyDataError is a ValueError
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise TrajectoryFileError(f"{path}: not a CSV table ({why})") from None
     missing = [c for c in COLUMNS if c not in table]
     if missing:
         raise TrajectoryFileError(f"{path}: missing column(s) {missing}")
+    if table.empty:
+        raise TrajectoryFileError(f"{path}: no stations (a header without rows)")
+    for c in ("reason", "warnings", "status"):
+        table[c] = table[c].fillna("")
     bad = sorted(set(table["status"]) - set(STATUSES))
     if bad:
         raise TrajectoryFileError(f"{path}: column status has unknown value(s) {bad}")
+    table = _numeric(table, path)
     if table["station"].duplicated().any():
-        raise TrajectoryFileError(f"{path}: station listed twice")
-    for c in ("reason", "warnings"):
-        table[c] = table[c].fillna("")
+        st = int(table.loc[table["station"].duplicated(), "station"].iloc[0])
+        raise TrajectoryFileError(f"{path}: station {st} listed twice")
     for ch in OBSERVED:       # SI columns beside the file's (theta_rad beside theta_deg)
         if ch.si_column != ch.value_column:
             table[ch.si_column] = to_si(table[ch.value_column], ch.file_unit)
             table[ch.si_sigma_column] = to_si(table[ch.sigma_column], ch.file_unit)
     return Trajectory(table=table, meta=meta)
+
+
+#: columns a truth table (``--truth``: a simulated shot's ``truth.csv``) must have
+TRUTH_COLUMNS = tuple(c.value_column for c in OBSERVED)
+
+
+def load_truth(path: str | os.PathLike) -> pd.DataFrame:
+    """A truth table to draw beside a measurement (``cadra1 --truth``): a CSV file with
+    :data:`TRUTH_COLUMNS` (others are kept). :class:`TrajectoryFileError` naming the file,
+    and the row and column of a value that is not a number."""
+    path = Path(path)
+    if not path.is_file():
+        raise TrajectoryFileError(f"{path}: truth table not found")
+    try:
+        table = pd.read_csv(path)
+    except (ValueError, OSError) as exc:  # parser errors and bad UTF-8 are ValueErrors
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise TrajectoryFileError(f"{path}: not a CSV table ({why})") from None
+    missing = [c for c in TRUTH_COLUMNS if c not in table]
+    if missing:
+        raise TrajectoryFileError(f"{path}: truth table lacks column(s) {missing}")
+    if table.empty:
+        raise TrajectoryFileError(f"{path}: truth table has no rows")
+    for c in TRUTH_COLUMNS:
+        num = pd.to_numeric(table[c], errors="coerce")
+        bad = (num.isna() & table[c].notna()) | np.isinf(num)
+        if bad.any():
+            i = int(bad.to_numpy().argmax())
+            raise TrajectoryFileError(f"{path}: row {i + 1}, column {c}: "
+                                      f"{table[c].iloc[i]!r} is not a finite number")
+        table[c] = num.astype(float)
+    return table
+
+
+def _numeric(table: pd.DataFrame, path: Path) -> pd.DataFrame:
+    """The numeric columns as numbers, refusing text, ``inf``, implausible magnitudes and
+    sigmas that are not > 0 beside a value; the message names the station and the column."""
+    def fail(row, column, what):
+        st = str(raw["station"].iloc[row]).strip()
+        raise TrajectoryFileError(f"{path}: station {st}, column {column}: {what}")
+
+    raw = table
+    table = table.copy()
+    for c in COLUMNS:
+        if c in ("status", "reason", "warnings"):
+            continue
+        text = raw[c].str.strip()
+        num = pd.to_numeric(text, errors="coerce")
+        notnum = num.isna() & text.notna() & (text.str.lower() != "nan") & (text != "")
+        if notnum.any():
+            i = int(notnum.to_numpy().argmax())
+            fail(i, c, f"{raw[c].iloc[i]!r} is not a number")
+        table[c] = num.astype(float)
+    st = table["station"].to_numpy()
+    ok = np.isfinite(st) & (st >= 1) & (st == np.round(st)) & (st < 1e9)
+    if not ok.all():
+        i = int((~ok).argmax())
+        raise TrajectoryFileError(f"{path}: row {i + 1}, column station: {raw['station'].iloc[i]!r}"
+                                  " is not a station id (an integer >= 1)")
+    table["station"] = table["station"].astype(int)
+    measured = (table["status"] != "failed").to_numpy()
+    for c, limit in LIMITS.items():
+        v = table[c].to_numpy()
+        with np.errstate(invalid="ignore"):
+            bad = np.isinf(v) | (np.abs(v) > limit)
+        if bad.any():
+            i = int(bad.argmax())
+            what = ("is not finite (an empty cell is 'not measured')" if np.isinf(v[i])
+                    else f"|{v[i]:g}| > {limit:g} is implausible (check the unit)")
+            fail(i, c, f"{raw[c].iloc[i]} {what}")
+    t = table["t_s"].to_numpy()
+    if (measured & np.isnan(t)).any():
+        fail(int((measured & np.isnan(t)).argmax()), "t_s", "no spark time for a measured "
+             "station")
+    for ch in OBSERVED:
+        v, s = table[ch.value_column].to_numpy(), table[ch.sigma_column].to_numpy()
+        with np.errstate(invalid="ignore"):
+            bad = measured & np.isfinite(v) & ~(s > 0) & ~np.isnan(s)
+        if bad.any():
+            i = int(bad.argmax())
+            fail(i, ch.sigma_column, f"{s[i]:g} is not a sigma (must be > 0; leave the value "
+                                     "and its sigma empty for 'not measured')")
+    return table
 
 
 def station_rows(results, times_s: dict) -> pd.DataFrame:
