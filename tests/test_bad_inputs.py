@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -233,3 +234,58 @@ def test_truth_table_missing_or_invalid(tmp_path):
     with pytest.raises(TrajectoryFileError, match=r"truth\.csv: row 2, column z_m: 'zz'"):
         load_truth(p)
     assert len(load_truth("sample_shots/m2_2429/truth.csv")) > 3
+
+
+# --- shot files ----------------------------------------------------------------------------
+
+SHOT_TEXT = Path(SHOT).read_text(encoding="utf-8")
+SPHERE_TEXT = Path("sample_shots/sphere_1/shot.toml").read_text(encoding="utf-8")
+
+
+def _shot(tmp_path, text, name="shot.toml"):
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def test_mass_in_kg_is_caught_by_load_and_check(tmp_path):
+    from cadra.io.shot_check import check_shot
+    from cadra.io.shotfile import ShotFileError, load_shot
+
+    p = _shot(tmp_path, SHOT_TEXT.replace("mass_g = 101.02", "mass_g = 0.10102"))
+    with pytest.raises(ShotFileError, match=re.escape(f"{p}: mass.mass_g: 0.10102 g") + ".*"
+                       r"density of 0\.00828 g/cm\^3, outside \[0\.1, 25\] -- a mass in kg"):
+        load_shot(p)
+    assert check_shot(p)[0].startswith(f"shot file: {p}: mass.mass_g: ")
+
+
+def test_diameter_ten_times_too_large(tmp_path):
+    from cadra.io.shot_check import check_shot
+    from cadra.io.shotfile import ShotFileError, load_shot
+
+    # the mass as written: the density check names the slip
+    p = _shot(tmp_path, SPHERE_TEXT.replace("d_cm = 2.0", "d_cm = 20.0"))
+    with pytest.raises(ShotFileError, match=r"mass\.mass_g: .* a model dimension in the "
+                                            r"wrong unit"):
+        load_shot(p)
+    # the mass scaled too (a consistent but wrong body): the field of view catches it
+    p = _shot(tmp_path, SPHERE_TEXT.replace("d_cm = 2.0", "d_cm = 20.0")
+              .replace("mass_g = 32.882", "mass_g = 32882.0")
+              .replace("13.153", "131530.0"), "big.toml")
+    load_shot(p)
+    problems = check_shot(p)
+    assert ("model: diameter 20 cm is more than 0.5 of the field of view of station 1 top "
+            "(15.24 cm): check model.d_* (the unit?)") in problems
+
+
+def test_unknown_view_name_is_refused_naming_the_known_views(tmp_path):
+    from cadra.io.shot_check import check_shot
+
+    text = SHOT_TEXT.replace('station = 2\ntime_s = 0.006438140799976919\nimages = {}',
+                             'station = 2\ntime_s = 0.006438140799976919\n'
+                             'images = { tpo = "a.png", side = "b.png" }')
+    assert 'tpo = "a.png"' in text
+    problems = check_shot(_shot(tmp_path, text))
+    assert ("station 2 images.tpo: unknown view (station 2 of 'hffaf' has views side, top)"
+            in problems)
+    assert not any("unknown view" in p for p in check_shot(SHOT))

@@ -5,14 +5,19 @@ from __future__ import annotations
 
 import os
 
+#: largest model size (diameter, length) as a fraction of a view's smaller field of view
+MAX_FIELD_FRACTION = 0.5
+
 
 def check_shot(path: str | os.PathLike) -> list[str]:
     """Problems found in a shot file, its facility and its images (empty list = all good).
 
     One line per problem: the shot file or the facility file does not load (the first error,
-    naming the key), a station the facility lacks, a view without an image, or an image that
-    is missing, unreadable, not greyscale, or of another size or bit depth than its view
-    declares.
+    naming the key), a station the facility lacks, an image of a view the station does not
+    have (naming the known views), a view without an image, an image that is missing,
+    unreadable, not greyscale, or of another size or bit depth than its view declares, or a
+    model larger than half a view's field of view (:data:`MAX_FIELD_FRACTION`: a diameter in
+    the wrong unit).
     """
     import cv2
 
@@ -28,12 +33,16 @@ def check_shot(path: str | os.PathLike) -> list[str]:
     except (ValueError, OSError) as exc:
         return [f"facility {shot.facility!r}: {exc}"]
     by_id = {s.id: s for s in facility.stations}
-    problems = []
+    problems = _size_problems(shot, facility)
     for rec in shot.stations:
         station = by_id.get(rec.station)
         if station is None:
             problems.append(f"station {rec.station}: not in facility {facility.name!r}")
             continue
+        for view_name in sorted(set(rec.images) - set(station.views)):
+            problems.append(f"station {rec.station} images.{view_name}: unknown view (station "
+                            f"{rec.station} of {facility.name!r} has views "
+                            f"{', '.join(sorted(station.views))})")
         for view_name, view in station.views.items():
             if view_name not in rec.images:
                 problems.append(f"station {rec.station} {view_name}: no image listed")
@@ -59,4 +68,26 @@ def check_shot(path: str | os.PathLike) -> list[str]:
     return problems
 
 
-__all__ = ["check_shot"]
+def _size_problems(shot, facility) -> list[str]:
+    """The model's diameter and length against the smallest field of view of the facility's
+    views (a diameter 10x too large does not fit)."""
+    from cadra.body import body_from_spec
+
+    body = body_from_spec(shot.model)
+    views = [(s.id, n, v) for s in facility.stations for n, v in s.views.items()]
+    if not views:
+        return []
+    sid, name, view = min(views, key=lambda t: min(t[2].width_px, t[2].height_px)
+                          * t[2].scale_m_per_px)
+    fov = min(view.width_px, view.height_px) * view.scale_m_per_px
+    out = []
+    for what, size, key in (("diameter", body.diameter_m, "model.d_*"),
+                            ("length", body.length_m, "model.h_* / length_*")):
+        if size > MAX_FIELD_FRACTION * fov:
+            out.append(f"model: {what} {size * 100:.4g} cm is more than "
+                       f"{MAX_FIELD_FRACTION:g} of the field of view of station {sid} {name} "
+                       f"({fov * 100:.4g} cm): check {key} (the unit?)")
+    return out
+
+
+__all__ = ["MAX_FIELD_FRACTION", "check_shot"]

@@ -41,6 +41,10 @@ MASS_G_RANGE = (0.0, 1e5)                 # exclusive lower bound; 100 kg upper 
 CG_CM_MAX = 100.0                         # |cg offset| < 1 m
 MODEL_LENGTH_CM_MAX = 100.0               # model dimensions < 1 m
 VELOCITY_M_S_RANGE = (0.0, 2.0e4)
+#: plausible mean density of a model, g/cm^3 (mass over the body's volume): hollow or foam
+#: models ~0.1, plastics ~1, steel ~8, tungsten ~19 (osmium, the densest metal, 22.6). A mass
+#: in kg written as grams, or a diameter 10x too large, lands below 0.1 (docs/shot_file.md)
+DENSITY_G_CM3_RANGE = (0.1, 25.0)
 #: Model-spec keys that are a size (must be > 0); other length keys need only |x| < 1 m.
 MODEL_SIZE_KEYS = ("d", "diameter", "h", "length", "l")
 
@@ -311,6 +315,27 @@ def _stations_from_list(stations) -> tuple[StationRecord, ...]:
     return tuple(out)
 
 
+def _check_density(model: dict, mass: MassProperties) -> None:
+    """The body must be buildable from ``model`` and ``mass_g`` over its volume a plausible
+    density (:data:`DENSITY_G_CM3_RANGE`): catches kg written as g and size-unit slips."""
+    from cadra.body import body_from_spec
+    from cadra.body.mass import solid_properties
+
+    try:
+        body = body_from_spec(model)
+    except ValueError as exc:
+        raise ShotFileError(f"model.{exc}") from None
+    volume_cm3 = solid_properties(body, n_meridian=401).volume_m3 * 1e6
+    m_g = units.from_si(mass.mass_kg, "g")
+    rho = m_g / volume_cm3
+    lo, hi = DENSITY_G_CM3_RANGE
+    if not lo <= rho <= hi:
+        raise ShotFileError(
+            f"mass.mass_g: {m_g:g} g in the model's {volume_cm3:.4g} "
+            f"cm^3 is a density of {rho:.3g} g/cm^3, outside [{lo:g}, {hi:g}] -- a mass in kg "
+            f"written as grams, or a model dimension in the wrong unit (model.*_cm)?")
+
+
 def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) -> ShotFile:
     """Validate a parsed shot file (file units) and build the SI :class:`ShotFile`."""
     if not isinstance(data, Mapping):
@@ -342,6 +367,7 @@ def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) 
         v_nom = _in_range(_number(v_nom, "nominal_velocity_m_s"), "nominal_velocity_m_s",
                           *VELOCITY_M_S_RANGE, "a model speed in m/s")
     stations = _stations_from_list(_require(data, "stations"))
+    _check_density(model, mass)
     return ShotFile(shot_id=shot_id, model=model, mass=mass,
                     pressure_pa=units.torr_to_pa(p_torr), temperature_k=t_k,
                     facility=facility, stations=stations, notes=notes,
