@@ -48,20 +48,62 @@ def tree_hash(root: Path) -> str:
     return h.hexdigest()
 
 
+def _trajectory(sim, shot_file: Path, out_dir: Path, rng) -> Path:
+    """A stage-one folder for ``sim``: its exact truth plus seeded noise (as
+    tests/test_cadra2_cli.py makes them: no images needed, and the fit converges)."""
+    import pandas as pd
+
+    from cadra.io.trajectory import COLUMNS, write_trajectory
+
+    t, sp, sa = sim.truth, 1e-4, 0.1
+    n = len(t)
+    table = pd.DataFrame({
+        "station": t["station"].to_numpy(), "t_s": t["t_s"].to_numpy(), "status": "ok",
+        "x_m": t["x_m"] + rng.normal(0, sp, n), "y_m": t["y_m"] + rng.normal(0, sp, n),
+        "z_m": t["z_m"] + rng.normal(0, sp, n),
+        "theta_deg": t["theta_deg"] + rng.normal(0, sa, n),
+        "psi_deg": t["psi_deg"] + rng.normal(0, sa, n),
+        "sigma_x_m": sp, "sigma_y_m": sp, "sigma_z_m": sp, "sigma_theta_deg": sa,
+        "sigma_psi_deg": sa, "x_top_minus_side_m": 0.0, "x_consistency": 0.0,
+        "reason": "", "warnings": ""})
+    out_dir.mkdir()
+    write_trajectory(out_dir / "trajectory.csv", table.loc[:, list(COLUMNS)],
+                     {"shot_id": sim.spec.shot_id, "shot_file": str(shot_file.resolve())})
+    return out_dir
+
+
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
-    """A 2-station shot with images (``shot/``), its stage-one folder (``stage1/``) and a
-    3-station spec (``specs/small.toml``), in one folder."""
+    """One folder of inputs: a 2-station shot with images (``shot/``, for cadra1), whole
+    M2-2429 and sphere shots without images with stage-one folders the fit and the
+    calibration accept (``m2/``, ``m2_stage1/``, ``sphere/``, ``sphere_stage1/``: so the old
+    code would have run to the end and written over them) and a 3-station spec
+    (``specs/small.toml``)."""
     import dataclasses
+
+    import numpy as np
 
     base = tmp_path_factory.mktemp("safety")
     spec = dataclasses.replace(load_shot_spec(SPEC), n_stations=2)
     write_shot(simulate_shot(spec), base / "shot", images=True, progress=False)
-    measure_shot(base / "shot" / "shot.toml", base / "stage1", workers=1, progress=False,
-                 overlays=False)
+    rng = np.random.default_rng(17)
+    for name, spec_file in (("m2", SPEC), ("sphere", SPEC.with_name("sphere_1.toml"))):
+        sim = simulate_shot(load_shot_spec(spec_file))
+        write_shot(sim, base / name, images=False, progress=False)
+        _trajectory(sim, base / name / "shot.toml", base / f"{name}_stage1", rng)
     (base / "specs").mkdir()
     (base / "specs" / "small.toml").write_text("n_stations = 3\n" + SPEC.read_text())
     return base
+
+
+#: per command: the stage-one folder it accepts and its other options (calibrate never
+#: touches the repository's station history, whatever the code does)
+def _command(command: str, work: Path) -> tuple[Path, list[str]]:
+    if command == "calibrate":
+        return work / "sphere_stage1", ["--no-history", "--stations-root", str(work / "hist")]
+    extra = {"holdone": ["--param", "Cm_A1", "--values", "1,2"]}.get(command, [])
+    model = [] if command == "single" else ["--model", "m2_m070"]
+    return work / "m2_stage1", [*model, *extra, "--max-iterations", "20"]
 
 
 def _refused(run, argv, culprit: str, capsys, work: Path, code: int) -> str:
@@ -76,42 +118,50 @@ def _refused(run, argv, culprit: str, capsys, work: Path, code: int) -> str:
 
 # -- cadra2: an output that is or holds an input -------------------------------------------
 
-@pytest.mark.parametrize("command", ["fit", "single", "holdone", "calibrate", "diagnose"])
+ALL = ["fit", "single", "holdone", "calibrate", "diagnose"]
+
+
+@pytest.mark.parametrize("command", ALL)
 @pytest.mark.parametrize("overwrite", [True, False])
 def test_cadra2_output_is_the_stage_one_folder(work, capsys, command, overwrite):
-    extra = {"fit": ["--model", "m2_m070"], "diagnose": ["--model", "m2_m070"],
-             "holdone": ["--model", "m2_m070", "--param", "Cm_A1", "--values", "1,2"]}
-    argv = [command, str(work / "stage1"), *extra.get(command, []), "-o",
-            str(work / "stage1"), *(["--overwrite"] if overwrite else [])]
+    stage1, options = _command(command, work)
+    argv = [command, str(stage1), *options, "-o", str(stage1),
+            *(["--overwrite"] if overwrite else [])]
     err = _refused(cadra2, argv, "is the input", capsys, work, 1)
-    assert err.startswith(f"cadra2 {command}: output {work / 'stage1'}")
+    assert err.startswith(f"cadra2 {command}: output {stage1}")
 
 
-@pytest.mark.parametrize("command", ["fit", "calibrate", "diagnose"])
+@pytest.mark.parametrize("command", ALL)
 def test_cadra2_output_holding_the_inputs(work, capsys, command):
-    model = [] if command == "calibrate" else ["--model", "m2_m070"]
-    # the folder holding the stage-one folder, the shot and its images
-    _refused(cadra2, [command, str(work / "stage1"), *model, "-o", str(work), "--overwrite"],
+    stage1, options = _command(command, work)
+    shot = stage1.parent / stage1.name.replace("_stage1", "")
+    # the folder holding the stage-one folder and the shot
+    _refused(cadra2, [command, str(stage1), *options, "-o", str(work), "--overwrite"],
              "holds the input", capsys, work, 1)
-    # the folder of --shot, with its images
-    _refused(cadra2, [command, str(work / "stage1"), *model, "--shot",
-                      str(work / "shot" / "shot.toml"), "-o", str(work / "shot"),
-                      "--overwrite"], "shot.toml", capsys, work, 1)
-    # the shot's images folder (the shot file the trajectory names)
-    _refused(cadra2, [command, str(work / "stage1"), *model, "-o",
+    # the folder of --shot
+    _refused(cadra2, [command, str(stage1), *options, "--shot", str(shot / "shot.toml"),
+                      "-o", str(shot), "--overwrite"], "shot.toml", capsys, work, 1)
+
+
+def test_cadra2_output_is_the_images_of_the_shot(work, capsys):
+    stage1 = work / "shot_stage1"
+    if not stage1.exists():
+        measure_shot(work / "shot" / "shot.toml", stage1, workers=1, progress=False,
+                     overlays=False)
+    _refused(cadra2, ["fit", str(stage1), "--model", "m2_m070", "-o",
                       str(work / "shot" / "images"), "--overwrite"], "st01_", capsys, work, 1)
 
 
 def test_cadra2_output_names_an_input_file(work, capsys):
-    traj = work / "stage1" / "trajectory.csv"
+    traj = work / "m2_stage1" / "trajectory.csv"
     _refused(cadra2, ["fit", str(traj), "--model", "m2_m070", "-o", str(traj), "--overwrite"],
              f"is the input {traj}", capsys, work, 1)
     assert traj.is_file()
     spec = work / "specs" / "small.toml"
-    _refused(cadra2, ["simulate", str(spec), "-o", str(spec), "--overwrite"],
+    _refused(cadra2, ["simulate", str(spec), "-o", str(spec), "--overwrite", "--no-images"],
              f"is the input {spec}", capsys, work, 1)
-    _refused(cadra2, ["simulate", str(spec), "-o", str(work / "specs"), "--overwrite"],
-             "holds the input", capsys, work, 1)
+    _refused(cadra2, ["simulate", str(spec), "-o", str(work / "specs"), "--overwrite",
+                      "--no-images"], "holds the input", capsys, work, 1)
     assert spec.is_file()
 
 
@@ -142,12 +192,13 @@ def test_other_spellings_of_an_input_folder(work, capsys, tmp_path, monkeypatch)
     # the current folder, and its parent, by any spelling
     monkeypatch.chdir(work / "shot")
     for out in (".", "./", "../shot"):
-        _refused(cadra2, ["fit", str(work / "stage1"), "--model", "m2_m070", "-o", out,
+        _refused(cadra2, ["fit", str(work / "m2_stage1"), "--model", "m2_m070", "-o", out,
                           "--overwrite"], "output", capsys, work, 1)
         _refused(cadra1, ["shot.toml", "-o", out, "--overwrite", "-q"], "output", capsys,
                  work, 2)
     _refused(cadra2, ["simulate", str(work / "specs" / "small.toml"), "-o", "..",
-                      "--overwrite"], "holds the current working folder", capsys, work, 1)
+                      "--overwrite", "--no-images"], "holds the current working folder",
+             capsys, work, 1)
     assert not [p for p in work.rglob(".*") if ".cadra-" in p.name]
 
 
