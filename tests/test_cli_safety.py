@@ -262,6 +262,19 @@ def test_stale_temps_cleaned_only_when_ours_and_dead(tmp_path):
     assert not (tmp_path / f".out.cadra-{dead}@{host}-zzzz9999.tmp").exists()
 
 
+def test_stale_temporary_files_of_single_file_writes(tmp_path):
+    from cadra.io.atomic import _host, atomic_write_text
+
+    dead, host = _dead_pid(), _host()
+    stale = tmp_path / f".a.csv.cadra-{dead}@{host}-abcd1234.tmp"
+    stale.write_text("half written")
+    keep = tmp_path / ".a.csv.abcd1234.tmp"                 # not CADRA's naming: kept
+    keep.write_text("someone's")
+    atomic_write_text(tmp_path / "a.csv", "x\n")
+    assert not stale.exists() and keep.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [keep.name, "a.csv"]
+
+
 def _wait_for(predicate, timeout_s: float, proc=None):
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
