@@ -9,11 +9,30 @@ from cadra.calibration.history import save_bias_table
 from cadra.io.atomic import atomic_output_dir
 
 
-def calibration_markdown(est, table, comparison, history, warnings=(),
-                         appended_to: str | os.PathLike | None = None) -> str:
-    """The calibration report: biases per station, residual rms before -> after the correction,
-    the comparison with the station history, warnings."""
+def history_sentence(history_file: str | os.PathLike | None, entry: int | None = None,
+                     append_error: str | None = None) -> str:
+    """What became of the estimate in the station history, in one sentence for the report.
+
+    ``history_file`` None: not recorded (``--no-history``); ``append_error``: the append failed
+    and why (the history is unchanged); else recorded as ``entry`` (1-based)."""
+    if history_file is None:
+        return "Station history: not recorded (--no-history)."
+    if append_error is not None:
+        return (f"**Station history: NOT recorded.** The append to {history_file} failed: "
+                f"{append_error}. The history is unchanged; the comparison below is with the "
+                "entries read before the attempt.")
+    return (f"Station history: recorded in {history_file} as entry {entry}; compared with the "
+            f"{entry - 1} entries before it, read under the history's lock.")
+
+
+def calibration_markdown(est, table, comparison, history, warnings=(), *,
+                         history_file: str | os.PathLike | None = None,
+                         entry: int | None = None, append_error: str | None = None) -> str:
+    """The calibration report: what became of the estimate in the station history (first, so
+    a failed append cannot be missed: :func:`history_sentence`), biases per station, residual
+    rms before -> after the correction, the comparison with the station history, warnings."""
     lines = [f"# Sphere calibration: facility {est.facility}", "",
+             history_sentence(history_file, entry, append_error), "",
              f"Shots: {', '.join(est.shots)} (speeds "
              f"{', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s). {est.method}.",
              f"chi^2/dof after correction: {est.chi2:.1f}/{est.dof} = "
@@ -51,14 +70,17 @@ def calibration_markdown(est, table, comparison, history, warnings=(),
     lines += ["", "![biases](biases.png)", ""]
     for w in (*est.warnings, *warnings):
         lines.append(f"- warning: {w}")
-    if appended_to is not None:
-        lines.append(f"- appended to the station history {appended_to}")
     return "\n".join(lines) + "\n"
 
 
 def write_calibration(est, table, comparison, history, out_dir: str | os.PathLike, *,
-                      warnings=(), appended_to=None, overwrite: bool = False) -> Path:
-    """``bias_table.csv``, ``comparison.csv``, ``biases.png``, ``report.md``, atomically."""
+                      warnings=(), history_file=None, entry=None, append_error=None,
+                      overwrite: bool = False) -> Path:
+    """``bias_table.csv``, ``comparison.csv``, ``biases.png``, ``report.md``, atomically.
+
+    Write it after the estimate was appended to the station history (``history_file``,
+    ``entry``), or with ``append_error`` saying why it was not: the report never claims a
+    record that is not there (:func:`history_sentence`)."""
     from cadra.calibration.plots import plot_biases
 
     out_dir = Path(out_dir)
@@ -67,6 +89,8 @@ def write_calibration(est, table, comparison, history, out_dir: str | os.PathLik
         comparison.to_csv(tmp / "comparison.csv", index=False)
         plot_biases(table, history).savefig(tmp / "biases.png", dpi=110)
         (tmp / "report.md").write_text(
-            calibration_markdown(est, table, comparison, history, warnings, appended_to),
+            calibration_markdown(est, table, comparison, history, warnings,
+                                 history_file=history_file, entry=entry,
+                                 append_error=append_error),
             encoding="utf-8")
     return out_dir

@@ -15,8 +15,13 @@ Subcommands:
   on all shots; table of rms and the other parameters, and a plot.
 * ``cadra2 calibrate TRAJECTORY [...] -o OUT_DIR`` — sphere calibration shots: per-station
   position and timing biases with sigmas, compared with the facility's station history
-  (``stations/<facility>/``), to which the new estimate is appended (docs/calibration.md).
-  ``cadra2 fit --bias-table current|FILE`` applies a table.
+  (``stations/<facility>/`` under ``--stations-root``, default ``$CADRA_STATIONS_ROOT`` or
+  the repository root, never the working folder unless given), to which the new estimate is
+  appended under the history's lock before the report is written (docs/calibration.md).
+  ``cadra2 fit --bias-table current|FILE`` applies a table. Exit status 3 (calibrate only):
+  the outputs are written but the estimate is not in the station history (the append failed:
+  full disk, lock timeout, a history changed into one it refuses; the report and a one-line
+  message say why), or writing the outputs failed after the append (the message says so).
 * ``cadra2 diagnose TRAJECTORY [...] --model MODEL -o OUT_DIR`` — fit, then rank the library
   of unmodelled effects by score tests, add the significant ones, and say where any remaining
   gap lies (docs/gap.md).
@@ -262,28 +267,50 @@ def _calibrate(args) -> int:
     import math
 
     from cadra.calibration.bias_table import shots_facility
-    from cadra.calibration.history import append_entry, compare, history_dir, load_history
+    from cadra.calibration.history import (
+        StationHistoryError,
+        append_compared,
+        compare,
+        history_path,
+        load_history,
+        stations_root,
+    )
     from cadra.calibration.report import write_calibration
     from cadra.calibration.sphere import CalibrationError, estimate_station_biases
     from cadra.units import from_si
 
     out = Path(args.output)
-    root = Path(args.stations_root)
     try:
+        root = stations_root(args.stations_root)
         shots, _ = _shots(args)
         facility = shots_facility(shots, CalibrationError)
-        history, hist_warnings = load_history(root, facility)
+        history, hist_warnings = load_history(root, facility)  # refuse a bad history early
         est = estimate_station_biases(shots, facility=facility)
     except _REFUSED as exc:
         return _refused("calibrate", exc)
     table = est.to_table(note=args.note or "")
-    comparison = compare(table, history, threshold_sigma=args.threshold_sigma)
-    write_calibration(est, table, comparison, history, out, warnings=hist_warnings,
-                      appended_to=None if args.no_history else history_dir(root, facility),
-                      overwrite=args.overwrite)
-    if not args.no_history:
-        path = append_entry(table, root)
-        print(f"appended to {path}")
+    hfile = None if args.no_history else history_path(root, facility)
+    entry = failed = None
+    if hfile is not None:
+        # read, date, compare and append under the history's lock; the report comes after
+        try:
+            rec = append_compared(table, root, threshold_sigma=args.threshold_sigma)
+        except (StationHistoryError, OSError) as exc:
+            failed = " ".join(str(exc).split())  # one line
+        else:
+            table, history, hist_warnings, entry = rec.table, rec.history, rec.warnings, rec.entry
+            comparison = rec.comparison
+    if hfile is None or failed is not None:
+        comparison = compare(table, history, threshold_sigma=args.threshold_sigma)
+    try:
+        write_calibration(est, table, comparison, history, out, warnings=hist_warnings,
+                          history_file=hfile, entry=entry, append_error=failed,
+                          overwrite=args.overwrite)
+    except OSError as exc:
+        done = f" (the estimate IS recorded: {hfile}, entry {entry})" if entry else ""
+        print(f"cadra2 calibrate: writing {out} failed: {' '.join(str(exc).split())}{done}",
+              file=sys.stderr)
+        return 3
     unit = {"x": "mm", "y": "mm", "z": "mm", "time": "us"}
     print(f"{facility}: station biases from {len(shots)} sphere shot(s) "
           f"(speeds {', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s)")
@@ -299,6 +326,12 @@ def _calibrate(args) -> int:
     for w in (*est.warnings, *hist_warnings):
         print(f"warning: {w}")
     print(f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
+    if failed is not None:
+        print(f"cadra2 calibrate: NOT recorded in the station history: {failed}",
+              file=sys.stderr)
+        return 3
+    if entry is not None:
+        print(f"recorded in {hfile} as entry {entry} (compared with the {entry - 1} before it)")
     return 0
 
 
@@ -390,8 +423,10 @@ def build_parser() -> argparse.ArgumentParser:
     diag.set_defaults(func=_diagnose)
     cal = sub.add_parser("calibrate", help="station biases from sphere calibration shots")
     _add_data_options(cal)
-    cal.add_argument("--stations-root", default=".",
-                     help="directory holding stations/<facility>/ (default: .)")
+    cal.add_argument("--stations-root", default=None, metavar="DIR",
+                     help="directory holding stations/<facility>/ (default: "
+                          "$CADRA_STATIONS_ROOT, else the repository root beside facilities/; "
+                          "'.' for the working folder)")
     cal.add_argument("--no-history", action="store_true",
                      help="do not append the estimate to the station history")
     cal.add_argument("--threshold-sigma", type=float, default=3.0,
