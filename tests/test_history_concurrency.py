@@ -114,6 +114,22 @@ def test_full_disk_leaves_the_history_as_it_was(tmp_path, monkeypatch):
     assert rec.entry == 2 and load_history(tmp_path, FAC)[1] == []
 
 
+def test_failed_first_append_leaves_no_file_and_a_held_lock_times_out(tmp_path, monkeypatch):
+    from filelock import FileLock
+
+    path = history_path(tmp_path, FAC)
+    _full_disk(monkeypatch)
+    with pytest.raises(OSError):
+        append_compared(make_table(1), tmp_path)
+    assert not path.exists()
+    monkeypatch.undo()
+    append_compared(make_table(2), tmp_path)
+    before = path.read_bytes()
+    with FileLock(f"{path}.lock"), pytest.raises(TimeoutError, match="lock"):
+        append_compared(make_table(3), tmp_path, timeout_s=0.2)
+    assert path.read_bytes() == before
+
+
 # --------------------------------------------------------------------------- cadra2 calibrate
 
 
