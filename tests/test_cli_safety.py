@@ -152,6 +152,18 @@ def test_cadra2_output_is_the_images_of_the_shot(work, capsys):
                       str(work / "shot" / "images"), "--overwrite"], "st01_", capsys, work, 1)
 
 
+def test_cadra2_output_holding_the_station_history(work, capsys, monkeypatch):
+    hist = work / "hist_root"
+    (hist / "stations" / "hffaf").mkdir(parents=True, exist_ok=True)
+    (hist / "stations" / "hffaf" / "bias_history.jsonl").write_text("")
+    monkeypatch.setenv("CADRA_STATIONS_ROOT", str(hist))        # calibrate's default root
+    _refused(cadra2, ["calibrate", str(work / "sphere_stage1"), "-o", str(hist / "stations"),
+                      "--overwrite"], "is the input", capsys, work, 1)
+    _refused(cadra2, ["fit", str(work / "m2_stage1"), "--model", "m2_m070", "--bias-table",
+                      "current", "--stations-root", str(hist), "-o", str(hist),
+                      "--overwrite"], "holds the input", capsys, work, 1)
+
+
 def test_cadra2_output_names_an_input_file(work, capsys):
     traj = work / "m2_stage1" / "trajectory.csv"
     _refused(cadra2, ["fit", str(traj), "--model", "m2_m070", "-o", str(traj), "--overwrite"],

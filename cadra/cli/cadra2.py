@@ -94,8 +94,11 @@ def _input_paths(args) -> list[Path]:
         value = getattr(args, name, None)
         if value and Path(value).exists():
             paths.append(Path(value))
-    if getattr(args, "stations_root", None):  # the station history (calibrate, fit)
-        paths.append(Path(args.stations_root) / "stations")
+    if args.command == "calibrate" or getattr(args, "stations_root", None):
+        from cadra.calibration.history import stations_root
+
+        with suppress(*readable):  # the station history (calibrate, fit --bias-table)
+            paths.append(stations_root(getattr(args, "stations_root", None)) / "stations")
     return paths
 
 
