@@ -124,6 +124,8 @@ class Fields:
         """A finite number (not a boolean), as float."""
         if not _is_number(value):
             raise self.fail(key, f"expected a number, got {value!r}")
+        if isinstance(value, int) and abs(value) > 2**1023:
+            raise self.fail(key, f"integer of {len(str(abs(value)))} digits is too large")
         x = float(value)
         if not math.isfinite(x):
             raise self.fail(key, f"must be finite, got {value!r}")
