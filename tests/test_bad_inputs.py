@@ -289,3 +289,19 @@ def test_unknown_view_name_is_refused_naming_the_known_views(tmp_path):
     assert ("station 2 images.tpo: unknown view (station 2 of 'hffaf' has views side, top)"
             in problems)
     assert not any("unknown view" in p for p in check_shot(SHOT))
+
+
+@pytest.mark.parametrize("content", [None, "x_m,y_m\n1,2\n", "x_m,y_m,z_m,theta_deg,psi_deg\n"
+                                     "0,0,0,zz,0\n"])
+def test_cadra1_truth_missing_or_invalid_is_one_line(tmp_path, capsys, content):
+    from cadra.cli.cadra1 import main
+
+    truth = tmp_path / "truth.csv"
+    if content is not None:
+        truth.write_text(content)
+    code = main([SHOT, "-o", str(tmp_path / "out"), "--truth", str(truth), "-q",
+                 "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith(f"cadra1: {truth}: ") and "Traceback" not in err
+    assert not (tmp_path / "out").exists()

@@ -60,15 +60,14 @@ def _main(argv: list[str] | None) -> int:
         return 1 if problems else 0
     from pathlib import Path
 
-    import pandas as pd
-
     from cadra.io.atomic import check_output_dir
+    from cadra.io.trajectory import load_truth
     from cadra.measure.shot import measure_shot
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
     try:
         check_output_dir(out, _input_paths(args))  # measure_shot checks the shot's inputs too
-        truth = pd.read_csv(args.truth) if args.truth else None
+        truth = load_truth(args.truth) if args.truth else None  # errors name row, column
         res = measure_shot(args.shot_file, out, workers=args.workers, progress=not args.quiet,
                            overlays=not args.no_overlays, overwrite=args.overwrite,
                            truth=truth)
