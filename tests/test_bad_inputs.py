@@ -280,14 +280,18 @@ def test_diameter_ten_times_too_large(tmp_path):
 
 def test_unknown_view_name_is_refused_naming_the_known_views(tmp_path):
     from cadra.io.shot_check import check_shot
+    from cadra.io.shotfile import ShotFileError, load_shot
 
     text = SHOT_TEXT.replace('station = 2\ntime_s = 0.006438140799976919\nimages = {}',
                              'station = 2\ntime_s = 0.006438140799976919\n'
                              'images = { tpo = "a.png", side = "b.png" }')
     assert 'tpo = "a.png"' in text
-    problems = check_shot(_shot(tmp_path, text))
-    assert ("station 2 images.tpo: unknown view (station 2 of 'hffaf' has views side, top)"
-            in problems)
+    p = _shot(tmp_path, text)
+    with pytest.raises(ShotFileError, match=re.escape(f"{p}: stations[1].images.tpo: unknown "
+                                                      "view (known: side, top)")):
+        load_shot(p)
+    assert check_shot(p) == [f"shot file: {p}: stations[1].images.tpo: unknown view (known: "
+                             "side, top)"]
     assert not any("unknown view" in p for p in check_shot(SHOT))
 
 

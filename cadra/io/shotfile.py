@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cadra.atmosphere import Atmosphere
+from cadra.facility.reference import VIEW_AXES
 from cadra.fields import frozen_array
 from cadra.io import units
 from cadra.io.atomic import atomic_write_text
@@ -298,6 +299,9 @@ def _stations_from_list(stations) -> tuple[StationRecord, ...]:
         if not isinstance(images, Mapping):
             raise ShotFileError(f"{where}images: expected a table view = \"path\"")
         for view, path in images.items():
+            if view not in VIEW_AXES:
+                raise ShotFileError(f"{where}images.{view}: unknown view (known: "
+                                    f"{', '.join(sorted(VIEW_AXES))})")
             if not isinstance(path, str) or not path.strip():
                 raise ShotFileError(f"{where}images.{view}: expected a non-empty path string")
         out.append(StationRecord(station=int(sid), time_s=t, images=dict(images)))
