@@ -1,5 +1,6 @@
-"""The coefficient-form language: safe parser, expression trees, numpy reference evaluator,
-and the compiler to the stack-machine program of :mod:`cadra.aero.program`.
+"""The coefficient-form language: safe parser, expression trees, and the compiler to the
+stack-machine program of :mod:`cadra.aero.program` (the numpy reference evaluator and the
+finite checks: :mod:`cadra.aero.evaluate`; nesting limits: :mod:`cadra.aero.nesting`).
 
 Expressions are parsed with ``ast.parse(text, mode="eval")`` and a whitelist visitor: nothing of
 the user's text is ever executed. The language (docs/aero_models.md):
