@@ -375,9 +375,11 @@ def _alive(pid: int) -> bool:
 
 
 def _slow_cadra1(work: Path, out: Path, stderr=subprocess.PIPE) -> subprocess.Popen:
+    # a session of its own: a terminal's Ctrl-C reaches the whole process group
     return subprocess.Popen([sys.executable, "-c", SLOW_CADRA1, str(work / "shot" / "shot.toml"),
                              "-o", str(out), "-q", "--workers", "2", "--no-overlays"],
-                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=stderr, text=True)
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=stderr, text=True,
+                            start_new_session=True)
 
 
 linux_only = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
@@ -390,7 +392,7 @@ def test_ctrl_c_cadra1_with_workers(work, tmp_path):
     workers = _wait_for(lambda: len(_children(proc.pid)) >= 2 and _children(proc.pid), 60,
                         proc)
     time.sleep(0.3)                                             # the tasks are running
-    proc.send_signal(signal.SIGINT)
+    os.killpg(proc.pid, signal.SIGINT)                          # Ctrl-C: parent and workers
     _, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130
     assert stderr.strip().splitlines() == ["cadra1: interrupted"], stderr
