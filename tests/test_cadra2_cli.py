@@ -265,7 +265,7 @@ def sphere_trajectories(shots):
     return trajs, bias
 
 
-def test_calibrate_history_and_fit_with_table(shots, sphere_trajectories, capsys):
+def test_calibrate_history_and_fit_with_table(shots, sphere_trajectories, capsys, monkeypatch):
     trajs, bias = sphere_trajectories
     root = shots["base"] / "facility_root"
     out = shots["base"] / "cal1"
@@ -296,6 +296,14 @@ def test_calibrate_history_and_fit_with_table(shots, sphere_trajectories, capsys
                  "--no-plots", "--bias-table", "current", "--stations-root", str(root)]) == 0
     report = (fit_out / "report.md").read_text()
     assert "station bias table applied" in report and "bias_history.jsonl" in report
+    # without --stations-root the fit reads the history where calibrate writes it by default
+    # (CADRA_STATIONS_ROOT here), not ./stations of the working folder
+    monkeypatch.setenv("CADRA_STATIONS_ROOT", str(root))
+    monkeypatch.chdir(shots["base"])
+    fit_env = shots["base"] / "fit_with_table_env"
+    assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(fit_env), "-q",
+                 "--no-plots", "--bias-table", "current"]) == 0
+    assert str(hist) in (fit_env / "report.md").read_text()
 
 
 def test_calibrate_refusals(shots, sphere_trajectories, capsys):

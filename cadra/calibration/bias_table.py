@@ -5,14 +5,13 @@ What ``cadra2 fit --bias-table`` and ``cadra2 calibrate`` do before their work, 
 functions::
 
     facility = shots_facility(shots)                       # the one facility they come from
-    shots, note = correct_by_bias_table(shots, "current", stations_root=".")
+    shots, note = correct_by_bias_table(shots, "current")          # the history calibrate wrote
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from pathlib import Path
 
 from cadra.calibration.history import current_table, load_bias_table, load_history
 from cadra.calibration.sphere import apply_bias_table
@@ -38,17 +37,22 @@ def shots_facility(shots: Sequence[ShotData], error: type[Exception] = ValueErro
 
 
 def correct_by_bias_table(shots: Sequence[ShotData], table: str | os.PathLike,
-                          stations_root: str | os.PathLike = "."
+                          stations_root: str | os.PathLike | None = None
                           ) -> tuple[list[ShotData], str]:
     """The shots corrected by a station bias table, and a note for the report.
 
-    ``table`` is :data:`CURRENT` (the latest entry of ``<stations_root>/stations/<facility>/``)
+    ``table`` is :data:`CURRENT` (the latest entry of ``<stations_root>/stations/<facility>/``;
+    ``stations_root`` resolved as ``cadra2 calibrate`` resolves it,
+    :func:`cadra.calibration.history.stations_root`, so the fit reads the history the
+    calibration wrote, whatever the working folder)
     or a bias-table CSV, which must be of the shots' facility
     (:func:`cadra.calibration.sphere.apply_bias_table` applies it). Raises ``ValueError``
     saying what does not fit.
     """
     facility = shots_facility(shots)
-    root = Path(stations_root)
+    from cadra.calibration.history import stations_root as resolve_stations_root
+
+    root = resolve_stations_root(stations_root)
     if str(table) == CURRENT:
         history, _ = load_history(root, facility)
         bias = current_table(history)

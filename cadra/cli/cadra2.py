@@ -400,8 +400,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--bias-table", default=None, metavar="current|FILE",
                      help="correct the measurements by a station bias table: 'current' (the "
                           "facility history's latest entry) or a bias-table CSV")
-    fit.add_argument("--stations-root", default=".",
-                     help="directory holding stations/<facility>/ (default: .)")
+    fit.add_argument("--stations-root", default=None, metavar="DIR",
+                     help="directory holding stations/<facility>/ (default: $CADRA_STATIONS_ROOT"
+                          ", else the repository holding facilities/; as for calibrate)")
     fit.set_defaults(func=_fit)
     single = sub.add_parser("single", help="single fits with linear forms and quasi-linear "
                                            "trends (seed 004 steps 1-2)")
