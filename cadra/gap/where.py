@@ -112,13 +112,14 @@ def motion_frequencies(result: FitResult, shots: Sequence[ShotData]) -> dict:
     for a motion with less than one cycle over the record)."""
     problem = result_problem(result, shots)
     theta, psi = CHANNELS.index("theta"), CHANNELS.index("psi")
+    times = {sd.shot_id: np.linspace(sd.t_s.min(), sd.t_s.max(), 512) for sd in problem.shots}
+    histories = problem.histories(times=times)       # every shot at once, each integrated once
     out = {}
-    for k, sd in enumerate(problem.shots):
+    for sd, h in zip(problem.shots, histories, strict=True):
         if not sd.has_angles:
             out[sd.shot_id] = {"pitch": math.nan, "yaw": math.nan, "roll": math.nan}
             continue
-        t = np.linspace(sd.t_s.min(), sd.t_s.max(), 512)
-        h = problem.histories(times={sd.shot_id: t})[k]
+        t = times[sd.shot_id]
         y, o = h["states"], h["channels"]
         f_roll = abs(float(np.median(y[:, 10]))) / (2 * math.pi)
         out[sd.shot_id] = {"pitch": _dominant_frequency(t, o[:, theta]),
