@@ -309,3 +309,12 @@ def test_cadra1_truth_missing_or_invalid_is_one_line(tmp_path, capsys, content):
     assert code == 2
     assert err.startswith(f"cadra1: {truth}: ") and "Traceback" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_body_without_volume_is_refused(tmp_path):
+    """Found by tools/fuzz_parsers.py: a 4e-243 cm sphere (volume 0) divided by zero."""
+    from cadra.io.shotfile import ShotFileError, load_shot
+
+    p = _shot(tmp_path, SPHERE_TEXT.replace("d_cm = 2.0", "d_cm = 0.378e-242"))
+    with pytest.raises(ShotFileError, match=re.escape(f"{p}: model: the body's volume, 0 cm^3")):
+        load_shot(p)

@@ -329,7 +329,13 @@ def _check_density(model: dict, mass: MassProperties) -> None:
         body = body_from_spec(model)
     except ValueError as exc:
         raise ShotFileError(f"model.{exc}") from None
-    volume_cm3 = solid_properties(body, n_meridian=401).volume_m3 * 1e6
+    with np.errstate(all="ignore"):
+        vol = float(np.pi / 6 * body.diameter_m**2 * body.length_m * 1e6)  # order of magnitude
+        volume_cm3 = (solid_properties(body, n_meridian=401).volume_m3 * 1e6
+                      if 1e-9 < vol < 1e9 else vol)
+    if not 1e-9 < volume_cm3 < 1e9:
+        raise ShotFileError(f"model: the body's volume, {volume_cm3:.3g} cm^3, is not a "
+                            "model's (a dimension in the wrong unit?)")
     m_g = units.from_si(mass.mass_kg, "g")
     rho = m_g / volume_cm3
     lo, hi = DENSITY_G_CM3_RANGE
