@@ -417,13 +417,24 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
     # reference would depend on a third party's internals. Central differences with these
     # steps are exact to ~1e-8 relative on this problem (they agree with 3-point differences
     # at other steps and with tighter solve_ivp tolerances).
+    # A shot's residuals depend on the aero parameters and its own local unknowns only, so a
+    # local column is differenced on its shot alone (the rest of the column is zero).
     steps = scale * rstep
-    J = np.empty((res.fun.size, x.size))
+    J = np.zeros((res.fun.size, x.size))
+    rows = np.cumsum([0, *counts])
     for j in range(x.size):
         xp, xm = x.copy(), x.copy()
         xp[j] += steps[j]
         xm[j] -= steps[j]
-        J[:, j] = -(residuals(xp) - residuals(xm)) / (2.0 * steps[j])  # d fitted/sigma / dx
+        if j < na:
+            J[:, j] = -(residuals(xp) - residuals(xm)) / (2.0 * steps[j])  # d fitted/sigma
+            continue
+        k = (j - na) // N_LOCAL
+        p = params0.copy()
+        p[aero_idx] = x[:na]
+        sl = slice(na + N_LOCAL * k, na + N_LOCAL * (k + 1))
+        J[rows[k]:rows[k + 1], j] = -(shot_residuals(k, p, xp[sl])
+                                      - shot_residuals(k, p, xm[sl])) / (2.0 * steps[j])
     cov = np.linalg.pinv(J.T @ J, rcond=1e-15, hermitian=True)
     sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
     states, local_sigma = [], []
