@@ -40,23 +40,9 @@ import numpy as np
 from cadra.aero import AeroModel
 from cadra.aero.expr import evaluate_tree
 from cadra.aero.program import COEFFICIENTS, VARIABLES
+from cadra.dynamics import layout as L
 from cadra.dynamics.eom import derivative
 from cadra.dynamics.integrate import inverse3
-from cadra.dynamics.layout import (
-    N_STATE,
-    P_CG_OFFSET,
-    P_D,
-    P_G,
-    P_INERTIA,
-    P_MASS,
-    P_MU,
-    P_RHO,
-    P_RHO_GRAD,
-    P_S,
-    P_SOUND,
-    P_WIND,
-    P_WIND_GRAD,
-)
 from cadra.dynamics.setup import plane_code
 from cadra.fitting.data import ShotData
 from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, apply_local, observables
@@ -129,18 +115,18 @@ def air_data_python(y, phys, R) -> tuple[tuple[float, float, float], float, floa
     rad) at state ``y``; plain-Python translation of :func:`cadra.dynamics.eom.air_data`.
     """
     x = y[0]
-    ax = y[3] - (phys[P_WIND] + phys[P_WIND_GRAD] * x)
-    ay = y[4] - (phys[P_WIND + 1] + phys[P_WIND_GRAD + 1] * x)
-    az = y[5] - (phys[P_WIND + 2] + phys[P_WIND_GRAD + 2] * x)
+    ax = y[3] - (phys[L.P_WIND] + phys[L.P_WIND_GRAD] * x)
+    ay = y[4] - (phys[L.P_WIND + 1] + phys[L.P_WIND_GRAD + 1] * x)
+    az = y[5] - (phys[L.P_WIND + 2] + phys[L.P_WIND_GRAD + 2] * x)
     u, v, w = (R[0][j] * ax + R[1][j] * ay + R[2][j] * az for j in range(3))
     V = math.sqrt(u * u + v * v + w * w)
-    rho = phys[P_RHO] * (1.0 + phys[P_RHO_GRAD] * x)
+    rho = phys[L.P_RHO] * (1.0 + phys[L.P_RHO_GRAD] * x)
     s_xz = math.sqrt(u * u + w * w)
     s_perp = math.sqrt(v * v + w * w)
     alpha = 2.0 * math.atan(w / (s_xz + u)) if s_xz + u > 0.0 else math.pi
-    k = phys[P_D] / (2.0 * V)
-    values = (alpha, math.asin(v / V), 2.0 * math.atan(s_perp / (V + u)), V / phys[P_SOUND],
-              rho * V * phys[P_D] / phys[P_MU], y[10] * k, y[11] * k, y[12] * k)
+    k = phys[L.P_D] / (2.0 * V)
+    values = (alpha, math.asin(v / V), 2.0 * math.atan(s_perp / (V + u)), V / phys[L.P_SOUND],
+              rho * V * phys[L.P_D] / phys[L.P_MU], y[10] * k, y[11] * k, y[12] * k)
     return (u, v, w), V, rho, dict(zip(VARIABLES, values, strict=True))
 
 
@@ -152,8 +138,8 @@ def aero_force_moment_python(v_b, V, rho, phys, coef, sigma_plane: bool
     :func:`cadra.dynamics.eom.aero_force_moment`.
     """
     u, v, w = v_b
-    qS = 0.5 * rho * V * V * phys[P_S]
-    qSd = qS * phys[P_D]
+    qS = 0.5 * rho * V * V * phys[L.P_S]
+    qSd = qS * phys[L.P_D]
     CD, CL, CC, Cl, Cm, Cn, Clp, Cmq, Cnr = coef
     evx, evy, evz = u / V, v / V, w / V
     s_xz = math.sqrt(u * u + w * w)
@@ -192,14 +178,14 @@ def python_rhs(phys: np.ndarray, model: AeroModel, params: np.ndarray):
     :mod:`cadra.dynamics.layout`; the inertia inverse is numpy's. No compiled code is called.
     """
     ph = [float(v) for v in phys]
-    I = np.asarray(phys[P_INERTIA:P_INERTIA + 9], dtype=float).reshape(3, 3)
+    I = np.asarray(phys[L.P_INERTIA:L.P_INERTIA + 9], dtype=float).reshape(3, 3)
     Ii = np.linalg.inv(I).tolist()
     I = I.tolist()
     pmap = dict(zip(model.names, (float(v) for v in params), strict=True))
     trees = [model.tree(c) for c in COEFFICIENTS]
     sigma_plane = model.angle_plane == "sigma"
-    m, g, d, S = ph[P_MASS], ph[P_G], ph[P_D], ph[P_S]
-    ox, oy, oz = ph[P_CG_OFFSET:P_CG_OFFSET + 3]
+    m, g, d, S = ph[L.P_MASS], ph[L.P_G], ph[L.P_D], ph[L.P_S]
+    ox, oy, oz = ph[L.P_CG_OFFSET:L.P_CG_OFFSET + 3]
 
     def rhs(_t, y):
         y = y.tolist() if isinstance(y, np.ndarray) else list(y)
@@ -273,7 +259,7 @@ def trajectory_ivp(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarra
     else:
         raise ValueError(f'trajectory_ivp: rhs must be "compiled" or "python", got {rhs!r}')
     times = np.asarray(times, dtype=float)
-    out = np.empty((times.size, N_STATE))
+    out = np.empty((times.size, L.N_STATE))
     y0 = np.asarray(y0, dtype=float)
     after = times >= t0
     for sel, t_end in ((after, times[-1]), (~after, times[0])):
@@ -293,13 +279,13 @@ def trajectory_ivp(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarra
 
 def _compiled_rhs(phys: np.ndarray, program, params: np.ndarray):
     """``f(t, y)`` calling the compiled :func:`cadra.dynamics.eom.derivative`."""
-    I = phys[P_INERTIA:P_INERTIA + 9].reshape(3, 3).copy()
+    I = phys[L.P_INERTIA:L.P_INERTIA + 9].reshape(3, 3).copy()
     Iinv = np.empty((3, 3))
     inverse3(I, Iinv)
     R, v_b, variables = np.empty((3, 3)), np.empty(3), np.empty(8)
     F_b, M_b, coef = np.empty(3), np.empty(3), np.empty(9)
     stack = np.empty(max(int(program.stack_size), 1))
-    dy = np.empty(N_STATE)
+    dy = np.empty(L.N_STATE)
     ops, args, starts = program.ops, program.args, program.starts
     plane = plane_code(program.angle_plane)
 
