@@ -338,7 +338,10 @@ def build_result(problem, params: np.ndarray, states, status: str, message: str,
     shot_fits = []
     chi2_total = 0.0
     n_obs = 0
-    have_jac = all(st.jac is not None for st in states)
+    # no covariance from a Jacobian that is missing or not finite (a start whose trajectory
+    # overflows): the result then carries NaN sigmas and its message, never a LinAlgError
+    have_jac = all(st.jac is not None and np.all(np.isfinite(st.jac[st.mask]))
+                   for st in states)
     jac_rows = []
     for st, off in zip(states, offsets, strict=True):
         sd = st.data
