@@ -33,6 +33,9 @@ from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
 from cadra.fitting.solver import FitOptions, fit
 from cadra.fitting.start import estimate_motion, initial_states, starting_model
 
+#: the progress-bar labels of :func:`fit_shots`' two phases (continuation)
+PHASE_LABELS = ("fit (film-level sigmas)", "fit (stage-one sigmas)")
+
 
 def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
               options: FitOptions | None = None, auto_start: bool = True,
@@ -70,21 +73,29 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
         first_shots, start, options.integration)
     extras = list(extras)
     if staged:
-        first = fit(first_shots, start, states, options=options, local_free=local_free,
-                    extras=extras)
+        first = fit(first_shots, start, states, local_free=local_free, extras=extras,
+                    options=replace(options, progress_label=PHASE_LABELS[0]))
         if first.status in ("converged", "max_iterations", "stalled") and np.all(
                 np.isfinite(first.aero_values)):
             result = fit(shots, first.model, [sf.state for sf in first.shots],
-                         options=options, local_free=local_free,
-                         extras=first.extras_at_values())
+                         options=replace(options, progress_label=PHASE_LABELS[1]),
+                         local_free=local_free, extras=first.extras_at_values())
+            # the report says there were two phases and why chi^2 jumps between them
+            phases = [{"label": PHASE_LABELS[k], "status": r.status,
+                       "iterations": r.iterations,
+                       "chi2_start": r.history[0] if r.history else float("nan"),
+                       "chi2_end": r.chi2, "history_points": len(r.history)}
+                      for k, r in enumerate((first, result))]
             return replace(result, iterations=first.iterations + result.iterations,
                            elapsed_s=first.elapsed_s + result.elapsed_s,
-                           history=first.history + result.history), start
+                           history=first.history + result.history,
+                           options={**result.options, "phases": phases,
+                                    "continuation": dict(continuation)}), start
     return fit(shots, start, states, options=options, local_free=local_free,
                extras=extras), start
 
 
-__all__ = ["CHANNELS", "FILM_SIGMAS", "LOCAL_NAMES", "FitDataError", "FitOptions",
-           "FitProblem", "FitResult", "Integration", "ShotData", "estimate_motion", "fit",
-           "fit_shots", "initial_states", "load_shot_data", "result_problem",
+__all__ = ["CHANNELS", "FILM_SIGMAS", "LOCAL_NAMES", "PHASE_LABELS", "FitDataError",
+           "FitOptions", "FitProblem", "FitResult", "Integration", "ShotData", "estimate_motion",
+           "fit", "fit_shots", "initial_states", "load_shot_data", "result_problem",
            "shot_data_from_truth", "starting_model"]

@@ -57,6 +57,7 @@ class FitOptions:
     rcond: float = 1e-12                 # eigenvalue cut-off of every solve (relative)
     integration: Integration = field(default_factory=Integration)
     progress: bool = False
+    progress_label: str = "cadra2 fit"   # the progress bar's label (fit_shots names its phases)
 
 
 @dataclass
@@ -233,7 +234,8 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     if options.progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=options.max_iterations, desc="cadra2 fit", unit="it", leave=False)
+        bar = tqdm(total=options.max_iterations, desc=options.progress_label, unit="it",
+                   leave=False)
     try:
         chi2 = evaluate_jac(params, xvals)
         if n_obs < n_free:
