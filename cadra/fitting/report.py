@@ -312,6 +312,27 @@ def _bounds_text(p) -> str:
     return f"[{p.min:g}, {p.max:g}]"
 
 
+def phases_note(result: FitResult) -> list[str]:
+    """The report's lines on the fit's two phases (``fit_shots``' continuation), or none when
+    it ran in one: the chi^2 history jumps between them because the weights change."""
+    phases = result.options.get("phases") if isinstance(result.options, dict) else None
+    if not phases or len(phases) != 2:
+        return []
+    a, b = phases
+    cont = result.options.get("continuation", {})
+    floor = ""
+    if "position_m" in cont and "angle_rad" in cont:
+        floor = (f" ({cont['position_m'] * 1e3:g} mm, "
+                 f"{math.degrees(cont['angle_rad']):g} deg)")
+    return [f"The fit ran in two phases (continuation, docs/fitting.md): {a['iterations']} "
+            f"iterations with the sigmas floored at film level{floor}, ending at χ² = "
+            f"{a['chi2_end']:.4g} ({a['status']}), then {b['iterations']} with stage one's own "
+            f"sigmas from that point, starting at χ² = {b['chi2_start']:.4g}. The χ² history "
+            "jumps between the phases because the weights change (stage one's sigmas are "
+            "much smaller), not because the fit got worse; the result is the second "
+            "phase's.", ""]
+
+
 def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
                     start_model: AeroModel | None = None, title: str | None = None,
                     plot_files: Mapping[str, str] | None = None,
@@ -342,6 +363,7 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
           f"| shots | {len(result.shots)} |",
           f"| iterations | {result.iterations} |",
           f"| elapsed | {result.elapsed_s:.2f} s |", ""]
+    L += phases_note(result)
     if math.isfinite(result.reduced_chi2) and result.reduced_chi2 > 2.0:
         L += [f"Reduced χ² = {result.reduced_chi2:.3g} > 2: the sigmas or the model do not "
               "describe the data; use the scaled or coloured sigmas.", ""]
