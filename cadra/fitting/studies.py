@@ -598,6 +598,36 @@ def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
 
 
 
+#: a single fit whose chi^2/nu exceeds this is flagged: its sigmas are not meaningful
+SINGLE_FIT_CHI2_WARN = 10.0
+
+
+def single_fit_warnings(table: pd.DataFrame) -> list[str]:
+    """Plain warnings on a :func:`single_fits` table where a result is meaningless: fewer than
+    two converged shots for the quasi-linear trends (a straight line through one point has no
+    slope; the line starts ``quasi-linear``), fits that did not converge, and fits whose
+    chi^2/nu exceeds :data:`SINGLE_FIT_CHI2_WARN` (the model or the sigmas do not describe
+    the data, so the covariance sigmas are not meaningful)."""
+    out = []
+    ok = table["status"] == "converged" if "status" in table else table["converged"]
+    n_ok = int(ok.sum())
+    if n_ok < 2:
+        out.append(f"quasi-linear trends not computed: they fit a straight line through the "
+                   f"shots' coefficients against their amplitude, which needs at least two "
+                   f"converged single fits at different amplitudes ({len(table)} shot(s) "
+                   f"given, {n_ok} converged); give more shots of the same case")
+    for _, row in table.iterrows():
+        if row["status"] != "converged":
+            out.append(f"{row['shot_id']}: fit {row['status']} ({row['message']}); its row is "
+                       "not a result")
+        elif math.isfinite(row["reduced_chi2"]) and row["reduced_chi2"] > SINGLE_FIT_CHI2_WARN:
+            out.append(f"{row['shot_id']}: chi^2/nu = {row['reduced_chi2']:.3g}, far above 1: "
+                       "the linear model or the sigmas do not describe this shot, so its "
+                       "sigmas are not meaningful (the *_sigma_scaled columns inflate them by "
+                       "sqrt(chi^2/nu); a nonlinear model may be needed)")
+    return out
+
+
 def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
                       overwrite: bool = False) -> list[str]:
     """Write seed 004 steps 1-2 to ``out_dir`` atomically: ``single_fits.csv``, the
@@ -622,6 +652,11 @@ def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
               "| coefficient | against | slope ± σ | intercept ± σ | p (line) |",
               "|---|---|---|---|---|"]
     summaries = {}
+    trend_warnings = [w for w in single_fit_warnings(table) if w.startswith("quasi-linear")]
+    if trend_warnings:   # one line saying why, not rows of NaN
+        lines = lines[:-4] + ["", "## Quasi-linear trends", "", *trend_warnings]
+        against = []
+    warns = [w for w in single_fit_warnings(table) if w not in trend_warnings]
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         table.to_csv(tmp / "single_fits.csv", index=False)
         (tmp / "plots").mkdir()
@@ -642,11 +677,14 @@ def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
             json.dumps(summaries, indent=2,
                        default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)),
             encoding="utf-8")
+        if warns:
+            lines += ["", "## Warnings", "", *(f"- {w}" for w in warns)]
         (tmp / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     return lines
 
 __all__ = [
     "LINE_P_THRESHOLD",
+    "SINGLE_FIT_CHI2_WARN",
     "aero_angle_history",
     "amplitude_measures",
     "fitted_states",
@@ -658,6 +696,7 @@ __all__ = [
     "quasi_linear_summary",
     "sigma_residual_rms_deg",
     "single_fit",
+    "single_fit_warnings",
     "single_fits",
     "write_single_fits",
 ]
