@@ -53,8 +53,8 @@ def shots(tmp_path_factory):
 def test_fit_writes_everything_and_refuses_to_overwrite(shots, capsys):
     sim, _, traj = shots["m2_2429"]
     out = shots["base"] / "fit1"
-    assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(out), "-q",
-                 "--no-plots"]) == 0
+    assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(out),
+                 "--no-plots"]) == 0     # not -q: the parameter table is printed
     for f in ("results.json", "coefficients.csv", "covariance.csv", "correlation.csv",
               "correlation_coloured.csv", "residuals.csv", "report.md", "model_fitted.toml",
               "config.toml"):

@@ -7,6 +7,10 @@
   file load and validate, and every station image exists, is readable and has the size and bit
   depth its view declares. One line per problem; nothing is written.
 
+``-q`` prints no progress bar, only the result line and errors; ``-v`` adds each station's
+measurement with its sigmas and every missing image of ``--check``; ``--version`` prints the
+version (docs/cli.md).
+
 Exit status: 0 all stations measured, 1 some station failed (the others are still measured
 and written), 2 the shot could not be processed at all (bad shot or facility file, output
 directory exists, an output that is or holds an input — shot file, facility file, image,
@@ -19,7 +23,11 @@ from __future__ import annotations
 import argparse
 import sys
 
+from cadra.cli._format import HelpFormatter, add_verbosity, add_version, pm
 from cadra.io.shot_check import check_shot
+
+#: ``--check`` lists this many missing images (``-v``: all of them)
+MISSING_SHOWN = 3
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -34,8 +42,14 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     parser = argparse.ArgumentParser(
         prog="cadra1",
+        formatter_class=HelpFormatter,
         description="Stage one: measure the model's position and attitude in every station's "
-                    "shadowgraphs (docs/stage1.md).")
+                    "shadowgraphs (docs/stage1.md). Exit status: 0 all stations measured "
+                    "(--check: all OK); 1 some station failed (the others are written; "
+                    "--check: a problem found); 2 the shot could not be processed (bad shot "
+                    "or facility file, unsafe output, usage error); 130 interrupted. See "
+                    "docs/cli.md.")
+    add_version(parser)
     parser.add_argument("shot_file", help="shot file (TOML, docs/shot_file.md)")
     parser.add_argument("-o", "--out", default=None,
                         help="output directory (default: <shot file's directory>/cadra1)")
@@ -49,15 +63,10 @@ def _main(argv: list[str] | None) -> int:
     parser.add_argument("--truth", default=None,
                         help="optional truth table (CSV with x_m, y_m, z_m, theta_deg, "
                              "psi_deg) drawn on the trajectory plot")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_verbosity(parser)
     args = parser.parse_args(argv)
     if args.check:
-        problems = check_shot(args.shot_file)
-        for p in problems:
-            print(f"cadra1: {p}", file=sys.stderr)
-        if not problems:
-            print(f"cadra1: {args.shot_file}: shot file, facility and images OK")
-        return 1 if problems else 0
+        return _check(args)
     from pathlib import Path
 
     from cadra.io.atomic import check_output_dir
@@ -75,6 +84,8 @@ def _main(argv: list[str] | None) -> int:
         print(f"cadra1: {exc}", file=sys.stderr)
         return 2
     t = res.trajectory
+    if args.verbose and not args.quiet:
+        _print_stations(t)
     n_fail = int((t["status"] == "failed").sum())
     n_warn = int((t["status"] == "warning").sum())
     for r in t.itertuples():
@@ -86,6 +97,46 @@ def _main(argv: list[str] | None) -> int:
           f"in {res.seconds:.1f} s; wrote {out}/trajectory.csv, quality.csv, trajectory.png, "
           f"overlays/, report.md")
     return 1 if n_fail else 0
+
+
+def _check(args) -> int:
+    """``--check``: one line per problem on stderr; missing images are summarised (``-v``
+    lists them all) with how they are rendered."""
+    from pathlib import Path
+
+    problems = check_shot(args.shot_file)
+    missing = [p for p in problems
+               if p.endswith(": no image listed") or ": missing image " in p]
+    shown = missing if args.verbose else missing[:MISSING_SHOWN]
+    for p in problems:
+        if p not in missing or p in shown:
+            print(f"cadra1: {p}", file=sys.stderr)
+    if len(shown) < len(missing):
+        print(f"cadra1: ... and {len(missing) - len(shown)} more stations' views without an "
+              "image (-v lists them)", file=sys.stderr)
+    if missing:
+        shot_dir = Path(args.shot_file).resolve().parent
+        sample = (f"python tools/make_sample_shots.py --images {shot_dir.name}"
+                  if shot_dir.parent.name == "sample_shots"
+                  else "python tools/make_sample_shots.py --images NAME")
+        print(f"cadra1: hint: {len(missing)} station images are missing or not listed; images "
+              f"are rendered, not committed: {sample} (a sample shot), or cadra2 simulate "
+              "SPEC -o DIR (a shot specification)", file=sys.stderr)
+    if not problems:
+        print(f"cadra1: {args.shot_file}: shot file, facility and images OK")
+    return 1 if problems else 0
+
+
+def _print_stations(t) -> None:
+    """-v: each station's measurement with its sigmas (mm, deg)."""
+    for r in t.itertuples():
+        if r.status == "failed":
+            continue
+        cells = [f"{c} {pm(getattr(r, f'{c}_m') * 1e3, getattr(r, f'sigma_{c}_m') * 1e3, 'mm')}"
+                 for c in ("x", "y", "z")]
+        cells += [f"{c} {pm(getattr(r, f'{c}_deg'), getattr(r, f'sigma_{c}_deg'), 'deg')}"
+                  for c in ("theta", "psi")]
+        print(f"  station {r.station:2d}: " + ", ".join(cells))
 
 
 def _input_paths(args) -> list:

@@ -27,6 +27,10 @@ Subcommands:
   gap lies (docs/gap.md).
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
+* ``cadra2 models`` — list the bundled aero models (name, case, angle plane, free parameters).
+
+Every command takes ``-q`` (no progress bars: only the result or status line, and errors) and
+``-v`` (more detail); ``cadra2 --version`` prints the version (docs/cli.md).
 
 Exit status: 0 success, 1 the input was refused (message names the key), the output folder
 would destroy an input (it is or holds one of the command's inputs — trajectory files and
@@ -42,6 +46,40 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+
+from cadra.cli._format import (
+    HelpFormatter,
+    add_verbosity,
+    add_version,
+    join_number_lists,
+    pm,
+)
+
+#: the top-level help's description (plain text: the module doc is rST)
+DESCRIPTION = (
+    "Stage two of CADRA: fit aerodynamic coefficients and initial states to stage one's "
+    "trajectory files, with seed 004's studies, sphere calibration, gap diagnosis and the "
+    "shot simulator. Exit status: 0 success; 1 input refused, output would destroy an input, "
+    "or the fit did not converge; 2 usage error; 3 calibrate: outputs written but the "
+    "estimate is not in the station history; 130 interrupted. See docs/cli.md.")
+
+#: options whose value may be a comma-separated list of numbers starting with '-'
+NUMBER_LIST_OPTIONS = ("--values",)
+
+
+def _quiet(args) -> bool:
+    return bool(getattr(args, "quiet", False))
+
+
+def _verbose(args) -> bool:
+    return bool(getattr(args, "verbose", False)) and not _quiet(args)
+
+
+def _say(args, *lines: str) -> None:
+    """Print unless -q (the result/status line is printed with plain ``print``)."""
+    if not _quiet(args):
+        for line in lines:
+            print(line)
 
 
 def _exists(out: Path, args, command: str) -> bool:
@@ -117,20 +155,24 @@ def _simulate(args) -> int:
         spec = load_shot_spec(args.spec)
         shot = simulate_shot(spec)
         write_shot(shot, out, images=not args.no_images, overwrite=args.overwrite,
-                   progress=not args.quiet)
+                   progress=not _quiet(args))
     except (SpecError, ValueError, FileNotFoundError) as exc:
         msg = str(exc)  # errors of the spec file name it already
         where = "" if msg.startswith(str(args.spec)) else f"{args.spec}: "
         print(f"cadra2 simulate: {where}{msg}", file=sys.stderr)
         return 1
     t = shot.truth
+    if _verbose(args):
+        cols = [c for c in ("station", "t_s", "x_m", "y_m", "z_m", "theta_deg", "psi_deg",
+                            "mach", "alpha_deg", "beta_deg") if c in t]
+        print(t[cols].to_string(index=False))
     print(f"{spec.shot_id}: {len(t)} stations, x {t.x_m.iloc[0]:.3f}..{t.x_m.iloc[-1]:.3f} m, "
           f"Mach {t.mach.min():.3f}..{t.mach.max():.3f}, "
           f"alpha {t.alpha_deg.min():+.2f}..{t.alpha_deg.max():+.2f} deg, "
           f"beta {t.beta_deg.min():+.2f}..{t.beta_deg.max():+.2f} deg")
     extra = ", station_biases.csv" if (out / "station_biases.csv").is_file() else ""
-    print(f"wrote {out}/shot.toml, truth.csv{extra}" + ("" if args.no_images else
-                                                         ", truth_images.csv, images/"))
+    _say(args, f"wrote {out}/shot.toml, truth.csv{extra}" + (
+        "" if args.no_images else ", truth_images.csv, images/"))
     return 0
 
 
@@ -170,7 +212,7 @@ def _fit(args) -> int:
         if args.bias_table:
             shots, note = correct_by_bias_table(shots, args.bias_table, args.stations_root)
             notes.append(note)
-        options = FitOptions(max_iterations=args.max_iterations, progress=not args.quiet)
+        options = FitOptions(max_iterations=args.max_iterations, progress=not _quiet(args))
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start)
     except _REFUSED as exc:
@@ -182,18 +224,20 @@ def _fit(args) -> int:
              "config.toml": toml_text(config, "cadra2 fit: the command's settings")}
     write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
                       start_model=start, extra_files=extra, notes=notes)
-    _print_summary(result)
-    print(f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
-    if not result.converged:
-        print(f"cadra2 fit: NOT CONVERGED: {result.message}", file=sys.stderr)
-        return 1
-    return 0
+    _print_summary(result, args)
+    _say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
+    return 0 if result.converged else 1
 
 
 def _single(args) -> int:
     from cadra.aero import load_bundled_model
     from cadra.fitting import FitOptions
-    from cadra.fitting.studies import linear_template_for, single_fits, write_single_fits
+    from cadra.fitting.studies import (
+        linear_template_for,
+        single_fit_warnings,
+        single_fits,
+        write_single_fits,
+    )
 
     out = Path(args.output)
     try:
@@ -206,9 +250,25 @@ def _single(args) -> int:
                             options=FitOptions(max_iterations=args.max_iterations))
     except _REFUSED as exc:
         return _refused("single", exc)
-    lines = write_single_fits(table, model, out, overwrite=args.overwrite)
-    print("\n".join(lines[2:2 + 2 + len(table)]))
-    print(f"wrote {out}/ (single_fits.csv, quasi_linear.json, report.md, plots/)")
+    write_single_fits(table, model, out, overwrite=args.overwrite)
+    warnings = single_fit_warnings(table)
+    if not _quiet(args):
+        names = model.free_names()
+        print(f"{'shot':10s} {'status':10s} {'chi^2/nu':>9s}  " + "  ".join(names))
+        for _, row in table.iterrows():
+            cells = [pm(row[n], row[f"{n}_sigma"]) for n in names]
+            print(f"{row['shot_id']:10s} {row['status']:10s} {row['reduced_chi2']:9.3g}  "
+                  + "  ".join(cells))
+            if _verbose(args):
+                print(f"  {row['message']}")
+        for w in warnings:
+            print(f"warning: {w}")
+    n_ok = int(table["converged"].sum())
+    trend = ("not computed (fewer than two converged shots)"
+             if any(w.startswith("quasi-linear") for w in warnings) else "computed")
+    print(f"single: {n_ok}/{len(table)} single fits converged with {model.name}; quasi-linear "
+          f"trends {trend}" + (f"; {len(warnings)} warning(s)" if warnings else ""))
+    _say(args, f"wrote {out}/ (single_fits.csv, quasi_linear.json, report.md, plots/)")
     return 0 if table["converged"].all() else 1
 
 
@@ -226,7 +286,8 @@ def _holdone(args) -> int:
         si = values_to_si(model, args.param, values)
         options = FitOptions(max_iterations=args.max_iterations)
         # the study starts from the free fit's solution (its parameters and states)
-        free, _ = fit_shots(shots, model, options=options)
+        free, _ = fit_shots(shots, model, options=FitOptions(
+            max_iterations=args.max_iterations, progress=not _quiet(args)))
         if not free:
             raise ValueError(f"the free fit did not converge ({free.message}); the study "
                              "needs a converged starting point")
@@ -239,9 +300,37 @@ def _holdone(args) -> int:
         table.to_csv(tmp / "hold_one.csv", index=False)
         plot_hold_one(table, args.param).savefig(tmp / "hold_one.png", dpi=110)
     cols = ["value", "status", "reduced_chi2", "theta_rms_deg", "psi_rms_deg"]
-    print(table[[c for c in cols if c in table]].to_string(index=False))
-    print(f"wrote {out}/ (hold_one.csv, hold_one.png)")
+    if _verbose(args):
+        print(table.to_string(index=False))
+    elif not _quiet(args):
+        print(table[[c for c in cols if c in table]].to_string(index=False))
+    best = table.loc[table["chi2"].idxmin(), "value"] if table["chi2"].notna().any() else None
+    print(f"holdone: {args.param} held at {len(table)} values, "
+          f"{int(table['converged'].sum())} converged"
+          + (f"; chi^2 lowest at {best:g}" if best is not None else ""))
+    _say(args, f"wrote {out}/ (hold_one.csv, hold_one.png)")
     return 0 if table["converged"].all() else 1
+
+
+def _models(args) -> int:
+    """List the bundled aero models (``cadra.aero.resolve_model``): name, case, angle plane,
+    number of free parameters, description; -v adds the free parameters' names."""
+    from cadra.aero import bundled_model_names, resolve_model
+
+    rows = []
+    for name in bundled_model_names():
+        m = resolve_model(name)
+        rows.append((name, str(m.reference.get("case", "—")), m.angle_plane,
+                     len(m.free_names()), m.description, m.free_names()))
+    if not _quiet(args):
+        print(f"{'name':28s} {'case':9s} {'plane':10s} {'free':>4s}  description")
+        for name, case, plane, n_free, text, free in rows:
+            print(f"{name:28s} {case:9s} {plane:10s} {n_free:4d}  {text}")
+            if _verbose(args):
+                print(f"{'':28s} free: {', '.join(free)}")
+    print(f"{len(rows)} bundled models (use one with --model NAME; a model file by its path; "
+          "docs/aero_models.md)")
+    return 0
 
 
 def _add_data_options(p) -> None:
@@ -256,7 +345,9 @@ def _add_data_options(p) -> None:
     p.add_argument("--free", action="append", metavar="NAME", help="free a held parameter")
     p.add_argument("--bound", action="append", metavar="NAME=LO:HI",
                    help="bounds of a parameter (file unit; either side may be empty)")
-    p.add_argument("--max-iterations", type=int, default=60)
+    p.add_argument("--max-iterations", type=int, default=60,
+                   help="most Levenberg-Marquardt iterations per fit phase (a fit whose data "
+                        "are finer than film level runs two phases: docs/cli.md)")
     p.add_argument("--sigma-time-s", type=float, default=0.0,
                    help="spark-time sigma, s (adds V sigma_t to the x sigma)")
     p.add_argument("--min-sigma-position-m", type=float, default=0.0,
@@ -264,6 +355,16 @@ def _add_data_options(p) -> None:
     p.add_argument("--min-sigma-angle-deg", type=float, default=0.0,
                    help="floor of the stage-one angle sigmas, deg")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+
+
+def _subcommand(sub, name: str, func, summary: str, description: str):
+    """A subcommand's parser: its one-line summary in ``cadra2 --help``, its plain-text
+    description in ``cadra2 NAME --help``, defaults shown, -q/-v."""
+    p = sub.add_parser(name, help=summary, description=description,
+                       formatter_class=HelpFormatter)
+    add_verbosity(p, top=False)
+    p.set_defaults(func=func)
+    return p
 
 
 def _calibrate(args) -> int:
@@ -324,11 +425,11 @@ def _calibrate(args) -> int:
             b, sg = table.bias[k, c], table.sigma[k, c]
             if math.isfinite(sg) and sg > 0:
                 mark = " *" if abs(b) > args.threshold_sigma * sg else ""
-                cells.append(f"{name} {from_si(b, u):+.4f}±{from_si(sg, u):.4f} {u}{mark}")
-        print(f"  station {st:2d}: " + ", ".join(cells))
+                cells.append(f"{name} {pm(from_si(b, u), from_si(sg, u), u)}{mark}")
+        _say(args, f"  station {st:2d}: " + ", ".join(cells))
     for w in (*est.warnings, *hist_warnings):
-        print(f"warning: {w}")
-    print(f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
+        _say(args, f"warning: {w}")
+    _say(args, f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
     if failed is not None:
         print(f"cadra2 calibrate: NOT recorded in the station history: {failed}",
               file=sys.stderr)
@@ -354,7 +455,7 @@ def _diagnose(args) -> int:
         if not result:
             raise ValueError(f"the fit did not converge ({result.message}): nothing to "
                              "diagnose")
-        dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=True)
+        dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=not _quiet(args))
         stage_one = {}
         for sd, traj in zip(shots, trajs, strict=True):
             table = load_trajectory(traj).table
@@ -365,67 +466,145 @@ def _diagnose(args) -> int:
         return _refused("diagnose", exc)
     write_diagnosis(dg, result, out, overwrite=args.overwrite, where_tables=tables)
     print(dg.verdict)
-    print(dg.ranking.head(8)[["candidate", "dchi2", "p_adjusted", "size"]]
-          .to_string(index=False))
-    for line in tables["findings"]:
-        print(f"where: {line}")
-    print(f"wrote {out}/ (report.md, ranking.csv, where*.csv, where.png)")
+    if not _quiet(args):
+        ranking = dg.ranking if _verbose(args) else dg.ranking.head(8)[
+            ["candidate", "dchi2", "p_adjusted", "size"]]
+        print(ranking.to_string(index=False))
+        for line in tables["findings"]:
+            print(f"where: {line}")
+    _say(args, f"wrote {out}/ (report.md, ranking.csv, where*.csv, where.png)")
     return 0
 
 
-def _print_summary(result) -> None:
-    print(f"{result.status}: {result.message}")
-    print(f"chi^2/dof = {result.chi2:.1f}/{result.dof} = {result.reduced_chi2:.3f}, "
-          f"{result.iterations} iterations, {result.elapsed_s:.2f} s")
-    print(f"{'parameter':12s} {'value':>12s} {'sigma':>10s}")
-    for name, v, s in zip(result.aero_names, result.aero_values, result.aero_sigma,
-                          strict=True):
-        print(f"{name:12s} {v:12.5g} {s:10.2g}")
+def status_line(result) -> str:
+    """The fit's one status line: status, why, chi^2/nu, iterations (per phase), time. The
+    solver's message may start with its status (``converged: ...``); it is not repeated."""
+    detail = result.message
+    if detail.lower().startswith(f"{result.status}:"):
+        detail = detail[len(result.status) + 1:].strip()
+    phases = result.options.get("phases") if isinstance(result.options, dict) else None
+    its = f"{result.iterations} iterations"
+    if phases:
+        its += " (" + " + ".join(f"{p['iterations']} {p['label'][5:-1]}" for p in phases) + ")"
+    return (f"{result.status}: {detail}; chi^2/nu = {result.chi2:.4g}/{result.dof} = "
+            f"{result.reduced_chi2:.3g}, {its}, {result.elapsed_s:.2f} s")
+
+
+def _phase_lines(result) -> list[str]:
+    """Two lines on the fit's two phases (continuation), or none: why chi^2 jumps."""
+    phases = result.options.get("phases") if isinstance(result.options, dict) else None
+    if not phases:
+        return []
+    a, b = phases
+    return [f"two phases: {a['label']}: {a['iterations']} iterations, chi^2 -> "
+            f"{a['chi2_end']:.4g} ({a['status']}); {b['label']}: {b['iterations']} iterations, "
+            f"chi^2 {b['chi2_start']:.4g} -> {b['chi2_end']:.4g}",
+            "  (stage one's sigmas are finer than film level: the fit first converges with "
+            "them floored, then refines; chi^2 jumps between the phases because the weights "
+            "change, not because the fit got worse; docs/fitting.md)"]
+
+
+def _print_summary(result, args) -> None:
+    """Status line (stdout when converged, stderr otherwise), then unless -q the parameter
+    table, the two phases and the warnings; -v adds the chi^2 history and per-shot rms."""
+    line = status_line(result)
+    if result.converged:
+        print(line)
+    else:
+        print(f"cadra2 fit: NOT CONVERGED: {line} (the best point reached is written, marked "
+              "as not converged)", file=sys.stderr)
+    if _quiet(args):
+        return
+    verbose = _verbose(args)
+    head = f"{'parameter':12s} {'value ± sigma':>24s}"
+    print(head + (f" {'sigma coloured':>15s} {'sigma scaled':>13s}" if verbose else ""))
+    for k, name in enumerate(result.aero_names):
+        row = f"{name:12s} {pm(result.aero_values[k], result.aero_sigma[k]):>24s}"
+        if verbose:
+            row += (f" {result.aero_sigma_coloured[k]:>15.2g}"
+                    f" {result.aero_sigma_scaled[k]:>13.2g}")
+        print(row)
+    for text in _phase_lines(result):
+        print(text)
+    if verbose:
+        print("chi^2 history: " + ", ".join(f"{c:.4g}" for c in result.history))
+        for sf in result.shots:
+            print(f"{sf.shot_id}: residual rms " + ", ".join(
+                f"{ch} {v * 1e6:.3g} um" if ch in ("x", "y", "z") else
+                f"{ch} {v * 57.29577951308232:.3g} deg" for ch, v in sf.rms.items()))
+    if result.converged and result.reduced_chi2 > 2.0:
+        print(f"warning: chi^2/nu = {result.reduced_chi2:.3g} > 2: the sigmas or the model do "
+              "not describe the data; use the scaled or coloured sigmas (report.md)")
     for w in result.warnings:
         print(f"warning: {w}")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="cadra2", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    fit = sub.add_parser("fit", help="fit aerodynamic coefficients to measured trajectories")
+    parser = argparse.ArgumentParser(prog="cadra2", description=DESCRIPTION,
+                                     formatter_class=HelpFormatter)
+    add_version(parser)
+    add_verbosity(parser)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    fit = _subcommand(
+        sub, "fit", _fit, "fit aerodynamic coefficients to measured trajectories",
+        "Least-squares differential correction of the model's free parameters and each "
+        "shot's initial state to stage one's measurements: one trajectory file is a single "
+        "fit, several a multi-fit. Data finer than film level are fitted in two phases (first "
+        "with the sigmas floored at 0.1 mm and 0.1 deg, then with stage one's own), each with "
+        "its own progress bar. Writes the coefficient table, covariances, residuals, report "
+        "and plots (docs/fitting.md). Exit status 1 if the fit did not converge.")
     _add_data_options(fit)
     fit.add_argument("--model", required=True,
-                     help="aero model: a bundled name (m2_m070, linear_template_alpha_beta, "
-                          "...) or a model file (docs/aero_models.md)")
+                     help="aero model: a bundled name (cadra2 models lists them) or a model "
+                          "file (docs/aero_models.md)")
     fit.add_argument("--no-auto-start", action="store_true",
                      help="start from the model file's values, not linear-theory estimates")
     fit.add_argument("--no-plots", action="store_true", help="tables and report only")
-    fit.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     fit.add_argument("--bias-table", default=None, metavar="current|FILE",
                      help="correct the measurements by a station bias table: 'current' (the "
-                          "facility history's latest entry) or a bias-table CSV")
+                          "facility history's latest entry) or a bias-table CSV (default: "
+                          "none)")
     fit.add_argument("--stations-root", default=None, metavar="DIR",
                      help="directory holding stations/<facility>/ (default: $CADRA_STATIONS_ROOT"
                           ", else the repository holding facilities/; as for calibrate)")
-    fit.set_defaults(func=_fit)
-    single = sub.add_parser("single", help="single fits with linear forms and quasi-linear "
-                                           "trends (seed 004 steps 1-2)")
+    single = _subcommand(
+        sub, "single", _single,
+        "single fits with linear forms and quasi-linear trends (seed 004 steps 1-2)",
+        "Seed 004 steps 1 and 2: each shot fitted on its own with a linear model, then the "
+        "quasi-linear coefficients against amplitude (alpha_rms, sigma_rms) with "
+        "straight-line tests and plots. The trends need at least two converged shots; a fit "
+        "with chi^2/nu far above 1 is flagged (its sigmas are not meaningful).")
     _add_data_options(single)
     single.add_argument("--model", default=None,
                         help="linear model (default: linear_template_sigma for symmetric "
                              "bodies, linear_template_alpha_beta for lifting ones)")
-    single.set_defaults(func=_single)
-    hold = sub.add_parser("holdone", help="hold-one-parameter study (seed 004 Fig. 15)")
+    hold = _subcommand(
+        sub, "holdone", _holdone, "hold-one-parameter study (seed 004 Fig. 15)",
+        "Seed 004 Fig. 15: fit freely, then hold one parameter at each given value (model "
+        "file's unit) and refit the rest on all shots; writes a table of chi^2, residual rms "
+        "and the other parameters, and a plot.")
     _add_data_options(hold)
-    hold.add_argument("--model", required=True, help="aero model (name or file)")
+    hold.add_argument("--model", required=True, help="aero model (bundled name or file)")
     hold.add_argument("--param", required=True, help="the parameter to hold")
-    hold.add_argument("--values", required=True,
-                      help="comma-separated values to hold it at (model file's unit)")
-    hold.set_defaults(func=_holdone)
-    diag = sub.add_parser("diagnose", help="where the fit misses, which unmodelled effect, "
-                                           "how far it shrinks")
+    hold.add_argument("--values", required=True, metavar="V1,V2,...",
+                      help="comma-separated values to hold it at, model file's unit "
+                           "(negative values are fine: --values -1.0,-1.5)")
+    diag = _subcommand(
+        sub, "diagnose", _diagnose,
+        "where the fit misses, which unmodelled effect, how far it shrinks",
+        "Fit, then rank a library of unmodelled effects (dynamics, aero, station) by score "
+        "tests and nonlinear refits, add the significant ones, and say where any remaining "
+        "gap lies (docs/gap.md).")
     _add_data_options(diag)
-    diag.add_argument("--model", required=True, help="aero model (name or file)")
+    diag.add_argument("--model", required=True, help="aero model (bundled name or file)")
     diag.add_argument("--alpha", type=float, default=0.01,
-                      help="family-wise significance of adding an effect (default 0.01)")
-    diag.set_defaults(func=_diagnose)
-    cal = sub.add_parser("calibrate", help="station biases from sphere calibration shots")
+                      help="family-wise significance of adding an effect")
+    cal = _subcommand(
+        sub, "calibrate", _calibrate, "station biases from sphere calibration shots",
+        "Sphere calibration: per-station position and timing biases with sigmas, compared "
+        "with the facility's station history, to which the estimate is appended "
+        "(docs/calibration.md). Exit status 3: the outputs are written but the estimate is "
+        "not in the station history (the message says why).")
     _add_data_options(cal)
     cal.add_argument("--stations-root", default=None, metavar="DIR",
                      help="directory holding stations/<facility>/ (default: "
@@ -435,16 +614,21 @@ def build_parser() -> argparse.ArgumentParser:
                      help="do not append the estimate to the station history")
     cal.add_argument("--threshold-sigma", type=float, default=3.0,
                      help="a station is flagged when its bias moved by more than this many "
-                          "sigma (default 3)")
+                          "sigma")
     cal.add_argument("--note", default="", help="a note stored with the history entry")
-    cal.set_defaults(func=_calibrate)
-    sim = sub.add_parser("simulate", help="simulate and render a synthetic shot")
+    sim = _subcommand(
+        sub, "simulate", _simulate, "simulate and render a synthetic shot",
+        "Fly a synthetic shot from a shot specification (6-DOF, the same code the fit uses), "
+        "render its shadowgraphs and write the shot file, images and exact truth "
+        "(docs/simulation.md).")
     sim.add_argument("spec", help="shot specification TOML (docs/simulation.md)")
     sim.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
     sim.add_argument("--no-images", action="store_true", help="trajectory and truth only")
     sim.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    sim.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    sim.set_defaults(func=_simulate)
+    _subcommand(sub, "models", _models, "list the bundled aero models",
+                "List the aero models bundled with CADRA (cadra/aero/models): name, seed 004 "
+                "case, angle plane, number of free parameters and description. Any of them "
+                "is given to --model by name; a model file by its path.")
     return parser
 
 
@@ -460,7 +644,10 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     from cadra.io.atomic import UnsafeOutputError, check_output_dir
 
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(join_number_lists(argv, NUMBER_LIST_OPTIONS))
+    if getattr(args, "output", None) is None:  # a command that writes nothing (models)
+        return args.func(args)
     try:  # every command writes one folder, never over its inputs
         check_output_dir(args.output, _input_paths(args))
     except UnsafeOutputError as exc:

@@ -1,0 +1,95 @@
+"""What ``cadra1`` and ``cadra2`` share: the look of a value with its sigma, the help
+formatter that shows every option's default, and ``-q``/``-v``/``--version`` (docs/cli.md).
+
+One home for ``value ± sigma`` on the console: :func:`pm` (the fit report's own rule, sigma to
+2 significant digits and the value to the same decimal place; ``cadra.fitting.report``), with
+a plain word where a number is not determined instead of ``nan ± nan``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+
+import cadra
+
+
+def pm(value: float, sigma: float | None = None, unit: str = "") -> str:
+    """``value ± sigma [unit]``: sigma to 2 significant digits, the value to the same decimal
+    place (as in the fit report); ``not determined`` for a non-finite value and ``value (σ not
+    determined)`` for a non-finite sigma."""
+    from cadra.fitting.report import _pm as report_pm  # the one rule (lazy: cadra1 --check)
+
+    u = f" {unit}" if unit else ""
+    if value is None or not math.isfinite(value):
+        return "not determined"
+    if sigma is not None and not math.isfinite(sigma):
+        return f"{value:.6g}{u} (σ not determined)"
+    return f"{report_pm(value, sigma)}{u}"
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """argparse's defaults formatter, but: a required option says ``(required)``, a default
+    the help text already states is not repeated, and None or off reads ``none``/``off``."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default is argparse.SUPPRESS or not action.option_strings \
+                or isinstance(action, (argparse._HelpAction, argparse._VersionAction)):
+            return text
+        if action.required:
+            return f"{text} (required)"
+        if "default" in text.lower():
+            return text
+        if action.default is None:
+            return f"{text} (default: none)"
+        if action.default is False:
+            return f"{text} (default: off)"
+        return f"{text} (default: %(default)s)"
+
+
+def add_verbosity(parser: argparse.ArgumentParser, *, top: bool = True) -> None:
+    """``-q``/``--quiet`` and ``-v``/``--verbose`` (mutually exclusive). Subcommands pass
+    ``top=False``: their defaults are suppressed so a flag given before the subcommand
+    (``cadra2 -q fit ...``) is not reset by the subcommand's parser."""
+    default = False if top else argparse.SUPPRESS
+    g = parser.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true", default=default,
+                   help="no progress bars: only the result or status line and errors")
+    g.add_argument("-v", "--verbose", action="store_true", default=default,
+                   help="more detail (per-station, per-phase, per-shot lines)")
+
+
+def add_version(parser: argparse.ArgumentParser) -> None:
+    """``--version``: the program name and ``cadra.__version__``."""
+    parser.add_argument("--version", action="version",
+                        version=f"%(prog)s {cadra.__version__}")
+
+
+#: a comma-separated list of numbers, the first negative (argparse takes it for an option)
+_UNSIGNED = r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_NUMBER_LIST = re.compile(rf"^-{_UNSIGNED}(?:,\s*[-+]?{_UNSIGNED})*,?$")
+
+
+def join_number_lists(argv: list[str], options: tuple[str, ...]) -> list[str]:
+    """``--values -1.0,-1.5`` -> ``--values=-1.0,-1.5`` for the given options, so argparse does
+    not take a negative number list for an option (a single negative number it already
+    accepts). Other tokens are left alone."""
+    out: list[str] = []
+    k = 0
+    while k < len(argv):
+        tok = argv[k]
+        if tok == "--":
+            out += argv[k:]
+            break
+        if tok in options and k + 1 < len(argv) and _NUMBER_LIST.match(argv[k + 1]):
+            out.append(f"{tok}={argv[k + 1]}")
+            k += 2
+            continue
+        out.append(tok)
+        k += 1
+    return out
+
+
+__all__ = ["HelpFormatter", "add_verbosity", "add_version", "join_number_lists", "pm"]
