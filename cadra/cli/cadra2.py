@@ -501,7 +501,7 @@ def _phase_lines(result) -> list[str]:
             f"chi^2 {b['chi2_start']:.4g} -> {b['chi2_end']:.4g}",
             "  (stage one's sigmas are finer than film level: the fit first converges with "
             "them floored, then refines; chi^2 jumps between the phases because the weights "
-            "change, not because the fit got worse; docs/fitting.md)"]
+            "change, not because the fit got worse; docs/cli.md)"]
 
 
 def _print_summary(result, args) -> None:

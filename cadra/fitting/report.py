@@ -324,7 +324,7 @@ def phases_note(result: FitResult) -> list[str]:
     if "position_m" in cont and "angle_rad" in cont:
         floor = (f" ({cont['position_m'] * 1e3:g} mm, "
                  f"{math.degrees(cont['angle_rad']):g} deg)")
-    return [f"The fit ran in two phases (continuation, docs/fitting.md): {a['iterations']} "
+    return [f"The fit ran in two phases (continuation, docs/cli.md): {a['iterations']} "
             f"iterations with the sigmas floored at film level{floor}, ending at χ² = "
             f"{a['chi2_end']:.4g} ({a['status']}), then {b['iterations']} with stage one's own "
             f"sigmas from that point, starting at χ² = {b['chi2_start']:.4g}. The χ² history "
