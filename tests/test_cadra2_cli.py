@@ -306,6 +306,25 @@ def test_calibrate_history_and_fit_with_table(shots, sphere_trajectories, capsys
     assert str(hist) in (fit_env / "report.md").read_text()
 
 
+def test_calibrate_quiet_prints_one_status_line(shots, sphere_trajectories, capsys):
+    """-q: one line (the history's 'recorded in', or the estimate's head without a history);
+    the station rows use the one value ± sigma format otherwise (docs/cli.md)."""
+    trajs, _ = sphere_trajectories
+    root = shots["base"] / "quiet_root"
+    assert main(["calibrate", *trajs, "-o", str(shots["base"] / "calq"), "--stations-root",
+                 str(root), "-q"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1 and out.startswith("recorded in ")
+    assert main(["calibrate", *trajs, "-o", str(shots["base"] / "calq2"), "--stations-root",
+                 str(root), "--no-history", "-q"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1 and out.startswith("hffaf: station biases from 3")
+    assert main(["calibrate", *trajs, "-o", str(shots["base"] / "calq3"), "--stations-root",
+                 str(root), "--no-history"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if "station  5:" in line]
+    assert rows and " ± " in rows[0] and "±0" not in rows[0]
+
+
 def test_calibrate_refusals(shots, sphere_trajectories, capsys):
     trajs, _ = sphere_trajectories
     root = shots["base"] / "refusal_root"

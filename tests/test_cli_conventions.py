@@ -265,3 +265,19 @@ def test_check_hints_how_images_are_rendered(capsys):
     assert cadra1.main(["--check", shot, "-v"]) == 1
     err = capsys.readouterr().err
     assert err.count("no image listed") == 32 and "make_sample_shots.py" in err
+
+
+def test_cadra1_verbose_stations_use_the_one_format(capsys):
+    """``cadra1 -v`` prints each measured station as value ± sigma (mm, deg) with :func:`pm`;
+    a failed station is left to its FAILED line."""
+    t = pd.DataFrame({"station": [1, 2], "status": ["ok", "failed"],
+                      "x_m": [1.2345671, np.nan], "y_m": [0.0012, np.nan],
+                      "z_m": [-0.0031, np.nan], "theta_deg": [2.51234, np.nan],
+                      "psi_deg": [-0.41, np.nan], "sigma_x_m": [3.1e-7, np.nan],
+                      "sigma_y_m": [2.5e-7, np.nan], "sigma_z_m": [2.5e-7, np.nan],
+                      "sigma_theta_deg": [0.0012, np.nan], "sigma_psi_deg": [0.0012, np.nan]})
+    cadra1._print_stations(t)
+    out = capsys.readouterr().out.splitlines()
+    assert out == ["  station  1: x 1234.56710 ± 0.00031 mm, y 1.20000 ± 0.00025 mm, "
+                   "z -3.10000 ± 0.00025 mm, theta 2.5123 ± 0.0012 deg, "
+                   "psi -0.4100 ± 0.0012 deg"]

@@ -416,8 +416,12 @@ def _calibrate(args) -> int:
               file=sys.stderr)
         return 3
     unit = {"x": "mm", "y": "mm", "z": "mm", "time": "us"}
-    print(f"{facility}: station biases from {len(shots)} sphere shot(s) "
-          f"(speeds {', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s)")
+    head = (f"{facility}: station biases from {len(shots)} sphere shot(s) "
+            f"(speeds {', '.join(f'{v:.0f}' for v in est.shot_speeds_m_s)} m/s)")
+    if entry is None and failed is None:   # -q: the one status line (else the history's)
+        print(head)
+    else:
+        _say(args, head)
     for k, st in enumerate(table.stations):
         cells = []
         for c, name in enumerate(("x", "y", "z", "time")):
