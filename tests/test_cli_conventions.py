@@ -281,3 +281,18 @@ def test_cadra1_verbose_stations_use_the_one_format(capsys):
     assert out == ["  station  1: x 1234.56710 ± 0.00031 mm, y 1.20000 ± 0.00025 mm, "
                    "z -3.10000 ± 0.00025 mm, theta 2.5123 ± 0.0012 deg, "
                    "psi -0.4100 ± 0.0012 deg"]
+
+
+def test_closed_stdout_is_quiet():
+    """``cadra2 models | head -0``: the reader went away; exit 141 (128 + SIGPIPE) with no
+    traceback, as a good filter does."""
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "cadra.cli.cadra2", "models"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    p.stderr.close()
+    assert p.wait() == 141
+    assert "Traceback" not in err and "BrokenPipe" not in err

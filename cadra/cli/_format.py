@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
+import sys
+from contextlib import suppress
 
 import cadra
 
@@ -92,4 +95,19 @@ def join_number_lists(argv: list[str], options: tuple[str, ...]) -> list[str]:
     return out
 
 
-__all__ = ["HelpFormatter", "add_verbosity", "add_version", "join_number_lists", "pm"]
+#: exit status when the reader of stdout went away (``cadra2 models | head -1``): 128 + SIGPIPE
+EXIT_STDOUT_CLOSED = 141
+
+
+def stdout_closed() -> int:
+    """After a ``BrokenPipeError`` on stdout: point stdout at the null device (so the
+    interpreter's final flush raises nothing) and return :data:`EXIT_STDOUT_CLOSED`; no
+    traceback, as ``head`` expects of a good filter."""
+    with suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    return EXIT_STDOUT_CLOSED
+
+
+__all__ = ["EXIT_STDOUT_CLOSED", "HelpFormatter", "add_verbosity", "add_version",
+           "join_number_lists", "pm", "stdout_closed"]

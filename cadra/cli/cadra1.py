@@ -15,7 +15,7 @@ Exit status: 0 all stations measured, 1 some station failed (the others are stil
 and written), 2 the shot could not be processed at all (bad shot or facility file, output
 directory exists, an output that is or holds an input — shot file, facility file, image,
 truth table — or the working folder, usage error), 130 interrupted (Ctrl-C: one line, no
-traceback, nothing written).
+traceback, nothing written), 141 stdout closed by its reader (``| head``; no traceback).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cadra.cli._format import HelpFormatter, add_verbosity, add_version, pm
+from cadra.cli._format import HelpFormatter, add_verbosity, add_version, pm, stdout_closed
 from cadra.io.shot_check import check_shot
 
 #: ``--check`` lists this many missing images (``-v``: all of them)
@@ -33,10 +33,14 @@ MISSING_SHOWN = 3
 def main(argv: list[str] | None = None) -> int:
     """The ``cadra1`` console script (module doc); returns the exit status."""
     try:
-        return _main(argv)
+        status = _main(argv)
+        sys.stdout.flush()   # a closed stdout shows here, inside the handler below
+        return status
     except KeyboardInterrupt:
         print("cadra1: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # stdout's reader went away (| head): quietly, 141
+        return stdout_closed()
 
 
 def _main(argv: list[str] | None) -> int:

@@ -38,7 +38,7 @@ their folders, shot files and their images, facility, model, spec or bias-table 
 station history — or the working folder, or is an existing file; links and ``..`` resolved;
 message names both; with or without ``--overwrite``) or the fit did not converge (its best
 point is still written, marked as not converged), 2 usage error, 130 interrupted (Ctrl-C: one
-line, no traceback, nothing written).
+line, no traceback, nothing written), 141 stdout closed by its reader (``| head``; no traceback).
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ from cadra.cli._format import (
     add_version,
     join_number_lists,
     pm,
+    stdout_closed,
 )
 
 #: the top-level help's description (plain text: the module doc is rST)
@@ -639,10 +640,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """The ``cadra2`` console script (module doc); returns the exit status."""
     try:
-        return _main(argv)
+        status = _main(argv)
+        sys.stdout.flush()   # a closed stdout shows here, inside the handler below
+        return status
     except KeyboardInterrupt:
         print("cadra2: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # stdout's reader went away (| head): quietly, 141
+        return stdout_closed()
 
 
 def _main(argv: list[str] | None) -> int:
