@@ -87,8 +87,14 @@ class BiasTable:
             raise StationHistoryError(f"stations: expected a non-empty 1-D array, got shape "
                                       f"{st.shape}")
         if not np.issubdtype(st.dtype, np.integer):
-            if not (np.issubdtype(st.dtype, np.floating) and np.all(st == np.round(st))):
+            if not np.issubdtype(st.dtype, np.floating):
                 raise StationHistoryError(f"stations: expected integer ids, got {st.dtype}")
+            with np.errstate(invalid="ignore"):
+                bad = ~(np.isfinite(st) & (st == np.round(st)) & (np.abs(st) < 2**62))
+            if np.any(bad):
+                i = int(np.argmax(bad))
+                raise StationHistoryError(f"stations: row {i + 1}: {float(st[i])!r} is not a "
+                                          f"station id (an integer)")
         st = st.astype(np.int64)
         if np.unique(st).size != st.size:
             dup = sorted({int(s) for s in st if np.count_nonzero(st == s) > 1})
@@ -101,16 +107,23 @@ class BiasTable:
                 raise StationHistoryError(f"{name}: expected shape ({n}, 4) "
                                           f"(x_m, y_m, z_m, time_s), got {a.shape}")
         if not np.all(np.isfinite(bias)):
-            raise StationHistoryError("bias: non-finite values (use 0 with sigma NaN for a "
-                                      "channel that was not estimated)")
+            i, j = np.argwhere(~np.isfinite(bias))[0]
+            raise StationHistoryError(f"station {st[i]} {CHANNELS[j]}: bias "
+                                      f"{float(bias[i, j])!r} is not finite (use 0 with sigma "
+                                      f"NaN for a channel that was not estimated)")
         est = ~np.isnan(sigma)
-        if np.any(np.isinf(sigma)) or np.any(sigma[est] <= 0):
-            raise StationHistoryError("sigma: must be > 0 and finite, or NaN (not estimated)")
+        with np.errstate(invalid="ignore"):
+            bad_sigma = np.isinf(sigma) | (est & ~(sigma > 0))
+        if np.any(bad_sigma):
+            i, j = np.argwhere(bad_sigma)[0]
+            raise StationHistoryError(f"station {st[i]} {CHANNELS[j]}: sigma "
+                                      f"{float(sigma[i, j])!r} must be > 0 and finite, or NaN "
+                                      f"(not estimated)")
         bad = ~est & (bias != 0)
         if np.any(bad):
             i, j = np.argwhere(bad)[0]
             raise StationHistoryError(f"station {st[i]} {CHANNELS[j]}: sigma NaN (not "
-                                      f"estimated) but bias {bias[i, j]!r} (must be 0)")
+                                      f"estimated) but bias {float(bias[i, j])!r} (must be 0)")
         shots = tuple(self.shots) if not isinstance(self.shots, str) else (self.shots,)
         if not all(isinstance(s, str) and s for s in shots):
             raise StationHistoryError(f"shots: expected non-empty strings, got {shots!r}")
@@ -214,11 +227,19 @@ def _table_from_entry(d: dict, where: str) -> BiasTable:
         if not all(x is None or (isinstance(x, int | float) and not isinstance(x, bool))
                    for x in v):
             raise StationHistoryError(f"{where}: {col} holds non-numbers")
+        huge = [i for i, x in enumerate(v) if isinstance(x, int) and abs(x) > 2**1023]
+        if huge:   # beyond a float: float() would raise OverflowError
+            raise StationHistoryError(f"{where}: {col}[{huge[0]}]: an integer of "
+                                      f"{len(str(abs(v[huge[0]])))} digits is not a bias")
         if col in BIAS_COLUMNS and any(x is None for x in v):
             raise StationHistoryError(f"{where}: {col} holds null (a bias not estimated is 0)")
         cols.append([math.nan if x is None else float(x) for x in v])
     if not all(isinstance(s, int) and not isinstance(s, bool) for s in d["stations"]):
         raise StationHistoryError(f"{where}: stations must be integers")
+    big = [s for s in d["stations"] if not 0 <= s < 2**62]
+    if big:    # beyond int64: numpy would raise OverflowError
+        raise StationHistoryError(f"{where}: stations: {big[0]} is not a station id (an "
+                                  f"integer >= 0)")
     if not isinstance(d["shots"], list):
         raise StationHistoryError(f"{where}: shots must be a list of strings")
     arr = np.array(cols, dtype=float).reshape(8, n).T
@@ -248,6 +269,23 @@ def bias_table_to_frame(table: BiasTable) -> pd.DataFrame:
     return df
 
 
+def _numeric_column(column: pd.Series, name: str) -> np.ndarray:
+    """``column`` as floats (empty = NaN); a cell that is not a number is an error naming its
+    row (1-based, data rows) and column. Integers beyond a float become inf (refused later,
+    naming the station) rather than an ``OverflowError``."""
+    if pd.api.types.is_numeric_dtype(column) and not pd.api.types.is_bool_dtype(column):
+        return column.to_numpy(dtype=float)
+    text = column.map(lambda v: v if isinstance(v, float) else str(v).strip())
+    num = pd.to_numeric(text, errors="coerce")
+    blank = text.map(lambda v: isinstance(v, str) and v.lower() in ("", "nan"))
+    bad = num.isna() & column.notna() & ~blank.astype(bool)
+    if bad.any():
+        i = int(bad.to_numpy().argmax())
+        raise StationHistoryError(f"row {i + 1}, column {name}: {column.iloc[i]!r} is not a "
+                                  f"number")
+    return num.to_numpy(dtype=float)
+
+
 def frame_to_bias_table(df: pd.DataFrame, facility: str, created_utc: str | None = None,
                         shots=(), method: str = "", note: str = "") -> BiasTable:
     """A :class:`BiasTable` from a DataFrame with columns :data:`TABLE_COLUMNS` (exactly those,
@@ -261,12 +299,15 @@ def frame_to_bias_table(df: pd.DataFrame, facility: str, created_utc: str | None
     if missing or unknown:
         raise StationHistoryError(f"bias table columns: missing {missing}, unknown {unknown}; "
                                   f"expected {list(TABLE_COLUMNS)} (SI, units in the names)")
-    try:
-        values = df[[*BIAS_COLUMNS, *SIGMA_COLUMNS]].to_numpy(dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise StationHistoryError(f"bias table: non-numeric values ({exc})") from None
+    columns = {c: _numeric_column(df[c], c) for c in TABLE_COLUMNS}
+    values = np.column_stack([columns[c] for c in (*BIAS_COLUMNS, *SIGMA_COLUMNS)])
+    stations = columns["station"]
+    if np.isnan(stations).any():
+        i = int(np.argmax(np.isnan(stations)))
+        raise StationHistoryError(f"row {i + 1}, column station: empty (a station id is "
+                                  f"needed)")
     return BiasTable(facility=facility, created_utc=created_utc or utc_now(),
-                     stations=df["station"].to_numpy(), bias=values[:, :4],
+                     stations=stations, bias=values[:, :4],
                      sigma=values[:, 4:], shots=tuple(shots), method=method, note=note)
 
 
@@ -288,7 +329,12 @@ def load_bias_table(path: str | os.PathLike) -> BiasTable:
     """Read a bias-table CSV written by :func:`save_bias_table` (or by hand in that layout:
     the ``# facility:`` and ``# created_utc:`` lines are required, the others optional)."""
     path = Path(path)
-    lines = path.read_text(encoding="utf-8").splitlines()
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise StationHistoryError(f"{path}: not a text file (not UTF-8: byte "
+                                  f"0x{exc.object[exc.start]:02x} at position {exc.start})"
+                                  ) from None
     meta, k = {}, 0
     while k < len(lines) and lines[k].startswith("#"):
         key, sep, value = lines[k][1:].partition(":")
@@ -310,7 +356,12 @@ def load_bias_table(path: str | os.PathLike) -> BiasTable:
             raise StationHistoryError(f"{path}: '# {key}:' must be a JSON value") from None
     from io import StringIO
 
-    df = pd.read_csv(StringIO("\n".join(lines[k:])))
+    try:
+        df = pd.read_csv(StringIO("\n".join(lines[k:])))
+    except (ValueError, pd.errors.ParserError) as exc:  # EmptyDataError is a ValueError
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise StationHistoryError(f"{path}: not a CSV table after the header lines ({why})"
+                                  ) from None
     try:
         return frame_to_bias_table(df, meta["facility"], meta["created_utc"],
                                    shots=tuple(extra["shots"]), method=extra["method"],
