@@ -140,10 +140,19 @@ def _no_duplicates(pairs):
     return dict(pairs)
 
 
+def _finite_float(text: str) -> float:
+    """A JSON number as float; one beyond a float (``1e400``) is refused like ``Infinity``:
+    the writer never produces it (canonical JSON has no inf) and it cannot be hashed."""
+    x = float(text)
+    if not math.isfinite(x):
+        raise ValueError(f"{text} is beyond a float")
+    return x
+
+
 def _parse_line(raw: bytes):
     try:
         return json.loads(raw.decode("ascii"), parse_constant=_reject_constant,
-                          object_pairs_hook=_no_duplicates)
+                          parse_float=_finite_float, object_pairs_hook=_no_duplicates)
     except (UnicodeDecodeError, ValueError):
         return None
 
