@@ -164,7 +164,10 @@ def load_truth(path: str | os.PathLike) -> pd.DataFrame:
     if table.empty:
         raise TrajectoryFileError(f"{path}: truth table has no rows")
     for c in TRUTH_COLUMNS:
-        num = pd.to_numeric(table[c], errors="coerce")
+        col = table[c]
+        if col.dtype == object:  # integers beyond int64 are Python ints: as text, they are inf
+            col = col.map(lambda v: v if isinstance(v, float) else str(v))
+        num = pd.to_numeric(col, errors="coerce")
         bad = (num.isna() & table[c].notna()) | np.isinf(num)
         if bad.any():
             i = int(bad.to_numpy().argmax())
