@@ -139,6 +139,9 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
     if bit_depth not in BIT_DEPTHS or isinstance(bit_depth, bool):
         raise _err(key_path("bit_depth"), f"must be one of {list(BIT_DEPTHS)}, got {bit_depth!r}")
     scale = _positive(get("scale_m_per_px"), key_path("scale_m_per_px"), 1e-2)
+    if scale < 1e-9:
+        raise _err(key_path("scale_m_per_px"), f"{scale:g} m/px is implausibly small "
+                                               f"(< 1e-09; check the unit)")
     axes = VIEW_AXES[name]
     if "image_to_plane" in view:
         ipath = f"{vpath}image_to_plane"
@@ -146,6 +149,12 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
         if not isinstance(raw, list | tuple) or len(raw) != 2:
             raise _err(ipath, f"expected 2 rows of 3 numbers, got {raw!r}")
         M = np.array([_vec(r, 3, f"{ipath}[{i}]") for i, r in enumerate(raw)])
+        for i, j in np.ndindex(2, 3):  # m/px like scale_m_per_px; the offset a position
+            limit = 1e4 if j == 2 else 1e-2
+            if abs(M[i, j]) > limit:
+                raise _err(f"{ipath}[{i}][{j}]", f"{M[i, j]:g} is implausibly large "
+                                                 f"(|value| <= {limit:g} m{'' if j == 2 else '/px'}"
+                                                 f"; check the unit)")
         det = float(np.linalg.det(M[:, :2]))
         if not abs(det) > 0:
             raise _err(ipath, "the affine is singular")
@@ -216,6 +225,8 @@ def facility_from_dict(data: Mapping, source_path: str | os.PathLike | None = No
         _check_unknown(st, {"id", "x_m", "views"}, f"{spath}.")
         sid = _integer(_require(st, "id", f"{spath}."), f"{spath}.id", 1, 10_000)
         x_m = _number(_require(st, "x_m", f"{spath}."), f"{spath}.x_m")
+        if abs(x_m) > 1e4:
+            raise _err(f"{spath}.x_m", f"{x_m:g} is not a position in metres (|x_m| <= 1e4)")
         views_raw = _table(_require(st, "views", f"{spath}."), f"{spath}.views")
         if not views_raw:
             raise _err(f"{spath}.views", "no views")
