@@ -30,6 +30,8 @@ BIAS_KEYS = ("x_m", "y_m", "z_m", "time_s")
 #: plausibility limits of an injected bias: each position component (m), the time (s)
 BIAS_POSITION_MAX_M = 0.01
 BIAS_TIME_MAX_S = 1e-4
+#: largest plausible inertia component, g cm^2 (1000 kg at 1 m is 1e10)
+INERTIA_MAX_G_CM2 = 1e12
 #: how the gun may be aimed (``"centre"``: slanted so the path stays centred in view)
 AIMS = ("none", "centre")
 
@@ -208,6 +210,9 @@ def _mass(mass: dict, row, base_s_m: float) -> tuple[float, tuple, np.ndarray]:
         inertia = np.array([_F.vector(r, 3, f"{key}[{i}]") for i, r in enumerate(raw)])
     else:
         inertia = np.diag(_F.vector(raw, 3, key, " [Ixx, Iyy, Izz] or a 3x3 tensor"))
+    if np.max(np.abs(inertia)) > INERTIA_MAX_G_CM2:  # beyond it the eigen-check overflows
+        raise _F.fail(key, f"{np.max(np.abs(inertia)):g} g cm^2 is implausibly large "
+                           f"(> {INERTIA_MAX_G_CM2:g}; check the unit)")
     try:
         validate_inertia(inertia, key)
     except ShotFileError as exc:
