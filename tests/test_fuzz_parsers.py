@@ -1,7 +1,9 @@
 """Property-based tests of the input parsers (issue 17 item 6): for the aero expression parser,
-aero model files, trajectory files and shot files, generated inputs -- valid and broken (random
-text; valid files mutated: lines deleted, duplicated or swapped, values swapped or replaced by
-huge, tiny, NaN, inf, negative or wrong-typed ones, text spliced in, cut short) -- give a result
+aero model files, trajectory files, shot files, the facility reference file, shot
+specifications, truth tables, bias-table CSVs and station histories, generated inputs -- valid
+and broken (random text; valid files mutated: lines deleted, duplicated or swapped, values
+swapped or replaced by huge, tiny, NaN, inf, negative or wrong-typed ones, text spliced in,
+cut short; history entries with keys deleted, duplicated or mistyped) -- give a result
 or the parser's own error class, never another exception (nor a warning: warnings are errors).
 
 CI runs 200 examples per parser; ``tools/fuzz_parsers.py`` (the same mutators) runs 10,000
@@ -27,6 +29,11 @@ ERRORS = fuzz.allowed()
 MODELS = fuzz.model_seeds()
 SHOTS = fuzz.shot_seeds()
 TRAJECTORIES = [fuzz.trajectory_seed(8), fuzz.trajectory_seed(4)]
+FACILITIES = fuzz.facility_seeds()
+SPECS = fuzz.spec_seeds()
+TRUTHS = fuzz.truth_seeds()
+BIAS_TABLES = fuzz.bias_table_seeds()
+HISTORIES = fuzz.history_seeds()
 CI = settings(max_examples=200, deadline=None, database=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
@@ -139,6 +146,132 @@ def test_shot_file_one_bad_value(key, value):
 
     text = re.sub(rf"^{key} = .*$", f"{key} = {value}", SHOTS[0], count=1, flags=re.M)
     assert _run("shot_file", text) in ("ok", "refused")
+
+
+# --- the facility file, shot specifications, truth tables, bias tables, station histories ----
+
+RANDOM_CONTENT = st.one_of(st.binary(max_size=300), st.text(max_size=300))
+NEW_FILES = {"facility_file": FACILITIES, "shot_spec": SPECS, "truth_table": TRUTHS,
+             "bias_table": BIAS_TABLES, "station_history": HISTORIES}
+
+
+def test_new_seeds_parse():
+    """The unmutated seeds are valid: the mutations start from files the parsers accept."""
+    for kind, seeds in NEW_FILES.items():
+        for seed in seeds:
+            assert _run(kind, seed) == "ok", kind
+
+
+@CI
+@given(st.randoms(use_true_random=False), st.sampled_from(FACILITIES))
+def test_facility_file_mutations(r, seed):
+    assert _run("facility_file", fuzz.mutate(r, seed)) in ("ok", "refused")
+
+
+@CI
+@given(RANDOM_CONTENT)
+def test_facility_file_random_content(content):
+    assert _run("facility_file", content) in ("ok", "refused")
+
+
+@CI
+@given(st.sampled_from(["x_m", "width_px", "height_px", "bit_depth", "scale_m_per_px",
+                        "u_px", "arm_px", "diameter_m", "id", "schema_version"]),
+       st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(),
+                 st.sampled_from(['"x"', "true", "[1, 2]", "{}", "-1", "9" * 400])))
+def test_facility_file_one_bad_value(key, value):
+    import re
+
+    text = re.sub(rf"^{key} = .*$", f"{key} = {value}", FACILITIES[0], count=1, flags=re.M)
+    assert _run("facility_file", text) in ("ok", "refused")
+
+
+@CI
+@given(st.randoms(use_true_random=False), st.sampled_from(SPECS))
+def test_shot_spec_mutations(r, seed):
+    assert _run("shot_spec", fuzz.mutate(r, seed)) in ("ok", "refused")
+
+
+@CI
+@given(RANDOM_CONTENT)
+def test_shot_spec_random_content(content):
+    assert _run("shot_spec", content) in ("ok", "refused")
+
+
+@CI
+@given(st.sampled_from(["mass_g", "pressure_torr", "temperature_k", "speed_m_s", "seed",
+                        "x_m", "q_deg_s", "inertia_g_cm2", "model", "aim"]),
+       st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(),
+                 st.sampled_from(['"x"', "true", "[1, 2]", "{}", "-1", "9" * 400,
+                                  "[[1, 2, 3], [4, 5]]", "[1e308, 1e308, 1e308]"])),
+       st.sampled_from(SPECS))
+def test_shot_spec_one_bad_value(key, value, seed):
+    import re
+
+    text = re.sub(rf"^{key} = .*$", f"{key} = {value}", seed, count=1, flags=re.M)
+    assert _run("shot_spec", text) in ("ok", "refused")
+
+
+@CI
+@given(st.randoms(use_true_random=False), st.sampled_from(TRUTHS))
+def test_truth_table_mutations(r, seed):
+    assert _run("truth_table", fuzz.mutate(r, seed)) in ("ok", "refused")
+
+
+@CI
+@given(RANDOM_CONTENT)
+def test_truth_table_random_content(content):
+    assert _run("truth_table", content) in ("ok", "refused")
+
+
+@CI
+@given(st.randoms(use_true_random=False), st.sampled_from(BIAS_TABLES))
+def test_bias_table_mutations(r, seed):
+    assert _run("bias_table", fuzz.mutate(r, seed)) in ("ok", "refused")
+
+
+@CI
+@given(RANDOM_CONTENT)
+def test_bias_table_random_content(content):
+    assert _run("bias_table", content) in ("ok", "refused")
+
+
+@CI
+@given(st.sampled_from(fuzz.NASTY + ["1e400", "-1e-9", "NaN", "inf", "9" * 30]),
+       st.integers(0, 15), st.sampled_from(["station", "bias_x_m", "bias_time_s", "sigma_y_m",
+                                            "sigma_time_s"]))
+def test_bias_table_one_bad_cell(value, row, column):
+    """One cell of a valid table replaced: a result or a refusal."""
+    import io
+
+    import pandas as pd
+
+    text = BIAS_TABLES[0]
+    head = "".join(line + "\n" for line in text.splitlines() if line.startswith("#"))
+    t = pd.read_csv(io.StringIO(text), comment="#", dtype=str, keep_default_na=False)
+    t.loc[row, column] = value
+    assert _run("bias_table", head + t.to_csv(index=False)) in ("ok", "refused")
+
+
+@CI
+@given(st.randoms(use_true_random=False), st.sampled_from(HISTORIES))
+def test_station_history_mutations(r, seed):
+    """Text mutations, each JSON line then signed again half the time (reaching the checks
+    behind the SHA-256)."""
+    assert _run("station_history", fuzz.resign(r, fuzz.mutate(r, seed))) in ("ok", "refused")
+
+
+@CI
+@given(st.randoms(use_true_random=False), st.sampled_from(HISTORIES))
+def test_station_history_entry_mutations(r, seed):
+    """One entry's key deleted, duplicated or given a wrong-typed or extreme value, signed."""
+    assert _run("station_history", fuzz.mutate_entry(r, seed)) in ("ok", "refused")
+
+
+@CI
+@given(RANDOM_CONTENT)
+def test_station_history_random_content(content):
+    assert _run("station_history", content) in ("ok", "refused")
 
 
 @pytest.mark.slow

@@ -2,15 +2,20 @@
 
 Parsers: the aero expression parser (``parse_expression``), aero model files (``load_model``,
 then ``compile``), trajectory files (``load_trajectory``, then ``load_shot_data`` with a valid
-shot file) and shot files (``load_shot``). Inputs are valid seeds (bundled models, sample
-shots, a trajectory made from a sample shot's truth) mutated at random -- lines deleted,
+shot file) and shot files (``load_shot``), the facility reference file (``load_facility``), shot
+specifications (``load_shot_spec``), truth tables (``load_truth``), bias-table CSVs
+(``load_bias_table``) and station histories (``load_history``). Inputs are valid seeds
+(bundled models, sample shots, a trajectory made from a sample shot's truth, the facility
+file, the sample specs, a sample truth table, bias tables and a history written by the
+calibration library's own writers) mutated at random -- lines deleted,
 duplicated or swapped; a number replaced by a huge, tiny, NaN, inf, negative or wrong-typed
 value; two values swapped; random text spliced in; the file cut short or binary bytes
 inserted -- and random text. Anything but a result or the parser's own error class (a
 ``ValueError`` subclass named in :data:`ALLOWED`) counts as uncaught and is printed with its
-input.
+input. A history line whose mutation still parses as a JSON object is, half the time, signed
+again (its ``sha256`` recomputed), so the checks behind the hash are reached too.
 
-    python tools/fuzz_parsers.py [--n 10000] [--seed 0]
+    python tools/fuzz_parsers.py [--n 10000] [--seed 0] [--parsers facility_file,shot_spec]
 
 The last line printed is a JSON object: per parser the inputs tried, how many parsed, how many
 were refused with the parser's error, and the number of uncaught exceptions.
@@ -72,6 +77,137 @@ def trajectory_seed(n: int = 8) -> str:
         t[c] = v
     t["x_top_minus_side_m"], t["x_consistency"], t["reason"], t["warnings"] = 1e-7, 0.3, "", ""
     return trajectory_to_csv(t[list(COLUMNS)], {"shot_id": "M2-2429", "producer": "fuzz"})
+
+
+FACILITY = ROOT / "facilities" / "hffaf.toml"
+SPECS = sorted((ROOT / "sample_shots" / "specs").glob("*.toml"))
+TRUTH = SHOT.parent / "truth.csv"
+PARSERS = ("expression", "model_file", "trajectory_file", "shot_file", "facility_file",
+           "shot_spec", "truth_table", "bias_table", "station_history")
+
+
+def facility_seeds() -> list[str]:
+    return [FACILITY.read_text(encoding="utf-8")]
+
+
+def spec_seeds() -> list[str]:
+    return [p.read_text(encoding="utf-8") for p in SPECS]
+
+
+def truth_seeds() -> list[str]:
+    text = TRUTH.read_text(encoding="utf-8")
+    return [text, "\n".join(text.split("\n")[:4]) + "\n"]
+
+
+def bias_tables():
+    """Three valid :class:`BiasTable` s of facility ``hffaf`` (16, 3 and 1 stations; some
+    channels not estimated), in time order."""
+    import numpy as np
+
+    from cadra.calibration.table import BiasTable
+
+    rng = np.random.default_rng(17)
+    out = []
+    for k, n in enumerate((16, 3, 1)):
+        sigma = np.full((n, 4), 2e-4)
+        sigma[:, 3] = 5e-7
+        bias = rng.normal(0, 1, (n, 4)) * sigma
+        if n > 1:
+            sigma[1, 2], bias[1, 2] = np.nan, 0.0
+        out.append(BiasTable(facility="hffaf", created_utc=f"2026-11-2{k}T10:00:00.000001Z",
+                             stations=np.arange(1, n + 1), bias=bias, sigma=sigma,
+                             shots=("SPH-B1", "SPH-B2")[:k + 1], method="fuzz seed",
+                             note="note, with \"quotes\""))
+    return out
+
+
+def bias_table_seeds() -> list[str]:
+    """Bias-table CSVs written by :func:`save_bias_table`."""
+    from cadra.calibration.table import save_bias_table
+
+    with tempfile.TemporaryDirectory() as tmp:
+        return [save_bias_table(t, Path(tmp) / f"t{k}.csv").read_text(encoding="utf-8")
+                for k, t in enumerate(bias_tables())]
+
+
+def history_seeds() -> list[str]:
+    """Station histories written by :func:`append_entry` (three entries; one entry)."""
+    from cadra.calibration.history import append_entry
+
+    out = []
+    for tables in (bias_tables(), bias_tables()[1:2]):
+        with tempfile.TemporaryDirectory() as tmp:
+            for t in tables:
+                path = append_entry(t, tmp)
+            out.append(path.read_text(encoding="ascii"))
+    return out
+
+
+JSON_NASTY = [None, "x", "", True, -1, 0, 1e300, -1e300, 1e-320, [], {}, [None], ["x"], [1.5],
+              "NaN", 2**70, "2026-13-40T99:00:00Z", "2026-11-22T10:00:00+05:00", "hffaf/../x"]
+
+
+def mutate_entry(r, text: str) -> str:
+    """A history with one entry's JSON changed: a key deleted, duplicated (``{"a":1,"a":2}``)
+    or given a wrong-typed or extreme value (or one list element so changed), then signed
+    again (:func:`resign`)."""
+    import json as _json
+
+    lines = text.split("\n")
+    spots = [i for i, line in enumerate(lines) if line.startswith("{")]
+    if not spots:
+        return text
+    i = r.choice(spots)
+    obj = _json.loads(lines[i])
+    obj.pop("sha256", None)
+    key = r.choice(sorted(obj))
+    k = r.randint(0, 3)
+    if k == 0:
+        del obj[key]
+    elif k == 1 and isinstance(obj[key], list) and obj[key]:
+        obj[key][r.randrange(len(obj[key]))] = r.choice(JSON_NASTY)
+    else:
+        obj[key] = r.choice(JSON_NASTY)
+    lines[i] = _json.dumps(obj, sort_keys=True, separators=(",", ":"))
+    text = resign(_Always(), "\n".join(lines))
+    if k == 3:  # a duplicated key, after signing (the parser must refuse it, not pick one)
+        lines = text.split("\n")
+        lines[i] = lines[i].replace("{", '{"facility":"hffaf",', 1)
+        text = "\n".join(lines)
+    return text
+
+
+class _Always:
+    """A random source whose ``random()`` is always 0.99 (:func:`resign` signs every line)."""
+
+    def random(self):
+        return 0.99
+
+
+def resign(r, text: str) -> str:
+    """``text`` (a history) with, for each line that parses as a JSON object, its ``sha256``
+    recomputed half the time: a mutation that kept the line JSON reaches the checks behind the
+    hash."""
+    import json as _json
+
+    from cadra.calibration.table import _sha256, canonical_json
+
+    lines = text.split("\n")
+    for i, line in enumerate(lines):
+        if r.random() < 0.5:
+            continue
+        try:
+            obj = _json.loads(line)
+        except ValueError:
+            continue
+        if not isinstance(obj, dict):
+            continue
+        obj.pop("sha256", None)
+        try:
+            lines[i] = canonical_json({**obj, "sha256": _sha256(canonical_json(obj))})
+        except (ValueError, TypeError):  # NaN or inf: not canonical, leave the line unsigned
+            continue
+    return "\n".join(lines)
 
 
 # --- mutators (any random.Random-like source: hypothesis' st.randoms() or random.Random) ------
@@ -161,14 +297,22 @@ def allowed():
     """Parser name -> the exception classes that count as a clear refusal."""
     from cadra.aero.expr import ExpressionError
     from cadra.aero.model import ModelFileError
+    from cadra.calibration.table import StationHistoryError
     from cadra.fitting.data import FitDataError
+    from cadra.io.facility_file import FacilityFileError
     from cadra.io.shotfile import ShotFileError
+    from cadra.io.spec_file import SpecError
     from cadra.io.trajectory import TrajectoryFileError
 
     return {"expression": (ExpressionError,),
             "model_file": (ModelFileError, ExpressionError),
             "trajectory_file": (TrajectoryFileError, FitDataError),
-            "shot_file": (ShotFileError,)}
+            "shot_file": (ShotFileError,),
+            "facility_file": (FacilityFileError,),
+            "shot_spec": (SpecError,),
+            "truth_table": (TrajectoryFileError,),
+            "bias_table": (StationHistoryError,),
+            "station_history": (StationHistoryError,)}
 
 
 def parse_expression_input(text: str):
@@ -207,6 +351,60 @@ def load_shot_text(text: str | bytes, folder: Path):
     return load_shot(p)
 
 
+def _write(folder: Path, name: str, text: str | bytes) -> Path:
+    p = folder / name
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_bytes(text if isinstance(text, bytes) else text.encode("utf-8", "surrogatepass"))
+    return p
+
+
+def load_facility_text(text: str | bytes, folder: Path):
+    from cadra.io import facility_file
+
+    facility_file._CACHE.clear()  # each input is a new file, never a cached earlier one
+    return facility_file.load_facility(_write(folder, "facility.toml", text))
+
+
+def load_spec_text(text: str | bytes, folder: Path):
+    from cadra.io.spec_file import load_shot_spec
+
+    return load_shot_spec(_write(folder, "spec.toml", text))
+
+
+def load_truth_text(text: str | bytes, folder: Path):
+    from cadra.io.trajectory import load_truth
+
+    return load_truth(_write(folder, "truth.csv", text))
+
+
+def load_bias_table_text(text: str | bytes, folder: Path):
+    from cadra.calibration.table import load_bias_table
+
+    return load_bias_table(_write(folder, "bias_table.csv", text))
+
+
+def load_history_text(text: str | bytes, folder: Path):
+    from cadra.calibration.history import HISTORY_FILENAME, load_history
+
+    _write(folder, f"stations/hffaf/{HISTORY_FILENAME}", text)
+    return load_history(folder, "hffaf")
+
+
+LOADERS = {"model_file": load_model_text, "trajectory_file": load_trajectory_text,
+           "shot_file": load_shot_text, "facility_file": load_facility_text,
+           "shot_spec": load_spec_text, "truth_table": load_truth_text,
+           "bias_table": load_bias_table_text, "station_history": load_history_text}
+
+
+def seeds_of(kind: str) -> list[str]:
+    """The valid inputs that ``kind``'s mutations start from."""
+    return {"expression": list, "model_file": model_seeds, "shot_file": shot_seeds,
+            "trajectory_file": lambda: [trajectory_seed(8), trajectory_seed(4)],
+            "facility_file": facility_seeds, "shot_spec": spec_seeds,
+            "truth_table": truth_seeds, "bias_table": bias_table_seeds,
+            "station_history": history_seeds}[kind]()
+
+
 def run_one(kind: str, text, folder: Path, errors: tuple) -> str:
     """``"ok"``, ``"refused"`` (the parser's own error), or raises the uncaught exception."""
     with warnings.catch_warnings():
@@ -214,12 +412,8 @@ def run_one(kind: str, text, folder: Path, errors: tuple) -> str:
         try:
             if kind == "expression":
                 parse_expression_input(text)
-            elif kind == "model_file":
-                load_model_text(text, folder)
-            elif kind == "trajectory_file":
-                load_trajectory_text(text, folder)
             else:
-                load_shot_text(text, folder)
+                LOADERS[kind](text, folder)
         except errors:
             return "refused"
     return "ok"
@@ -237,23 +431,31 @@ def generate(kind: str, r: random.Random, seeds: list[str]) -> str | bytes:
     if u < 0.08:
         return random_text(r, 300)
     seed = r.choice(seeds)
-    return seed if u < 0.1 else mutate(r, seed)
+    if u < 0.1:
+        return seed
+    if kind == "station_history":
+        return mutate_entry(r, seed) if u < 0.5 else resign(r, mutate(r, seed))
+    return mutate(r, seed)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=10000, help="inputs per parser")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--parsers", default="expression,model_file,trajectory_file,shot_file")
+    ap.add_argument("--parsers", default=",".join(PARSERS),
+                    help=f"comma-separated, of {', '.join(PARSERS)} (default: all)")
     args = ap.parse_args(argv)
+    kinds = args.parsers.split(",")
+    unknown = sorted(set(kinds) - set(PARSERS))
+    if unknown:
+        ap.error(f"unknown parser(s) {unknown}; known: {', '.join(PARSERS)}")
     errors = allowed()
-    seeds = {"expression": [], "model_file": model_seeds(), "shot_file": shot_seeds(),
-             "trajectory_file": [trajectory_seed(8), trajectory_seed(4)]}
+    seeds = {kind: seeds_of(kind) for kind in kinds}
     result = {"n_per_parser": args.n, "seed": args.seed}
     uncaught_total = 0
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for kind in args.parsers.split(","):
+        for kind in kinds:
             r = random.Random(f"{args.seed}-{kind}")
             counts = {"ok": 0, "refused": 0, "uncaught": 0}
             t0 = time.perf_counter()
