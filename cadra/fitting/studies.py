@@ -597,20 +597,17 @@ def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
     return fig
 
 
-
 #: a single fit whose chi^2/nu exceeds this is flagged: its sigmas are not meaningful
 SINGLE_FIT_CHI2_WARN = 10.0
 
 
 def single_fit_warnings(table: pd.DataFrame) -> list[str]:
     """Plain warnings on a :func:`single_fits` table where a result is meaningless: fewer than
-    two converged shots for the quasi-linear trends (a straight line through one point has no
-    slope; the line starts ``quasi-linear``), fits that did not converge, and fits whose
-    chi^2/nu exceeds :data:`SINGLE_FIT_CHI2_WARN` (the model or the sigmas do not describe
-    the data, so the covariance sigmas are not meaningful)."""
+    two converged shots for the quasi-linear trends (the line starts ``quasi-linear``), fits
+    that did not converge, and fits whose chi^2/nu exceeds :data:`SINGLE_FIT_CHI2_WARN` (the
+    model or the sigmas do not describe the data: the covariance sigmas mean nothing)."""
     out = []
-    ok = table["status"] == "converged" if "status" in table else table["converged"]
-    n_ok = int(ok.sum())
+    n_ok = int((table["status"] == "converged").sum())
     if n_ok < 2:
         out.append(f"quasi-linear trends not computed: they fit a straight line through the "
                    f"shots' coefficients against their amplitude, which needs at least two "
@@ -652,11 +649,10 @@ def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
               "| coefficient | against | slope ± σ | intercept ± σ | p (line) |",
               "|---|---|---|---|---|"]
     summaries = {}
-    trend_warnings = [w for w in single_fit_warnings(table) if w.startswith("quasi-linear")]
-    if trend_warnings:   # one line saying why, not rows of NaN
-        lines = lines[:-4] + ["", "## Quasi-linear trends", "", *trend_warnings]
+    warns = single_fit_warnings(table)
+    if warns and warns[0].startswith("quasi-linear"):   # one line saying why, not NaN rows
+        lines = lines[:-4] + ["", "## Quasi-linear trends", "", warns.pop(0)]
         against = []
-    warns = [w for w in single_fit_warnings(table) if w not in trend_warnings]
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         table.to_csv(tmp / "single_fits.csv", index=False)
         (tmp / "plots").mkdir()
