@@ -267,7 +267,7 @@ def resolve_facility_path(path_or_name: str | os.PathLike) -> Path:
                             f"{[str(c) for c in candidates]}")
 
 
-_CACHE: dict[tuple[str, int], Facility] = {}
+_CACHE: dict[tuple[str, int, int], Facility] = {}
 
 
 def load_facility(path_or_name: str | os.PathLike) -> Facility:
@@ -278,7 +278,8 @@ def load_facility(path_or_name: str | os.PathLike) -> Facility:
         stat = path.stat()
     except OSError as exc:
         raise FileNotFoundError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    key = (str(path.resolve()), stat.st_mtime_ns)
+    # the size too: two writes within one tick of the file system's clock share an mtime
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     if key in _CACHE:
         return _CACHE[key]
     data = read_toml(path, FacilityFileError, read_error=FileNotFoundError)
