@@ -157,6 +157,14 @@ def test_truth_integer_beyond_float(tmp_path):
         load_truth(p)
 
 
+def test_truth_inf_shown_plainly(tmp_path):
+    p = tmp_path / "truth.csv"
+    p.write_text("station,x_m,y_m,z_m,theta_deg,psi_deg\n1,0,0,0,0,0\n2,0,0,inf,0,0\n")
+    with pytest.raises(TrajectoryFileError, match=r"truth\.csv: row 2, column z_m: inf is not "
+                                                  r"a finite number"):
+        load_truth(p)
+
+
 # --- facility file --------------------------------------------------------------------------
 
 FACILITY = (ROOT / "facilities" / "hffaf.toml").read_text()

@@ -171,8 +171,10 @@ def load_truth(path: str | os.PathLike) -> pd.DataFrame:
         bad = (num.isna() & table[c].notna()) | np.isinf(num)
         if bad.any():
             i = int(bad.to_numpy().argmax())
-            raise TrajectoryFileError(f"{path}: row {i + 1}, column {c}: "
-                                      f"{table[c].iloc[i]!r} is not a finite number")
+            v = table[c].iloc[i]
+            v = v.item() if isinstance(v, np.generic) else v  # inf, not np.float64(inf)
+            raise TrajectoryFileError(f"{path}: row {i + 1}, column {c}: {v!r} is not a finite "
+                                      f"number")
         table[c] = num.astype(float)
     return table
 
