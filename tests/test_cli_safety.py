@@ -411,3 +411,60 @@ def test_killed_cadra1_leaves_no_worker(work, tmp_path):
     assert proc.wait() == -signal.SIGKILL
     _wait_for(lambda: not any(_alive(p) for p in workers), 10)
     assert not out.exists()
+
+
+# -- cadra2 fit: Ctrl-C and SIGKILL while it fits ----------------------------------------------
+
+#: cadra2's own main, with every trajectory integration slowed down (and the first one
+#: announced by a marker file) so the signal lands while the fit is iterating
+SLOW_CADRA2 = """
+import sys, time
+from pathlib import Path
+import cadra.fitting.problem as problem
+marker = Path(sys.argv[1])
+integrate = problem.predict_with_jacobian
+def slow(*args, **kwargs):
+    marker.touch()
+    time.sleep(0.5)
+    return integrate(*args, **kwargs)
+problem.predict_with_jacobian = slow
+from cadra.cli.cadra2 import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def _slow_fit(work: Path, out: Path, marker: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", SLOW_CADRA2, str(marker), "fit",
+                             str(work / "m2_stage1"), "--model", "m2_m070", "-o", str(out),
+                             "-q", "--no-plots"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@POSIX
+def test_ctrl_c_during_cadra2_fit_exits_130_and_writes_nothing(work, tmp_path):
+    out, marker = tmp_path / "fit", tmp_path / "fitting"
+    before = tree_hash(work)
+    proc = _slow_fit(work, out, marker)
+    _wait_for(marker.exists, 120, proc)                         # it is iterating
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert stderr.strip().splitlines() == ["cadra2: interrupted"], stderr
+    assert not out.exists() and _temps(out) == []
+    assert tree_hash(work) == before
+
+
+@POSIX
+def test_sigkill_during_cadra2_fit_leaves_nothing_and_a_rerun_succeeds(work, tmp_path):
+    out, marker = tmp_path / "fit", tmp_path / "fitting"
+    before = tree_hash(work)
+    proc = _slow_fit(work, out, marker)
+    _wait_for(marker.exists, 120, proc)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    assert not out.exists() and _temps(out) == []               # nothing partial
+    assert tree_hash(work) == before
+    assert cadra2(["fit", str(work / "m2_stage1"), "--model", "m2_m070", "-o", str(out), "-q",
+                   "--no-plots"]) == 0
+    assert (out / "report.md").is_file() and _temps(out) == []
