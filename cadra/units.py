@@ -7,7 +7,7 @@ convert through the one table :data:`UNITS` (``to_si(x, "torr")``, ``from_si(x, 
 table's entries under readable names. All accept floats or numpy arrays and return the same kind.
 
 This module imports nothing of CADRA, so the numerical core (body specs, aero-model parameter
-units) and the file formats of :mod:`cadra.io` (which offers it as :mod:`cadra.io.units`)
+units) and the file formats of :mod:`cadra.io`
 convert through the same table.
 """
 

@@ -24,6 +24,7 @@ import math
 import numpy as np
 import pytest
 
+from cadra import units
 from cadra.atmosphere import (
     SEED004_NOMINAL_VISCOSITY_PA_S,
     SEED004_NOMINAL_VISCOSITY_T_K,
@@ -32,7 +33,6 @@ from cadra.atmosphere import (
     speed_of_sound,
     sutherland_viscosity,
 )
-from cadra.io import units
 from cadra.io.seed004 import load_seed004_table
 
 TABLE = load_seed004_table()

@@ -1,10 +1,8 @@
-"""File boundaries: every file format of CADRA and its validation, unit conversions, atomic
-writes, seed-004 tables.
+"""File boundaries: every file format of CADRA and its validation, atomic writes, seed-004
+tables. File units meet SI through the one unit table, :mod:`cadra.units`.
 
 Submodules (import what you need; none imports a heavy dependency at package import):
 
-* :mod:`cadra.io.units` -- the unit table (:mod:`cadra.units`): torr/Pa, cm/m, g/kg,
-  g cm^2/kg m^2, deg/rad ...: the one place where file units meet SI;
 * :mod:`cadra.io.toml_file` -- the shared TOML helpers: ``read_toml`` (errors name the file),
   ``Fields`` (typed getters naming the key path), ``prefixed_by``, ``write_toml`` (atomic);
 * :mod:`cadra.io.atomic` -- ``atomic_write_text``, ``atomic_write_bytes``,
@@ -19,7 +17,6 @@ Submodules (import what you need; none imports a heavy dependency at package imp
 * :mod:`cadra.io.seed004` -- ``load_seed004_table`` (seed 004 Tables 2 and 3).
 """
 
-from cadra.io import units
 from cadra.io.atomic import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
-__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text", "units"]
+__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text"]

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cadra.io import units
+from cadra import units
 
 DATA_PATH = Path(__file__).resolve().parent.parent / "data" / "seed004_shots.csv"
 

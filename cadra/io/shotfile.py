@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cadra import units
 from cadra.atmosphere import Atmosphere
 from cadra.facility.reference import VIEW_AXES
 from cadra.fields import frozen_array
-from cadra.io import units
 from cadra.io.atomic import atomic_write_text
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
@@ -187,7 +187,7 @@ def _vector3(value, key: str) -> np.ndarray:
 def validate_model_spec(model, key: str = "model") -> dict:
     """Check a body spec: ``kind`` known, dimensions positive and plausible (cm scale).
 
-    Keys ending in a length unit of :data:`cadra.io.units.UNITS` (``_cm``, ``_mm``, ``_m``)
+    Keys ending in a length unit of :data:`cadra.units.UNITS` (``_cm``, ``_mm``, ``_m``)
     are lengths (finite, |x| < 1 m); the size keys ``d_*``, ``diameter_*``, ``h_*``,
     ``length_*``, ``l_*`` must be > 0. Angle keys (``_deg``, ``_rad``) must be finite numbers.
     Everything else is passed through for ``cadra.body``.

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from cadra import units
 from cadra.body import body_from_spec
 from cadra.dynamics.effects import Effects
 from cadra.dynamics.setup import DT_MAX_TRUTH
 from cadra.dynamics.trajectory import Launch
-from cadra.io import units
 from cadra.io.seed004 import load_seed004_table
 from cadra.io.shotfile import ShotFileError, validate_inertia
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
