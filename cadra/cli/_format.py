@@ -109,5 +109,20 @@ def stdout_closed() -> int:
     return EXIT_STDOUT_CLOSED
 
 
+def console_main(prog: str, body, argv) -> int:
+    """Run a console script's ``body(argv)`` to the conventions of docs/cli.md: Ctrl-C ends
+    it with one line and status 130, a closed stdout (``| head``) quietly with
+    :data:`EXIT_STDOUT_CLOSED`; returns the exit status."""
+    try:
+        status = body(argv)
+        sys.stdout.flush()   # a closed stdout shows here, inside the handler below
+        return status
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:   # stdout's reader went away (| head): quietly, 141
+        return stdout_closed()
+
+
 __all__ = ["EXIT_STDOUT_CLOSED", "HelpFormatter", "add_verbosity", "add_version",
-           "join_number_lists", "pm", "stdout_closed"]
+           "console_main", "join_number_lists", "pm", "stdout_closed"]

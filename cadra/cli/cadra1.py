@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cadra.cli._format import HelpFormatter, add_verbosity, add_version, pm, stdout_closed
+from cadra.cli._format import HelpFormatter, add_verbosity, add_version, console_main, pm
 from cadra.io.shot_check import check_shot
 
 #: ``--check`` lists this many missing images (``-v``: all of them)
@@ -32,15 +32,7 @@ MISSING_SHOWN = 3
 
 def main(argv: list[str] | None = None) -> int:
     """The ``cadra1`` console script (module doc); returns the exit status."""
-    try:
-        status = _main(argv)
-        sys.stdout.flush()   # a closed stdout shows here, inside the handler below
-        return status
-    except KeyboardInterrupt:
-        print("cadra1: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:   # stdout's reader went away (| head): quietly, 141
-        return stdout_closed()
+    return console_main("cadra1", _main, argv)
 
 
 def _main(argv: list[str] | None) -> int:

@@ -51,9 +51,9 @@ from cadra.cli._format import (
     HelpFormatter,
     add_verbosity,
     add_version,
+    console_main,
     join_number_lists,
     pm,
-    stdout_closed,
 )
 
 #: the top-level help's description (plain text: the module doc is rST)
@@ -639,15 +639,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """The ``cadra2`` console script (module doc); returns the exit status."""
-    try:
-        status = _main(argv)
-        sys.stdout.flush()   # a closed stdout shows here, inside the handler below
-        return status
-    except KeyboardInterrupt:
-        print("cadra2: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:   # stdout's reader went away (| head): quietly, 141
-        return stdout_closed()
+    return console_main("cadra2", _main, argv)
 
 
 def _main(argv: list[str] | None) -> int:
