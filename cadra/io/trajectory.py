@@ -115,12 +115,7 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
                                   f"{meta.get('format')!r}, expected {FORMAT!r})")
     import io
 
-    try:
-        table = pd.read_csv(io.StringIO(text), comment="#", keep_default_na=True,
-                            dtype=str)
-    except (ValueError, pd.errors.ParserError) as exc:  # EmptyDataError is a ValueError
-        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise TrajectoryFileError(f"{path}: not a CSV table ({why})") from None
+    table = _read_csv(io.StringIO(text), path, comment="#", keep_default_na=True, dtype=str)
     missing = [c for c in COLUMNS if c not in table]
     if missing:
         raise TrajectoryFileError(f"{path}: missing column(s) {missing}")
@@ -142,6 +137,16 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
     return Trajectory(table=table, meta=meta)
 
 
+def _read_csv(source, path, **kwargs) -> pd.DataFrame:
+    """``pd.read_csv(source, **kwargs)``, its failures as one :class:`TrajectoryFileError`
+    naming ``path`` (parser errors, empty data and bad UTF-8 are ValueErrors)."""
+    try:
+        return pd.read_csv(source, **kwargs)
+    except (ValueError, OSError) as exc:
+        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise TrajectoryFileError(f"{path}: not a CSV table ({why})") from None
+
+
 #: columns a truth table (``--truth``: a simulated shot's ``truth.csv``) must have
 TRUTH_COLUMNS = tuple(c.value_column for c in OBSERVED)
 
@@ -153,11 +158,7 @@ def load_truth(path: str | os.PathLike) -> pd.DataFrame:
     path = Path(path)
     if not path.is_file():
         raise TrajectoryFileError(f"{path}: truth table not found")
-    try:
-        table = pd.read_csv(path)
-    except (ValueError, OSError) as exc:  # parser errors and bad UTF-8 are ValueErrors
-        why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise TrajectoryFileError(f"{path}: not a CSV table ({why})") from None
+    table = _read_csv(path, path)
     missing = [c for c in TRUTH_COLUMNS if c not in table]
     if missing:
         raise TrajectoryFileError(f"{path}: truth table lacks column(s) {missing}")
