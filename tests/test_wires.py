@@ -26,7 +26,8 @@ import time
 import numpy as np
 import pytest
 
-from cadra.facility.reference import apply_affine, fit_affine_to_wires
+from cadra.facility.reference import fit_affine_to_wires
+from cadra.geometry import apply_affine
 from cadra.io.facility_file import load_facility
 from cadra.measure.wires import WireMeasurement, measure_wires, wire_mask
 from cadra.synthetic.render import RenderConfig, Scene, render

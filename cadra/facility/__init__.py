@@ -13,13 +13,11 @@ from cadra.facility.reference import (
     Station,
     View,
     Wire,
-    affine_inverse,
-    apply_affine,
     fit_affine_to_wires,
     nominal_image_to_plane,
 )
 
 __all__ = [
-    "AffineFit", "Facility", "ReferenceMark", "Station", "View", "Wire", "affine_inverse",
-    "apply_affine", "fit_affine_to_wires", "nominal_image_to_plane",
+    "AffineFit", "Facility", "ReferenceMark", "Station", "View", "Wire",
+    "fit_affine_to_wires", "nominal_image_to_plane",
 ]

@@ -408,6 +408,6 @@ def default_hffaf_text() -> str:
 
 __all__ = [
     "VIEW_AXES", "AffineFit", "Facility", "ReferenceMark", "Station", "View", "Wire",
-    "affine_inverse", "apply_affine", "default_hffaf_text", "fit_affine_to_wires",
+    "default_hffaf_text", "fit_affine_to_wires",
     "nominal_image_to_plane", "SCHEMA_VERSION",
 ]
