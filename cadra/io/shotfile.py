@@ -42,6 +42,10 @@ MASS_G_RANGE = (0.0, 1e5)                 # exclusive lower bound; 100 kg upper 
 CG_CM_MAX = 100.0                         # |cg offset| < 1 m
 MODEL_LENGTH_CM_MAX = 100.0               # model dimensions < 1 m
 VELOCITY_M_S_RANGE = (0.0, 2.0e4)
+#: largest |inertia component| of a model, g cm^2: the heaviest model (MASS_G_RANGE, 100 kg)
+#: at the largest size (1 m) has m L^2 = 1e9 g cm^2. Larger is a unit slip, and far larger
+#: (1e308) would overflow the eigen-check
+INERTIA_MAX_G_CM2 = 1e9
 #: plausible mean density of a model, g/cm^3 (mass over the body's volume): hollow or foam
 #: models ~0.1, plastics ~1, steel ~8, tungsten ~19 (osmium, the densest metal, 22.6). A mass
 #: in kg written as grams, or a diameter 10x too large, lands below 0.1 (docs/shot_file.md)
@@ -215,11 +219,18 @@ def validate_model_spec(model, key: str = "model") -> dict:
 
 
 def validate_inertia(inertia: np.ndarray, key: str) -> np.ndarray:
-    """Symmetric, positive definite, principal moments satisfying the triangle inequalities."""
+    """Symmetric, positive definite, principal moments satisfying the triangle inequalities;
+    every component in g cm^2 with magnitude at most :data:`INERTIA_MAX_G_CM2` (checked
+    first, so the numerics below never overflow)."""
     inertia = np.asarray(inertia, dtype=float)
     if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
         raise ShotFileError(f"{key}: expected a finite 3x3 tensor")
     scale = float(np.max(np.abs(inertia)))
+    if scale > INERTIA_MAX_G_CM2:
+        i, j = np.unravel_index(int(np.argmax(np.abs(inertia))), (3, 3))
+        raise ShotFileError(f"{key}: component [{i}][{j}] = {inertia[i, j]:g} g cm^2 is not a "
+                            f"model's moment of inertia (|I| <= {INERTIA_MAX_G_CM2:g} g cm^2, "
+                            f"100 kg at 1 m; check the unit)")
     if scale == 0.0:
         raise ShotFileError(f"{key}: tensor is zero")
     if not np.allclose(inertia, inertia.T, rtol=0.0, atol=1e-9 * scale):

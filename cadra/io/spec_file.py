@@ -22,7 +22,7 @@ from cadra.dynamics.effects import Effects
 from cadra.dynamics.setup import DT_MAX_TRUTH
 from cadra.dynamics.trajectory import Launch
 from cadra.io.seed004 import load_seed004_table
-from cadra.io.shotfile import ShotFileError, validate_inertia
+from cadra.io.shotfile import INERTIA_MAX_G_CM2, ShotFileError, validate_inertia
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
 #: keys of one station's entry in ``[station_biases]`` (m, m, m, s), in this order
@@ -30,8 +30,6 @@ BIAS_KEYS = ("x_m", "y_m", "z_m", "time_s")
 #: plausibility limits of an injected bias: each position component (m), the time (s)
 BIAS_POSITION_MAX_M = 0.01
 BIAS_TIME_MAX_S = 1e-4
-#: largest plausible inertia component, g cm^2 (1000 kg at 1 m is 1e10)
-INERTIA_MAX_G_CM2 = 1e12
 #: how the gun may be aimed (``"centre"``: slanted so the path stays centred in view)
 AIMS = ("none", "centre")
 
