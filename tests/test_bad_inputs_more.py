@@ -133,11 +133,13 @@ def test_history_station_beyond_int64(tmp_path):
 
 def test_history_number_beyond_float(tmp_path):
     """``1e400`` (inf when parsed) in a line: was a ValueError from the canonical JSON
-    ("Out of range float values are not JSON compliant"); now a line that is not valid JSON."""
+    ("Out of range float values are not JSON compliant"), then "not valid JSON"; now named by
+    line, entry and key."""
     path = append_entry(fuzz.bias_tables()[1], tmp_path)
     path.write_text(re.sub(r'"bias_x_m":\[[^,\]]+', '"bias_x_m":[1e400', path.read_text()))
-    with pytest.raises(StationHistoryError, match=rf"{HISTORY_FILENAME}: line 1: not valid "
-                                                  r"JSON"):
+    with pytest.raises(StationHistoryError, match=re.escape(
+            f"{HISTORY_FILENAME}: line 1 (entry 1): key bias_x_m[0]: 1e400 is not a finite "
+            "number")):
         load_history(tmp_path, "hffaf")
 
 

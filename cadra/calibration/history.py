@@ -129,8 +129,14 @@ class _Scan:
     fragment: dict | None  # the unterminated, non-JSON last line: line, bytes, sha256
 
 
-def _reject_constant(name):
-    raise ValueError(f"{name} is not allowed")
+class _NonFinite(str):
+    """A JSON number beyond a float (``1e400``) or a non-standard constant (``NaN``,
+    ``Infinity``), kept as its text so the entry holding it is named (:func:`_nonfinite_at`):
+    the writer never produces one (canonical JSON has no inf or NaN)."""
+
+
+def _keep_constant(name: str) -> _NonFinite:
+    return _NonFinite(name)
 
 
 def _no_duplicates(pairs):
@@ -140,21 +146,32 @@ def _no_duplicates(pairs):
     return dict(pairs)
 
 
-def _finite_float(text: str) -> float:
-    """A JSON number as float; one beyond a float (``1e400``) is refused like ``Infinity``:
-    the writer never produces it (canonical JSON has no inf) and it cannot be hashed."""
+def _finite_float(text: str) -> float | _NonFinite:
+    """A JSON number as float; one beyond a float (``1e400``) stays its text."""
     x = float(text)
-    if not math.isfinite(x):
-        raise ValueError(f"{text} is beyond a float")
-    return x
+    return x if math.isfinite(x) else _NonFinite(text)
 
 
 def _parse_line(raw: bytes):
     try:
-        return json.loads(raw.decode("ascii"), parse_constant=_reject_constant,
+        return json.loads(raw.decode("ascii"), parse_constant=_keep_constant,
                           parse_float=_finite_float, object_pairs_hook=_no_duplicates)
     except (UnicodeDecodeError, ValueError):
         return None
+
+
+def _nonfinite_at(obj, key: str = "") -> tuple[str, str] | None:
+    """The first non-finite number in a parsed entry: (its key path, e.g. ``bias_x_m[2]``, and
+    its text), or None."""
+    if isinstance(obj, _NonFinite):
+        return key, str(obj)
+    items = (obj.items() if isinstance(obj, dict)
+             else ((f"[{i}]", v) for i, v in enumerate(obj)) if isinstance(obj, list) else ())
+    for k, v in items:
+        found = _nonfinite_at(v, f"{key}.{k}" if key and not k.startswith("[") else f"{key}{k}")
+        if found:
+            return found
+    return None
 
 
 def _scan(path: Path, facility: str) -> _Scan:
@@ -189,6 +206,11 @@ def _scan(path: Path, facility: str) -> _Scan:
             continue
         if not isinstance(obj, dict):
             raise StationHistoryError(f"{where}: not a JSON object (corrupted line)")
+        bad = _nonfinite_at(obj)
+        if bad is not None:
+            raise StationHistoryError(f"{where} (entry {len(tables) + 1}): key {bad[0]}: "
+                                      f"{bad[1]} is not a finite number (a bias or sigma must "
+                                      f"be finite; null means a channel not estimated)")
         if obj.get("format") != HISTORY_FORMAT:
             raise StationHistoryError(f"{where}: format {obj.get('format')!r}, expected "
                                       f"{HISTORY_FORMAT!r}")
