@@ -5,6 +5,7 @@ asserts the message names the culprit (key, station and channel, line and entry)
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -62,3 +63,137 @@ def test_validate_inertia_raises_no_warning():
             with pytest.raises(ShotFileError, match="is not a model's moment of inertia"):
                 validate_inertia(np.full((3, 3), big), "k")
         validate_inertia(np.diag([1e9, 1e9, 1e9]), "k")  # the bound itself is accepted
+
+
+# --- station history: non-finite numbers by location ----------------------------------------
+
+
+def _two_entry_history(tmp_path):
+    from cadra.calibration.history import append_entry
+
+    fuzz = _fuzz()
+    first, second = fuzz.bias_tables()[:2]
+    append_entry(first, tmp_path)
+    return append_entry(second, tmp_path)
+
+
+def _fuzz():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("fuzz_parsers",
+                                                  ROOT / "tools" / "fuzz_parsers.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("column, index, text", [
+    ("bias_y_m", 2, "1e400"), ("sigma_z_m", 0, "-1e999"), ("bias_time_s", 2, "NaN"),
+    ("sigma_x_m", 1, "Infinity"), ("sigma_x_m", 1, "-Infinity")])
+def test_history_nonfinite_named_by_entry_and_key(tmp_path, column, index, text):
+    """Was "line 2: not valid JSON ... refusing to guess" (1e400 parsed to inf and was refused
+    as if the line were corrupted); now the entry and key holding the number."""
+    from cadra.calibration.history import HISTORY_FILENAME, load_history
+    from cadra.calibration.table import StationHistoryError
+
+    path = _two_entry_history(tmp_path)
+    first, second = path.read_text().splitlines()
+    values = re.search(rf'"{column}":\[([^\]]*)\]', second).group(1).split(",")
+    values[index] = text
+    second = second.replace(re.search(rf'"{column}":\[[^\]]*\]', second).group(0),
+                            f'"{column}":[{",".join(values)}]')
+    path.write_text(f"{first}\n{second}\n")
+    with pytest.raises(StationHistoryError, match=re.escape(
+            f"{HISTORY_FILENAME}: line 2 (entry 2): key {column}[{index}]: {text} is not a "
+            "finite number")):
+        load_history(tmp_path, "hffaf")
+
+
+# --- bias tables: absurd but finite biases --------------------------------------------------
+
+
+def _csv_with(tmp_path, station: int, column: str, value: str) -> Path:
+    """A valid 16-station bias-table CSV with one cell replaced."""
+    from cadra.calibration.table import save_bias_table
+
+    text = save_bias_table(_fuzz().bias_tables()[0], tmp_path / "ok.csv", overwrite=True).read_text()
+    head = [line for line in text.splitlines() if line.startswith("#")]
+    rows = [line.split(",") for line in text.splitlines() if not line.startswith("#")]
+    col = rows[0].index(column)
+    row = next(r for r in rows[1:] if r[0] == str(station))
+    row[col] = value
+    p = tmp_path / "t.csv"
+    p.write_text("\n".join(head + [",".join(r) for r in rows]) + "\n")
+    return p
+
+
+@pytest.mark.parametrize("station, column, value, shown", [
+    (5, "bias_x_m", "1e30", "x: bias 1e+30 m is not a plausible station bias (|bias| <= 0.1 m"),
+    (7, "bias_z_m", "-0.25", "z: bias -0.25 m is not a plausible station bias (|bias| <= 0.1 m"),
+    (3, "bias_time_s", "0.02", "time: bias 0.02 s is not a plausible station bias (|bias| <= "
+                               "0.001 s"),
+])
+def test_bias_table_absurd_bias_names_station_and_channel(tmp_path, station, column, value,
+                                                          shown):
+    """Was accepted: a finite bias of 1e30 m (or 25 cm, or 20 ms) loaded and was applied."""
+    from cadra.calibration.table import StationHistoryError, load_bias_table
+
+    p = _csv_with(tmp_path, station, column, value)
+    with pytest.raises(StationHistoryError, match=re.escape(
+            f"{p}: station {station} {shown}; check the unit)")):
+        load_bias_table(p)
+    load_bias_table(_csv_with(tmp_path, station, column, "0.0009" if "time" in column
+                              else "-0.09"))   # inside the bounds: accepted
+
+
+def test_history_absurd_bias_names_line_station_and_channel(tmp_path):
+    from cadra.calibration.history import HISTORY_FILENAME, load_history
+    from cadra.calibration.table import StationHistoryError, _sha256, canonical_json
+
+    path = _two_entry_history(tmp_path)
+    first, second = path.read_text().splitlines()
+    obj = json.loads(second)
+    obj.pop("sha256")
+    obj["bias_y_m"][2] = 1e30
+    path.write_text(f"{first}\n{canonical_json({**obj, 'sha256': _sha256(canonical_json(obj))})}"
+                    "\n")
+    with pytest.raises(StationHistoryError, match=re.escape(
+            f"{HISTORY_FILENAME}: line 2: station 3 y: bias 1e+30 m is not a plausible station "
+            "bias (|bias| <= 0.1 m; check the unit)")):
+        load_history(tmp_path, "hffaf")
+
+
+def _trajectory(folder: Path, shot_file: Path = SPHERE, shot_id: str = "SPH-1") -> Path:
+    """Stage one's trajectory file of the sphere sample, from its exact truth (no images)."""
+    import pandas as pd
+
+    from cadra.io.trajectory import COLUMNS, trajectory_to_csv
+
+    t = pd.read_csv(SPHERE.parent / "truth.csv")
+    t = t[["station", "t_s", "x_m", "y_m", "z_m", "theta_deg", "psi_deg"]].copy()
+    t["status"] = "ok"
+    for c, v in (("sigma_x_m", 1e-4), ("sigma_y_m", 1e-4), ("sigma_z_m", 1e-4),
+                 ("sigma_theta_deg", 0.1), ("sigma_psi_deg", 0.1)):
+        t[c] = v
+    t["x_top_minus_side_m"], t["x_consistency"], t["reason"], t["warnings"] = 0.0, 0.0, "", ""
+    folder.mkdir(parents=True, exist_ok=True)
+    p = folder / "trajectory.csv"
+    p.write_text(trajectory_to_csv(t[list(COLUMNS)], {"shot_id": shot_id,
+                                                      "shot_file": str(shot_file)}))
+    return p
+
+
+def test_absurd_bias_table_is_refused_by_cadra2_fit(tmp_path, capsys):
+    """The CLI path: ``cadra2 fit --bias-table FILE`` refuses it with exit status 1 before any
+    fit, one line naming the file, station and channel; nothing written."""
+    from cadra.cli.cadra2 import main
+
+    table = _csv_with(tmp_path, 4, "bias_x_m", "1e30")
+    traj = _trajectory(tmp_path / "stage1")
+    status = main(["fit", str(traj), "--model", "sphere", "--bias-table", str(table),
+                   "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status == 1
+    assert err == (f"cadra2 fit: {table}: station 4 x: bias 1e+30 m is not a plausible station "
+                   "bias (|bias| <= 0.1 m; check the unit)\n")
+    assert not (tmp_path / "out").exists()

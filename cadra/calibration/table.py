@@ -35,6 +35,11 @@ UNITS = ("m", "m", "m", "s")
 BIAS_COLUMNS = tuple(f"bias_{c}_{u}" for c, u in zip(CHANNELS, UNITS, strict=True))
 SIGMA_COLUMNS = tuple(f"sigma_{c}_{u}" for c, u in zip(CHANNELS, UNITS, strict=True))
 TABLE_COLUMNS = ("station", *BIAS_COLUMNS, *SIGMA_COLUMNS)
+#: largest plausible |bias| of each channel (SI, CHANNELS' order): 0.1 m of position (a
+#: station misplaced by 10 cm no longer sees the model where it expects it) and 1 ms of spark
+#: time (metres of flight at range speeds). Larger is a unit slip or a broken estimate
+#: (docs/calibration.md)
+BIAS_MAX = (0.1, 0.1, 0.1, 1e-3)
 
 _ENTRY_KEYS = frozenset({"format", "facility", "created_utc", "stations", *BIAS_COLUMNS,
                          *SIGMA_COLUMNS, "shots", "method", "note"})
@@ -111,6 +116,12 @@ class BiasTable:
             raise StationHistoryError(f"station {st[i]} {CHANNELS[j]}: bias "
                                       f"{float(bias[i, j])!r} is not finite (use 0 with sigma "
                                       f"NaN for a channel that was not estimated)")
+        big = np.abs(bias) > np.array(BIAS_MAX)
+        if np.any(big):
+            i, j = np.argwhere(big)[0]
+            raise StationHistoryError(f"station {st[i]} {CHANNELS[j]}: bias {bias[i, j]:g} "
+                                      f"{UNITS[j]} is not a plausible station bias (|bias| <= "
+                                      f"{BIAS_MAX[j]:g} {UNITS[j]}; check the unit)")
         est = ~np.isnan(sigma)
         with np.errstate(invalid="ignore"):
             bad_sigma = np.isinf(sigma) | (est & ~(sigma > 0))
