@@ -274,8 +274,9 @@ def test_diameter_ten_times_too_large(tmp_path):
               .replace("13.153", "131530.0"), "big.toml")
     load_shot(p)
     problems = check_shot(p)
-    assert ("model: diameter 20 cm is more than 0.5 of the field of view of station 1 top "
-            "(15.24 cm): check model.d_* (the unit?)") in problems
+    assert problems[0] == ("model.d_cm = 20.0: the model's diameter, 20 cm, is more than 0.5 "
+                           "of the field of view of station 1 top (15.24 cm: 1600x1200 px at "
+                           "0.127 mm/px); a model that large cannot be measured: check the unit")
 
 
 def test_unknown_view_name_is_refused_naming_the_known_views(tmp_path):

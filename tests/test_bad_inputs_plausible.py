@@ -197,3 +197,53 @@ def test_absurd_bias_table_is_refused_by_cadra2_fit(tmp_path, capsys):
     assert err == (f"cadra2 fit: {table}: station 4 x: bias 1e+30 m is not a plausible station "
                    "bias (|bias| <= 0.1 m; check the unit)\n")
     assert not (tmp_path / "out").exists()
+
+
+# --- the model's size against the image scale, at load time ---------------------------------
+
+#: the sphere sample with a diameter 10x too large and the mass and inertia scaled with it: a
+#: consistent body (the density check passes) that does not fit the field of view
+BIG_SPHERE = (SPHERE.read_text().replace("d_cm = 2.0", "d_cm = 20.0")
+              .replace("mass_g = 32.882", "mass_g = 32882.0").replace("13.153", "131530.0"))
+SIZE_MESSAGE = ("model.d_cm = 20.0: the model's diameter, 20 cm, is more than 0.5 of the field "
+                "of view of station 1 top (15.24 cm: 1600x1200 px at 0.127 mm/px); a model "
+                "that large cannot be measured: check the unit")
+
+
+def test_cadra1_refuses_a_model_larger_than_the_field_of_view(tmp_path, capsys):
+    """Was caught only by ``cadra1 --check``; ``cadra1`` went on to measure. Now exit 2, one
+    line naming the file, the key and the figures, nothing written."""
+    from cadra.cli.cadra1 import main
+
+    shot = _write(tmp_path, BIG_SPHERE, "big.toml")
+    status = main([str(shot), "-o", str(tmp_path / "out"), "--workers", "1", "-q"])
+    assert status == 2
+    assert capsys.readouterr().err == f"cadra1: {shot}: {SIZE_MESSAGE}\n"
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command", ["fit", "calibrate"])
+def test_cadra2_refuses_a_model_larger_than_the_field_of_view(tmp_path, capsys, command):
+    """``cadra2`` loading the same shot (through its trajectory file) refuses it with exit
+    status 1 (input refused), naming the key, before any fit; nothing written."""
+    from cadra.cli.cadra2 import main
+
+    shot = _write(tmp_path, BIG_SPHERE, "big.toml")
+    traj = _trajectory(tmp_path / "stage1", shot_file=shot)
+    extra = ["--model", "sphere"] if command == "fit" else ["--stations-root", str(tmp_path)]
+    status = main([command, str(traj), *extra, "-o", str(tmp_path / "out")])
+    assert status == 1
+    assert capsys.readouterr().err == f"cadra2 {command}: {shot}: {SIZE_MESSAGE}\n"
+    assert not (tmp_path / "out").exists()
+    assert not (tmp_path / "stations").exists()
+
+
+def test_check_model_size_is_the_check_of_cadra1_check(tmp_path):
+    """One home: ``--check`` lists the same line the load-time check raises."""
+    from cadra.io.shot_check import check_model_size, check_shot
+
+    shot = _write(tmp_path, BIG_SPHERE, "big.toml")
+    assert SIZE_MESSAGE in check_shot(shot)
+    with pytest.raises(ShotFileError, match=re.escape(f"{shot}: {SIZE_MESSAGE}")):
+        check_model_size(load_shot(shot))
+    check_model_size(load_shot(SPHERE))   # the sample fits

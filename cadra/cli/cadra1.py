@@ -12,7 +12,8 @@ measurement with its sigmas and every missing image of ``--check``; ``--version`
 version (docs/cli.md).
 
 Exit status: 0 all stations measured, 1 some station failed (the others are still measured
-and written), 2 the shot could not be processed at all (bad shot or facility file, output
+and written), 2 the shot could not be processed at all (bad shot or facility file, a model
+larger than half the field of view — a size in the wrong unit —, output
 directory exists, an output that is or holds an input — shot file, facility file, image,
 truth table — or the working folder, usage error), 130 interrupted (Ctrl-C: one line, no
 traceback, nothing written), 141 stdout closed by its reader (``| head``; no traceback).
@@ -66,12 +67,15 @@ def _main(argv: list[str] | None) -> int:
     from pathlib import Path
 
     from cadra.io.atomic import check_output_dir
+    from cadra.io.shot_check import check_model_size
+    from cadra.io.shotfile import load_shot
     from cadra.io.trajectory import load_truth
     from cadra.measure.shot import measure_shot
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
     try:
         check_output_dir(out, _input_paths(args))  # measure_shot checks the shot's inputs too
+        check_model_size(load_shot(args.shot_file))  # a size in the wrong unit: no measuring
         truth = load_truth(args.truth) if args.truth else None  # errors name row, column
         res = measure_shot(args.shot_file, out, workers=args.workers, progress=not args.quiet,
                            overlays=not args.no_overlays, overwrite=args.overwrite,

@@ -58,7 +58,9 @@ def load_shots(trajectories: Sequence[str | os.PathLike],
 
     ``shots`` gives the shot file of each trajectory, same order (default: the ones the
     trajectory files name, :func:`trajectory_and_shot`); ``sigma_time_s`` the spark-time
-    sigma (s); the ``min_sigma_*`` floors of the stage-one sigmas (m, deg).
+    sigma (s); the ``min_sigma_*`` floors of the stage-one sigmas (m, deg). A model larger
+    than half its facility's field of view (a size in the wrong unit) raises
+    :class:`FitDataError` naming the shot file's key, as stage one refuses it.
     """
     if shots and len(shots) != len(trajectories):
         raise ValueError("give one --shot per trajectory file (same order), or none")
@@ -69,8 +71,29 @@ def load_shots(trajectories: Sequence[str | os.PathLike],
         traj, shot_path = trajectory_and_shot(item, shots[k] if shots else None)
         data.append(load_shot_data(shot_path, traj, sigma_t_s=sigma_time_s,
                                    min_sigma=min_sigma))
+        _check_model_size(shot_path)
         paths.append(traj)
     return data, paths
+
+
+def _check_model_size(shot_path: str | os.PathLike) -> None:
+    """The shot's model against its facility's field of view, as stage one checks it
+    (:func:`cadra.io.shot_check.check_model_size`: a size in the wrong unit). A facility that
+    cannot be loaded is left alone: the fit does not need it, and without it there is no
+    image scale to compare with."""
+    from cadra.io.facility_file import load_facility
+    from cadra.io.shot_check import check_model_size
+    from cadra.io.shotfile import ShotFileError, load_shot
+
+    shot = load_shot(shot_path)   # already validated by load_shot_data
+    try:
+        facility = load_facility(shot.facility)
+    except (ValueError, OSError):
+        return
+    try:
+        check_model_size(shot, facility)
+    except ShotFileError as exc:
+        raise FitDataError(str(exc)) from None
 
 
 def parse_assignments(items: Iterable[str] | None) -> dict[str, str | None]:

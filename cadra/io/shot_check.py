@@ -33,7 +33,7 @@ def check_shot(path: str | os.PathLike) -> list[str]:
     except (ValueError, OSError) as exc:
         return [f"facility {shot.facility!r}: {exc}"]
     by_id = {s.id: s for s in facility.stations}
-    problems = _size_problems(shot, facility)
+    problems = size_problems(shot, facility)
     for rec in shot.stations:
         station = by_id.get(rec.station)
         if station is None:
@@ -68,9 +68,17 @@ def check_shot(path: str | os.PathLike) -> list[str]:
     return problems
 
 
-def _size_problems(shot, facility) -> list[str]:
+#: model-spec size keys (``cadra.io.shotfile.MODEL_SIZE_KEYS``) of each checked dimension
+_SIZE_KEYS = {"diameter": ("d", "diameter"), "length": ("h", "length", "l")}
+
+
+def size_problems(shot, facility) -> list[str]:
     """The model's diameter and length against the smallest field of view of the facility's
-    views (a diameter 10x too large does not fit)."""
+    views (:data:`MAX_FIELD_FRACTION`; a diameter 10x too large does not fit): one line per
+    dimension that does not fit, naming the shot file's key, its value and the view's figures
+    (width x height px at its scale). The one home of this check: ``cadra1 --check``
+    (:func:`check_shot`), stage one and stage two (:func:`check_model_size`) all use it."""
+    from cadra import units
     from cadra.body import body_from_spec
 
     body = body_from_spec(shot.model)
@@ -81,13 +89,35 @@ def _size_problems(shot, facility) -> list[str]:
                           * t[2].scale_m_per_px)
     fov = min(view.width_px, view.height_px) * view.scale_m_per_px
     out = []
-    for what, size, key in (("diameter", body.diameter_m, "model.d_*"),
-                            ("length", body.length_m, "model.h_* / length_*")):
+    for what, size in (("diameter", body.diameter_m), ("length", body.length_m)):
         if size > MAX_FIELD_FRACTION * fov:
-            out.append(f"model: {what} {size * 100:.4g} cm is more than "
+            keys = [f"model.{k} = {v!r}" for k, v in shot.model.items()
+                    if (u := units.split_unit_key(k, "length")) and u[0] in _SIZE_KEYS[what]]
+            if not keys and out:   # the length follows from the diameter already named
+                continue
+            key = keys[0] if keys else f"model ({what} set by the model's other keys)"
+            out.append(f"{key}: the model's {what}, {size * 100:.4g} cm, is more than "
                        f"{MAX_FIELD_FRACTION:g} of the field of view of station {sid} {name} "
-                       f"({fov * 100:.4g} cm): check {key} (the unit?)")
+                       f"({fov * 100:.4g} cm: {view.width_px}x{view.height_px} px at "
+                       f"{view.scale_m_per_px * 1e3:.4g} mm/px); a model that large cannot be "
+                       f"measured: check the unit")
     return out
 
 
-__all__ = ["MAX_FIELD_FRACTION", "check_shot"]
+def check_model_size(shot, facility=None) -> None:
+    """Raise :class:`~cadra.io.shotfile.ShotFileError` (naming the shot file, the key and the
+    figures, :func:`size_problems`) when the model does not fit the facility's field of view.
+    ``facility`` None: the shot's own (``load_facility(shot.facility)``, whose errors pass)."""
+    from cadra.io.shotfile import ShotFileError
+
+    if facility is None:
+        from cadra.io.facility_file import load_facility
+
+        facility = load_facility(shot.facility)
+    problems = size_problems(shot, facility)
+    if problems:
+        where = f"{shot.source_path}: " if shot.source_path else ""
+        raise ShotFileError(where + "; ".join(problems))
+
+
+__all__ = ["MAX_FIELD_FRACTION", "check_model_size", "check_shot", "size_problems"]
