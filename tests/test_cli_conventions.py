@@ -230,11 +230,51 @@ def test_single_on_one_shot_says_why_not_nan(fine_shot, capsys):
     cadra2.main(["single", str(traj), "-o", str(out)])
     cap = capsys.readouterr()
     assert "nan ± nan" not in cap.out and "nan +- nan" not in cap.out
-    assert "quasi-linear trends not computed" in cap.out and "at least two" in cap.out
+    assert "quasi-linear trends not computed" in cap.out
+    # the warning itself: stderr, one line, prefixed with the command
+    assert "cadra2 single: warning: quasi-linear trends not computed" in cap.err
+    assert "at least two" in cap.err and "warning" not in cap.out.replace("warning(s)", "")
     report = (out / "report.md").read_text()
     assert "nan ± nan" not in report and "quasi-linear trends not computed" in report
     status = [line for line in cap.out.splitlines() if line.startswith("single: ")]
     assert len(status) == 1 and "not computed" in status[0]
+
+
+def test_single_warnings_survive_quiet(fine_shot, capsys):
+    """-q hides progress and chatter, never a warning on the result: the one-shot quasi-linear
+    warning was not printed at all under -q (it sat inside the not-quiet block, on stdout)."""
+    base, traj = fine_shot
+    cadra2.main(["single", str(traj), "-o", str(base / "single_q"), "-q"])
+    cap = capsys.readouterr()
+    warned = [line for line in cap.err.splitlines() if ": warning: " in line]
+    assert len(warned) == 2   # one shot; the linear model does not fit it (chi^2/nu >> 1)
+    assert warned[0].startswith("cadra2 single: warning: quasi-linear trends not computed")
+    assert "at least two" in warned[0]
+    assert re.match(r"cadra2 single: warning: M2-2429: chi\^2/nu = \S+, far above 1", warned[1])
+    assert [line for line in cap.out.splitlines() if line.startswith("single: ")] == \
+        cap.out.splitlines()   # stdout: the status line only
+
+
+@pytest.mark.parametrize("quiet", [True, False])
+def test_fit_warnings_go_to_stderr_and_survive_quiet(capsys, quiet):
+    """chi^2/nu far above 1 and the result's own warnings (a parameter at a bound): stderr,
+    with or without -q (they were stdout, and -q hid them)."""
+    from types import SimpleNamespace
+
+    result = SimpleNamespace(
+        status="converged", message="converged: step below tolerance", options={},
+        iterations=7, chi2=880.0, dof=10, reduced_chi2=88.0, elapsed_s=0.5, converged=True,
+        warnings=("CD_A1 = 2 is at a bound [0, 2]",), aero_names=("CD_A1",),
+        aero_values=np.array([2.0]), aero_sigma=np.array([0.01]), history=[88.0], shots=())
+    cadra2._print_summary(result, argparse.Namespace(quiet=quiet, verbose=False))
+    cap = capsys.readouterr()
+    assert cap.err.splitlines() == [
+        "cadra2 fit: warning: chi^2/nu = 88 > 2: the sigmas or the model do not describe the "
+        "data; use the scaled or coloured sigmas (report.md)",
+        "cadra2 fit: warning: CD_A1 = 2 is at a bound [0, 2]"]
+    assert "warning" not in cap.out
+    assert cap.out.splitlines()[0].startswith("converged: step below tolerance; chi^2/nu")
+    assert len(cap.out.splitlines()) == (1 if quiet else 3)
 
 
 def test_single_fit_warnings_flag_meaningless_sigmas():

@@ -32,6 +32,13 @@ def pm(value: float, sigma: float | None = None, unit: str = "") -> str:
     return f"{report_pm(value, sigma)}{u}"
 
 
+def warn(prog: str, text: str) -> None:
+    """A warning on a result (a chi^2/nu far above 1, one shot given to the quasi-linear step,
+    a parameter at a bound): one line on stderr, ``PROG: warning: TEXT``, never hidden by
+    ``-q`` (which hides progress and chatter only; docs/cli.md)."""
+    print(f"{prog}: warning: {text}", file=sys.stderr)
+
+
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """argparse's defaults formatter, but: a required option says ``(required)``, a default
     the help text already states is not repeated, and None or off reads ``none``/``off``."""
@@ -59,7 +66,8 @@ def add_verbosity(parser: argparse.ArgumentParser, *, top: bool = True) -> None:
     default = False if top else argparse.SUPPRESS
     g = parser.add_mutually_exclusive_group()
     g.add_argument("-q", "--quiet", action="store_true", default=default,
-                   help="no progress bars: only the result or status line and errors")
+                   help="no progress bars or chatter: only the result or status line, "
+                        "warnings and errors")
     g.add_argument("-v", "--verbose", action="store_true", default=default,
                    help="more detail (per-station, per-phase, per-shot lines)")
 
@@ -125,4 +133,4 @@ def console_main(prog: str, body, argv) -> int:
 
 
 __all__ = ["EXIT_STDOUT_CLOSED", "HelpFormatter", "add_verbosity", "add_version",
-           "console_main", "join_number_lists", "pm", "stdout_closed"]
+           "console_main", "join_number_lists", "pm", "stdout_closed", "warn"]

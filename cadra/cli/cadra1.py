@@ -7,7 +7,7 @@
   file load and validate, and every station image exists, is readable and has the size and bit
   depth its view declares. One line per problem; nothing is written.
 
-``-q`` prints no progress bar, only the result line and errors; ``-v`` adds each station's
+``-q`` prints no progress bar, only the result line, warnings and errors (stderr); ``-v`` adds each station's
 measurement with its sigmas and every missing image of ``--check``; ``--version`` prints the
 version (docs/cli.md).
 

@@ -29,7 +29,8 @@ Subcommands:
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 * ``cadra2 models`` — list the bundled aero models (name, case, angle plane, free parameters).
 
-Every command takes ``-q`` (no progress bars: only the result or status line, and errors) and
+Every command takes ``-q`` (no progress bars: only the result or status line, warnings and
+errors; warnings go to stderr, ``cadra2 CMD: warning: ...``) and
 ``-v`` (more detail); ``cadra2 --version`` prints the version (docs/cli.md).
 
 Exit status: 0 success, 1 the input was refused (message names the key), the output folder
@@ -54,6 +55,7 @@ from cadra.cli._format import (
     console_main,
     join_number_lists,
     pm,
+    warn,
 )
 
 #: the top-level help's description (plain text: the module doc is rST)
@@ -262,8 +264,8 @@ def _single(args) -> int:
                   + "  ".join(cells))
             if _verbose(args):
                 print(f"  {row['message']}")
-        for w in warnings:
-            print(f"warning: {w}")
+    for w in warnings:
+        warn("cadra2 single", w)
     n_ok = int(table["converged"].sum())
     trend = ("not computed (fewer than two converged shots)"
              if any(w.startswith("quasi-linear") for w in warnings) else "computed")
@@ -433,7 +435,7 @@ def _calibrate(args) -> int:
                 cells.append(f"{name} {pm(from_si(b, u), from_si(sg, u), u)}{mark}")
         _say(args, f"  station {st:2d}: " + ", ".join(cells))
     for w in (*est.warnings, *hist_warnings):
-        _say(args, f"warning: {w}")
+        warn("cadra2 calibrate", w)
     _say(args, f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
     if failed is not None:
         print(f"cadra2 calibrate: NOT recorded in the station history: {failed}",
@@ -510,14 +512,20 @@ def _phase_lines(result) -> list[str]:
 
 
 def _print_summary(result, args) -> None:
-    """Status line (stdout when converged, stderr otherwise), then unless -q the parameter
-    table, the two phases and the warnings; -v adds the chi^2 history and per-shot rms."""
+    """Status line (stdout when converged, stderr otherwise) and the warnings (stderr, also
+    under -q), then unless -q the parameter table and the two phases; -v adds the chi^2
+    history and per-shot rms."""
     line = status_line(result)
     if result.converged:
         print(line)
     else:
         print(f"cadra2 fit: NOT CONVERGED: {line} (the best point reached is written, marked "
               "as not converged)", file=sys.stderr)
+    if result.converged and result.reduced_chi2 > 2.0:
+        warn("cadra2 fit", f"chi^2/nu = {result.reduced_chi2:.3g} > 2: the sigmas or the model "
+             "do not describe the data; use the scaled or coloured sigmas (report.md)")
+    for w in result.warnings:
+        warn("cadra2 fit", w)
     if _quiet(args):
         return
     verbose = _verbose(args)
@@ -537,11 +545,6 @@ def _print_summary(result, args) -> None:
             print(f"{sf.shot_id}: residual rms " + ", ".join(
                 f"{ch} {v * 1e6:.3g} um" if ch in ("x", "y", "z") else
                 f"{ch} {v * 57.29577951308232:.3g} deg" for ch, v in sf.rms.items()))
-    if result.converged and result.reduced_chi2 > 2.0:
-        print(f"warning: chi^2/nu = {result.reduced_chi2:.3g} > 2: the sigmas or the model do "
-              "not describe the data; use the scaled or coloured sigmas (report.md)")
-    for w in result.warnings:
-        print(f"warning: {w}")
 
 
 def build_parser() -> argparse.ArgumentParser:
