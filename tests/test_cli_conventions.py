@@ -16,9 +16,10 @@ import pytest
 
 import cadra
 from cadra.cli import cadra1, cadra2
-from cadra.cli._format import join_number_lists, pm
+from cadra.cli._format import join_number_lists
 from cadra.fitting.studies import SINGLE_FIT_CHI2_WARN, single_fit_warnings
 from cadra.io.trajectory import COLUMNS, write_trajectory
+from cadra.numfmt import pm
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 SPECS = Path("sample_shots/specs")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from cadra.calibration.history import save_bias_table
 from cadra.io.atomic import atomic_output_dir
+from cadra.numfmt import pm
 
 
 def history_sentence(history_file: str | os.PathLike | None, entry: int | None = None,
@@ -47,7 +48,7 @@ def calibration_markdown(est, table, comparison, history, warnings=(), *,
         cells = []
         for c, f in enumerate((1e3, 1e3, 1e3, 1e6)):
             b, sg = table.bias[k, c], table.sigma[k, c]
-            cells.append("—" if not sg == sg else f"{b * f:+.4f} ± {sg * f:.4f}")
+            cells.append("—" if not sg == sg else pm(b * f, sg * f))
         lines.append(f"| {st} | " + " | ".join(cells) + " |")
     lines += ["", "## Residual rms per shot (µm), before → after the correction", "",
               "| shot | x | y | z |", "|---|---|---|---|"]

@@ -1,35 +1,17 @@
-"""What ``cadra1`` and ``cadra2`` share: the look of a value with its sigma, the help
-formatter that shows every option's default, and ``-q``/``-v``/``--version`` (docs/cli.md).
-
-One home for ``value ± sigma`` on the console: :func:`pm` (the fit report's own rule, sigma to
-2 significant digits and the value to the same decimal place; ``cadra.fitting.report``), with
-a plain word where a number is not determined instead of ``nan ± nan``.
+"""What ``cadra1`` and ``cadra2`` share: the help formatter that shows every option's default,
+``-q``/``-v``/``--version``, warnings and the console exit conventions (docs/cli.md).
+``value ± sigma`` has its one home in :func:`cadra.numfmt.pm`, below every layer.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import re
 import sys
 from contextlib import suppress
 
 import cadra
-
-
-def pm(value: float, sigma: float | None = None, unit: str = "") -> str:
-    """``value ± sigma [unit]``: sigma to 2 significant digits, the value to the same decimal
-    place (as in the fit report); ``not determined`` for a non-finite value and ``value (σ not
-    determined)`` for a non-finite sigma."""
-    from cadra.fitting.report import _pm as report_pm  # the one rule (lazy: cadra1 --check)
-
-    u = f" {unit}" if unit else ""
-    if value is None or not math.isfinite(value):
-        return "not determined"
-    if sigma is not None and not math.isfinite(sigma):
-        return f"{value:.6g}{u} (σ not determined)"
-    return f"{report_pm(value, sigma)}{u}"
 
 
 def warn(prog: str, text: str) -> None:
@@ -133,4 +115,4 @@ def console_main(prog: str, body, argv) -> int:
 
 
 __all__ = ["EXIT_STDOUT_CLOSED", "HelpFormatter", "add_verbosity", "add_version",
-           "console_main", "join_number_lists", "pm", "stdout_closed", "warn"]
+           "console_main", "join_number_lists", "stdout_closed", "warn"]

@@ -54,9 +54,9 @@ from cadra.cli._format import (
     add_version,
     console_main,
     join_number_lists,
-    pm,
     warn,
 )
+from cadra.numfmt import pm
 
 #: the top-level help's description (plain text: the module doc is rST)
 DESCRIPTION = (

@@ -50,6 +50,7 @@ from cadra.fitting.histories import fitted_histories
 from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local, observables
+from cadra.numfmt import pm
 
 #: results.json format tag
 RESULTS_FORMAT = "cadra.fit-results/1"
@@ -263,21 +264,6 @@ def residuals_table(result: FitResult) -> pd.DataFrame:
 # --------------------------------------------------------------------------- formatting
 
 
-def _pm(value: float, sigma: float | None) -> str:
-    """``value ± sigma`` with sigma to 2 significant digits and value to the same place."""
-    if sigma is None or not math.isfinite(value):
-        return f"{value:.6g}"
-    if not math.isfinite(sigma):
-        return f"{value:.6g} ± inf"
-    if sigma <= 0:
-        return f"{value:.6g} ± 0"
-    place = math.floor(math.log10(sigma)) - 1
-    if -8 <= place <= 0:
-        dec = -place
-        return f"{value:.{dec}f} ± {sigma:.{dec}f}"
-    return f"{value:.4g} ± {sigma:.2g}"
-
-
 def _pct(value: float, sigma: float) -> str:
     if not math.isfinite(sigma) or value == 0:
         return "—"
@@ -300,7 +286,7 @@ def coefficient_markdown(table: pd.DataFrame) -> str:
             elif bool(d.get(f"A{k}_held")):
                 cells.append(f"{v:.6g} (held)")
             else:
-                cells.append(_pm(float(v), float(d.get(f"A{k}_sigma"))))
+                cells.append(pm(float(v), float(d.get(f"A{k}_sigma"))))
         cells.append(str(d.get("other") or ""))
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return "\n".join(lines)
@@ -392,7 +378,7 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
             flags.append("UNDETERMINED")
         if any(d["hold"] == n for d in result.near_singular):
             flags.append("hold suggested")
-        L.append(f"| {n} | {_pm(p.value, sig[n])} | {_pct(p.value, sig[n])} | "
+        L.append(f"| {n} | {pm(p.value, sig[n])} | {_pct(p.value, sig[n])} | "
                  f"{sig_c[n]:.2g} | {sig_s[n]:.2g} | {init} | {_bounds_text(p)} | "
                  f"{', '.join(flags)} |")
     held = [p for p in result.model.parameters if p.name not in sig]
@@ -440,13 +426,13 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     for r in rows:
         x, y, z = r["reference_point_m"]
         sx, sy, sz = r["reference_point_sigma_m"]
-        rates = ", ".join(_pm(float(v), float(s)) if np.isfinite(s) else f"{v:.4g}"
+        rates = ", ".join(pm(float(v), float(s)) if np.isfinite(s) else f"{v:.4g}"
                           for v, s in zip(r["rates_rad_s"], r["rates_sigma_rad_s"],
                                           strict=True))
         L.append(f"| {r['shot_id']} | {r['epoch_station']} | {r['t0_s']:.6f} | "
-                 f"{_pm(x, sx)} | {_pm(y * 1e3, sy * 1e3)} | {_pm(z * 1e3, sz * 1e3)} | "
-                 f"{r['speed_m_s']:.3f} | {_pm(r['theta_deg'], r['theta_sigma_deg'])} | "
-                 f"{_pm(r['psi_deg'], r['psi_sigma_deg'])} | {rates} | "
+                 f"{pm(x, sx)} | {pm(y * 1e3, sy * 1e3)} | {pm(z * 1e3, sz * 1e3)} | "
+                 f"{r['speed_m_s']:.3f} | {pm(r['theta_deg'], r['theta_sigma_deg'])} | "
+                 f"{pm(r['psi_deg'], r['psi_sigma_deg'])} | {rates} | "
                  f"{r['alpha_deg']:.2f}, {r['beta_deg']:.2f}, {r['sigma_deg']:.2f} | "
                  f"{r['mach']:.4f} |")
     L.append("")

@@ -49,6 +49,7 @@ from cadra.fitting.problem import FitProblem, result_problem
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import Integration
 from cadra.fitting.solver import FitOptions, fit
+from cadra.numfmt import pm
 
 #: an initial-state source: per-shot (13,) states, or ``f(shot, model) -> (13,) state``
 InitialStates = Sequence[np.ndarray] | Callable[[ShotData, AeroModel], np.ndarray]
@@ -456,8 +457,8 @@ def plot_quasi_linear(table: pd.DataFrame, coefficient: str = "Cmq_0",
         xs = np.linspace(0.0, max(float(np.max(s["x"])), 1e-12) * 1.05, 50)
         p = "" if not math.isfinite(s["p_value"]) else f", p = {s['p_value']:.2g}"
         ax.plot(xs, s["intercept"] + s["slope"] * xs, "-", color="C3", lw=1,
-                label=(f"line: {s['intercept']:.4g} ± {s['intercept_sigma']:.2g} "
-                       f"+ ({s['slope']:.3g} ± {s['slope_sigma']:.2g}) x{p}"))
+                label=(f"line: {pm(s['intercept'], s['intercept_sigma'])} "
+                       f"+ ({pm(s['slope'], s['slope_sigma'])}) x{p}"))
     ax.set_xlabel(against)
     ax.set_ylabel(f"{coefficient} (quasi-linear)")
     ax.set_title(f"{coefficient} vs {against}", fontsize=10)
@@ -642,7 +643,7 @@ def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
              "| shot | status | chi2/dof | " + " | ".join(names) + " |",
              "|---|---|---|" + "---|" * len(names)]
     for _, row in table.iterrows():
-        cells = [f"{row[n]:.5g} ± {row[n + '_sigma']:.2g}" for n in names]
+        cells = [pm(row[n], row[n + "_sigma"]) for n in names]
         lines.append(f"| {row['shot_id']} | {row['status']} | "
                      f"{row['reduced_chi2']:.3g} | " + " | ".join(cells) + " |")
     lines += ["", "## Quasi-linear trends (weighted straight line vs amplitude)", "",
@@ -664,8 +665,8 @@ def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
                     lines.append(f"| {name} | {col} | {exc} | | |")
                     continue
                 summaries[f"{name}:{col}"] = q
-                lines.append(f"| {name} | {col} | {q['slope']:.4g} ± {q['slope_sigma']:.2g} | "
-                             f"{q['intercept']:.4g} ± {q['intercept_sigma']:.2g} | "
+                lines.append(f"| {name} | {col} | {pm(q['slope'], q['slope_sigma'])} | "
+                             f"{pm(q['intercept'], q['intercept_sigma'])} | "
                              f"{q['p_value'] if q['p_value'] is not None else '—'} |")
                 plot_quasi_linear(table, name, col).savefig(
                     tmp / "plots" / f"quasi_linear_{name}_{col}.png", dpi=110)

@@ -45,6 +45,7 @@ from cadra.fitting.sensitivity import (
 from cadra.fitting.solver import FitOptions
 from cadra.gap.candidates import Candidate, augmented_model, library
 from cadra.gap.where import by_group
+from cadra.numfmt import pm
 
 
 @dataclass(frozen=True, eq=False)
@@ -365,7 +366,7 @@ def size_text(a: dict) -> str:
         if ivs is not None and ivs[k] is not None:
             parts.append(f"{n} = {v:.4g} (2-sigma profile interval {_fmt_interval(ivs[k])})")
         else:
-            parts.append(f"{n} = {v:.4g} ± {s:.2g}")
+            parts.append(f"{n} = {pm(v, s)}")
     text = ", ".join(parts)
     if a["refit_status"] != "converged":
         how = _HOW.get(a["refit_status"], "failed")
@@ -506,7 +507,7 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                 test, size = row.pop("_test"), row["_size"]
                 row.update({"dchi2": test["dchi2"], "F": test["F"], "p_value": test["p"],
                             "dbic": test["dbic"], "refit": row["_refit"] is not None,
-                            "size": "; ".join(f"{n} = {v:.4g} ± {e:.2g}" for n, v, e in size)})
+                            "size": "; ".join(f"{n} = {pm(v, e)}" for n, v, e in size)})
             table = pd.DataFrame(rows)
             # rank by the Bonferroni-adjusted p-value (p over its kind's level, times alpha)
             table["p_adjusted"] = [min(1.0, p * alpha / threshold[
