@@ -116,7 +116,8 @@ def _csv_with(tmp_path, station: int, column: str, value: str) -> Path:
     """A valid 16-station bias-table CSV with one cell replaced."""
     from cadra.calibration.table import save_bias_table
 
-    text = save_bias_table(_fuzz().bias_tables()[0], tmp_path / "ok.csv", overwrite=True).read_text()
+    text = save_bias_table(_fuzz().bias_tables()[0], tmp_path / "ok.csv",
+                           overwrite=True).read_text()
     head = [line for line in text.splitlines() if line.startswith("#")]
     rows = [line.split(",") for line in text.splitlines() if not line.startswith("#")]
     col = rows[0].index(column)

@@ -144,7 +144,8 @@ def history_seeds() -> list[str]:
 
 
 JSON_NASTY = [None, "x", "", True, -1, 0, 1e300, -1e300, 1e-320, [], {}, [None], ["x"], [1.5],
-              "NaN", float("inf"), 1e30, 0.5, 2**70, "2026-13-40T99:00:00Z", "2026-11-22T10:00:00+05:00", "hffaf/../x"]
+              "NaN", float("inf"), 1e30, 0.5, 2**70, "2026-13-40T99:00:00Z",
+              "2026-11-22T10:00:00+05:00", "hffaf/../x"]
 
 
 def mutate_entry(r, text: str) -> str:

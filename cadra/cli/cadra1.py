@@ -7,9 +7,9 @@
   file load and validate, and every station image exists, is readable and has the size and bit
   depth its view declares. One line per problem; nothing is written.
 
-``-q`` prints no progress bar, only the result line, warnings and errors (stderr); ``-v`` adds each station's
-measurement with its sigmas and every missing image of ``--check``; ``--version`` prints the
-version (docs/cli.md).
+``-q`` prints no progress bar, only the result line, warnings and errors (stderr); ``-v``
+adds each station's measurement with its sigmas and every missing image of ``--check``;
+``--version`` prints the version (docs/cli.md).
 
 Exit status: 0 all stations measured, 1 some station failed (the others are still measured
 and written), 2 the shot could not be processed at all (bad shot or facility file, a model
@@ -24,8 +24,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cadra.cli._format import HelpFormatter, add_verbosity, add_version, console_main, pm
+from cadra.cli._format import HelpFormatter, add_verbosity, add_version, console_main
 from cadra.io.shot_check import check_shot
+from cadra.numfmt import pm
 
 #: ``--check`` lists this many missing images (``-v``: all of them)
 MISSING_SHOWN = 3
