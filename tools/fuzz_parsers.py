@@ -345,11 +345,21 @@ def load_trajectory_text(text: str | bytes, folder: Path):
 
 
 def load_shot_text(text: str | bytes, folder: Path):
+    """Load a shot file, then check its model's size against its facility as cadra1 and
+    cadra2 do at load time (a facility that does not load is another parser's concern)."""
+    from cadra.io.facility_file import FacilityFileError, load_facility
+    from cadra.io.shot_check import check_model_size
     from cadra.io.shotfile import load_shot
 
     p = folder / "shot.toml"
     p.write_bytes(text if isinstance(text, bytes) else text.encode("utf-8", "surrogatepass"))
-    return load_shot(p)
+    shot = load_shot(p)
+    try:
+        facility = load_facility(shot.facility)
+    except (FacilityFileError, OSError):
+        return shot
+    check_model_size(shot, facility)
+    return shot
 
 
 def _write(folder: Path, name: str, text: str | bytes) -> Path:
