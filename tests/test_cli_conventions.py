@@ -337,3 +337,19 @@ def test_closed_stdout_is_quiet():
     p.stderr.close()
     assert p.wait() == 141
     assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+def test_calibrate_warnings_survive_quiet(tmp_path, capsys):
+    """A calibration warning (one sphere shot: timing biases not estimated) was printed on
+    stdout and hidden by -q; now stderr, with -q, and stdout keeps the one status line."""
+    from test_bad_inputs_plausible import _trajectory
+
+    traj = _trajectory(tmp_path / "stage1")
+    assert cadra2.main(["calibrate", str(traj), "--stations-root", str(tmp_path), "-o",
+                        str(tmp_path / "out"), "-q"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err.startswith("cadra2 calibrate: warning: timing biases not estimated: the "
+                              "shots' speeds differ by 0 %")
+    assert cap.out.splitlines() == [
+        f"recorded in {tmp_path / 'stations' / 'hffaf' / 'bias_history.jsonl'} as entry 1 "
+        "(compared with the 0 before it)"]
