@@ -139,3 +139,28 @@ def test_parallel_equals_serial(m2_shot):
     a = measure_shot(m2_shot / "shot.toml", None, workers=1, progress=False, overlays=False)
     b = measure_shot(m2_shot / "shot.toml", None, workers=2, progress=False, overlays=False)
     pd.testing.assert_frame_equal(a.trajectory, b.trajectory)
+
+
+def test_truth_comparison_in_the_report(m2_shot, tmp_path):
+    """With a truth table the outputs give measured minus truth per station and channel, equal
+    to the difference of the two files (issue 18)."""
+    out = tmp_path / "out"
+    truth = pd.read_csv(m2_shot / "truth.csv")
+    measure_shot(m2_shot / "shot.toml", out, workers=1, progress=False, overlays=False,
+                 truth=truth)
+    cmp = pd.read_csv(out / "truth_comparison.csv")
+    traj = load_trajectory(out / "trajectory.csv").table
+    t = traj.merge(truth, on="station", suffixes=("", "_true"))
+    assert cmp["station"].tolist() == t["station"].tolist() == [1, 2, 3]
+    for c in ("x_m", "z_m", "theta_deg"):
+        name = c.split("_")[0]
+        err = (t[c] - t[f"{c}_true"]).to_numpy()
+        # trajectory.csv carries 10 significant digits: 1e-9 m at x = 15 m, 1e-8 deg
+        tol = 2e-9 if c.endswith("_m") else 2e-8
+        np.testing.assert_allclose(cmp[f"{name}_error_{c.split('_')[1]}"], err, rtol=0,
+                                   atol=tol)
+        np.testing.assert_allclose(cmp[f"{name}_error_sigma"], err / t[f"sigma_{c}"],
+                                   rtol=0, atol=tol / t[f"sigma_{c}"].min())
+        assert (np.abs(cmp[f"{name}_error_sigma"]) < 6).all()
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert "## Measured minus truth" in report and "| theta | 3 |" in report

@@ -60,7 +60,9 @@ def _main(argv: list[str] | None) -> int:
                         help="replace an existing output directory (atomically, at the end)")
     parser.add_argument("--truth", default=None,
                         help="optional truth table (CSV with x_m, y_m, z_m, theta_deg, "
-                             "psi_deg) drawn on the trajectory plot")
+                             "psi_deg, e.g. a synthetic shot's truth.csv): drawn on the "
+                             "trajectory plot and, with a station column, compared station "
+                             "by station (report.md, truth_comparison.csv)")
     add_verbosity(parser)
     args = parser.parse_args(argv)
     if args.check:

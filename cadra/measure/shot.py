@@ -240,10 +240,23 @@ def _write_outputs(out_dir: Path, table, quality, results, meta, shot, truth, ov
                 if v.overlay_png:
                     (tmp / "overlays" / f"st{r.station:02d}_{name}.png").write_bytes(
                         v.overlay_png)
-        (tmp / "report.md").write_text(_report(table, quality, meta), encoding="utf-8")
+        truth_lines = []
+        if truth is not None:
+            from cadra.measure.truth_compare import compare_with_truth, comparison_markdown
+
+            try:
+                cmp = compare_with_truth(table, truth)
+            except ValueError as exc:
+                truth_lines = ["## Measured minus truth", "", f"Not compared: {exc}.", ""]
+            else:
+                cmp.per_station.to_csv(tmp / "truth_comparison.csv", index=False,
+                                       float_format="%.8g")
+                truth_lines = comparison_markdown(cmp)
+        (tmp / "report.md").write_text(_report(table, quality, meta, truth_lines),
+                                       encoding="utf-8")
 
 
-def _report(table, quality, meta) -> str:
+def _report(table, quality, meta, truth_lines=()) -> str:
     n = len(table)
     failed = table[table["status"] == "failed"]
     warned = table[table["status"] == "warning"]
@@ -268,6 +281,7 @@ def _report(table, quality, meta) -> str:
                   f"- median edge-offset rms: {np.nanmedian(ok['edge_offset_rms_px']):.4f} px",
                   f"- largest |x_top - x_side| / sigma: "
                   f"{np.max(np.abs(xc)):.2f}", ""]
+    lines += list(truth_lines)
     lines += ["Files: trajectory.csv (docs/stage1.md), quality.csv, trajectory.png, "
-              "overlays/.", ""]
+              "overlays/" + (", truth_comparison.csv" if truth_lines else "") + ".", ""]
     return "\n".join(lines)
