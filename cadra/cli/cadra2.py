@@ -131,7 +131,7 @@ def _input_paths(args) -> list[Path]:
             paths += [shot.image_path(rec.station, view)
                       for rec in shot.stations for view in rec.images]
             facility(shot.facility)
-    for name in ("model", "bias_table"):
+    for name in ("model", "bias_table", "reference"):
         value = getattr(args, name, None)
         if value and Path(value).exists():
             paths.append(Path(value))
@@ -216,6 +216,11 @@ def _fit(args) -> int:
             shots, note = correct_by_bias_table(shots, args.bias_table, args.stations_root)
             notes.append(note)
         options = FitOptions(max_iterations=args.max_iterations, progress=not _quiet(args))
+        reference = None
+        if args.reference:
+            from cadra.fitting.reference import load_reference
+
+            reference = load_reference(args.reference)   # before the fit: fail early
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start)
     except _REFUSED as exc:
@@ -226,7 +231,7 @@ def _fit(args) -> int:
                                             "by cadra2 fit"),
              "config.toml": toml_text(config, "cadra2 fit: the command's settings")}
     write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
-                      start_model=start, extra_files=extra, notes=notes)
+                      start_model=start, extra_files=extra, notes=notes, reference=reference)
     _print_summary(result, args)
     _say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
     return 0 if result.converged else 1
@@ -575,6 +580,11 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--stations-root", default=None, metavar="DIR",
                      help="directory holding stations/<facility>/ (default: $CADRA_STATIONS_ROOT"
                           ", else the repository holding facilities/; as for calibrate)")
+    fit.add_argument("--reference", default=None, metavar="MODEL|FIT_DIR",
+                     help="compare with a reference: a model (bundled name or file: values "
+                          "only) or an earlier cadra2 fit's output folder (values, sigmas and "
+                          "covariance); adds a pulls table and a joint chi^2 to the report and "
+                          "draws it on the coefficient plots (default: none)")
     single = _subcommand(
         sub, "single", _single,
         "single fits with linear forms and quasi-linear trends (seed 004 steps 1-2)",

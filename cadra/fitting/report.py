@@ -322,7 +322,7 @@ def phases_note(result: FitResult) -> list[str]:
 def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
                     start_model: AeroModel | None = None, title: str | None = None,
                     plot_files: Mapping[str, str] | None = None,
-                    notes: Sequence[str] = ()) -> str:
+                    notes: Sequence[str] = (), reference_lines: Sequence[str] = ()) -> str:
     """The one-page fit report (Markdown), lmfit's fit report in a range engineer's units.
 
     Sections: status; fit statistics; free parameters (value ± sigma (%), coloured and
@@ -475,8 +475,10 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
         L.append("")
         for key, rel in plot_files.items():
             L += [f"![{captions.get(key, key)}]({rel})", ""]
+    L += list(reference_lines)
     L += ["Files: results.json, coefficients.csv, covariance.csv, correlation.csv, "
-          "correlation_coloured.csv, residuals.csv (angles in deg, `unit` column).", ""]
+          "correlation_coloured.csv, residuals.csv (angles in deg, `unit` column)"
+          + (", reference_pulls.csv" if reference_lines else "") + ".", ""]
     return "\n".join(L)
 
 
@@ -492,6 +494,7 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
                       *, overwrite: bool = False, plots: bool = True, title: str | None = None,
                       start_model: AeroModel | None = None, bodies: Mapping | None = None,
                       reference_model: AeroModel | None = None,
+                      reference=None,
                       extra_files: Mapping[str, str] | None = None,
                       notes: Sequence[str] = ()) -> Path:
     """Write a fit's files, report and plots to ``out_dir`` (module doc), atomically.
@@ -510,6 +513,10 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
         ``shot.source["shot_file"]``, else a generic body of the shot's kind).
     reference_model : optional model drawn beside the fitted coefficients (e.g. the truth of
         a synthetic shot).
+    reference : optional :class:`cadra.fitting.reference.Reference` (``cadra2 fit
+        --reference``): a pulls table and joint chi^2 against it in the report,
+        ``reference_pulls.csv``, a ``reference`` block in results.json, and its model drawn
+        on the coefficient plots (unless ``reference_model`` is given).
     extra_files : ``{file name: text}`` written in the same atomic step (the CLI's fitted
         model file and run configuration).
     notes : lines the report lists under its warnings (e.g. the station bias table applied).
@@ -526,8 +533,26 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
     missing = [sf.shot_id for sf in result.shots if sf.shot_id not in _shots_by_id(shots)]
     if missing:
         raise ValueError(f"write_fit_outputs: no ShotData for shot(s) {missing}")
+    cmp = None
+    if reference is not None:
+        from cadra.fitting.reference import compare_with_reference
+
+        na = len(result.aero_names)
+        cmp = compare_with_reference(result.aero_names, result.aero_values,
+                                     result.covariance[:na, :na], reference)
+        if reference_model is None:
+            reference_model = reference.model
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
         data = results_dict(result, shots, start_model=start_model, title=title)
+        reference_lines: list[str] = []
+        if cmp is not None:
+            from cadra.fitting.reference import reference_markdown
+
+            cmp.table.to_csv(tmp / "reference_pulls.csv", index=False, float_format="%.10g")
+            data["reference"] = _plain({"label": cmp.label, "chi2": cmp.chi2, "dof": cmp.dof,
+                                        "p": cmp.p, "not_compared": list(cmp.not_compared),
+                                        "pulls": cmp.table.to_dict(orient="records")})
+            reference_lines = reference_markdown(cmp)
         (tmp / "results.json").write_text(json.dumps(data, indent=2, allow_nan=False) + "\n",
                                           encoding="utf-8")
         result.coefficient_table().to_csv(tmp / "coefficients.csv", index=False)
@@ -546,7 +571,8 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
             notes += plot_notes
         (tmp / "report.md").write_text(
             report_markdown(result, shots, start_model=start_model, title=title,
-                            plot_files=plot_files, notes=notes), encoding="utf-8")
+                            plot_files=plot_files, notes=notes,
+                            reference_lines=reference_lines), encoding="utf-8")
     return out_dir
 
 
