@@ -222,7 +222,10 @@ def _fit(args) -> int:
 
             reference = load_reference(args.reference)   # before the fit: fail early
         result, start = fit_shots(shots, model, options=options,
-                                  auto_start=not args.no_auto_start)
+                                  auto_start=not args.no_auto_start,
+                                  variance_components=args.variance_components)
+        if result.options.get("variance_components") and result.problem is not None:
+            shots = list(result.problem.shots)   # the rescaled sigmas the fit used
     except _REFUSED as exc:
         return _refused("fit", exc)
     config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
@@ -533,6 +536,11 @@ def _print_summary(result, args) -> None:
         warn("cadra2 fit", w)
     if _quiet(args):
         return
+    vc = result.options.get("variance_components")
+    if vc:
+        print("variance components: sigma scale " + ", ".join(
+            f"{ch} ×{v:.3f}" for ch, v in vc["sigma_scale"].items())
+            + f" (chi^2/nu with stage one's sigmas {vc['reduced_chi2_before']:.3f})")
     verbose = _verbose(args)
     head = f"{'parameter':12s} {'value ± sigma':>24s}"
     print(head + (f" {'sigma coloured':>15s} {'sigma scaled':>13s}" if verbose else ""))
@@ -580,6 +588,12 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--stations-root", default=None, metavar="DIR",
                      help="directory holding stations/<facility>/ (default: $CADRA_STATIONS_ROOT"
                           ", else the repository holding facilities/; as for calibrate)")
+    fit.add_argument("--variance-components", action="store_true",
+                     help="after convergence, rescale each channel's sigmas (x, y, z, theta, "
+                          "psi) by the factor its residuals ask for and refit: coefficient "
+                          "sigmas that carry the noise the data show when stage one's sigmas "
+                          "are off (the factors are reported; default: stage one's sigmas "
+                          "as they are)")
     fit.add_argument("--reference", default=None, metavar="MODEL|FIT_DIR",
                      help="compare with a reference: a model (bundled name or file: values "
                           "only) or an earlier cadra2 fit's output folder (values, sigmas and "

@@ -41,7 +41,8 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
               options: FitOptions | None = None, auto_start: bool = True,
               initial: Sequence | None = None,
               continuation: dict | None = FILM_SIGMAS, local_free=None,
-              extras: Sequence = ()) -> tuple[FitResult, AeroModel]:
+              extras: Sequence = (),
+              variance_components: bool = False) -> tuple[FitResult, AeroModel]:
     """Fit ``model`` to ``shots`` from automatic starting values.
 
     With ``auto_start`` the free parameters first move to the linear-theory targets
@@ -58,8 +59,27 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
     ``local_free`` and ``extras`` are passed to :func:`cadra.fitting.solver.fit` (each
     stage; the second starts the extras at the first's values).
 
+    ``variance_components``: after convergence, rescale each channel's sigmas by the factor
+    its own residuals ask for and refit (:func:`cadra.fitting.variance.fit_variance_components`;
+    the factors are in ``result.options["variance_components"]``, the rescaled shots in
+    ``result.problem.shots``).
+
     Returns the result and the starting model (for the report's "initial value" column).
     """
+    result, start = _fit_shots(shots, model, options=options, auto_start=auto_start,
+                               initial=initial, continuation=continuation,
+                               local_free=local_free, extras=extras)
+    if variance_components and result.converged:
+        from cadra.fitting.variance import fit_variance_components
+
+        result, _ = fit_variance_components(list(shots), result, options or FitOptions(),
+                                            local_free=local_free)
+    return result, start
+
+
+def _fit_shots(shots, model, *, options, auto_start, initial, continuation, local_free,
+               extras):
+    """:func:`fit_shots` without the variance components."""
     options = options or FitOptions()
     shots = list(shots)
     staged = continuation is not None and any(

@@ -350,6 +350,21 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
           f"| iterations | {result.iterations} |",
           f"| elapsed | {result.elapsed_s:.2f} s |", ""]
     L += phases_note(result)
+    vc = result.options.get("variance_components")
+    if vc:
+        from cadra.numfmt import pm
+
+        L += ["### Variance components (`--variance-components`)", "",
+              f"Each channel's sigmas were rescaled by the factor its own residuals ask for "
+              f"({vc['rounds']} refit round(s)); χ²/ν with stage one's own sigmas was "
+              f"{vc['reduced_chi2_before']:.4g}. The sigmas above include the rescaling; a "
+              "scale far from 1 is a finding about the stage-one sigmas (docs/fitting.md).", "",
+              "| channel | sigma scale | variance factor | degrees of freedom |",
+              "|---|---|---|---|"]
+        for ch, f in vc["factors"].items():
+            L.append(f"| {ch} | ×{vc['sigma_scale'][ch]:.3f} | "
+                     f"{pm(f, vc['factor_sigma'][ch])} | {vc['dof'][ch]:.1f} |")
+        L.append("")
     if math.isfinite(result.reduced_chi2) and result.reduced_chi2 > 2.0:
         L += [f"Reduced χ² = {result.reduced_chi2:.3g} > 2: the sigmas or the model do not "
               "describe the data; use the scaled or coloured sigmas.", ""]
