@@ -592,8 +592,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="after convergence, rescale each channel's sigmas (x, y, z, theta, "
                           "psi) by the factor its residuals ask for and refit: coefficient "
                           "sigmas that carry the noise the data show when stage one's sigmas "
-                          "are off (the factors are reported; default: stage one's sigmas "
-                          "as they are)")
+                          "are off; the factors are reported (default: off, stage one's "
+                          "sigmas as they are)")
     fit.add_argument("--reference", default=None, metavar="MODEL|FIT_DIR",
                      help="compare with a reference: a model (bundled name or file: values "
                           "only) or an earlier cadra2 fit's output folder (values, sigmas and "

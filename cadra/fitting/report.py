@@ -352,8 +352,6 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     L += phases_note(result)
     vc = result.options.get("variance_components")
     if vc:
-        from cadra.numfmt import pm
-
         L += ["### Variance components (`--variance-components`)", "",
               f"Each channel's sigmas were rescaled by the factor its own residuals ask for "
               f"({vc['rounds']} refit round(s)); χ²/ν with stage one's own sigmas was "
