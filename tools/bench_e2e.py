@@ -23,7 +23,7 @@ the stations per shot, over the within-shot variance: 1 for independent errors).
 
 Usage::
 
-    python tools/bench_e2e.py                    # 20 realisations per set (~23 min, 2 cores; 40: 45 min)
+    python tools/bench_e2e.py                    # 20 realisations a set (23 min; 40: 45 min)
     python tools/bench_e2e.py --realisations 3   # a smoke run
 
 The last printed line is a JSON object (e2e_pull_std_min/max, e2e_pull_abs_mean_max,
