@@ -73,6 +73,9 @@ class FitSettings:
     tol_px: float = 2e-4            # stop when the pose moves less than this (px at the rim)
     outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
     hac_lags: int = 3               # Newey-West lags over contour-ordered segments
+    #: "scaled": the formal covariance times the segment fit's reduced chi^2 (default);
+    #: "sandwich": Newey-West over the contour-ordered segments (the pre-issue-18 sigma)
+    covariance: str = "scaled"
     fit_curvature_bias: bool = True
     fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
@@ -80,6 +83,9 @@ class FitSettings:
     dark_level: str = "tied"        # "tied": D = r L + c image-wide; "segment": D per segment
 
     def __post_init__(self):
+        if self.covariance not in ("scaled", "sandwich"):
+            raise ValueError(f"FitSettings.covariance: expected 'scaled' or 'sandwich', got "
+                             f"{self.covariance!r}")
         if self.dark_level not in ("tied", "segment"):
             raise ValueError(f"FitSettings.dark_level: expected 'tied' or 'segment', got "
                              f"{self.dark_level!r}")
@@ -214,13 +220,18 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         npar = X.shape[1]
         if keep.sum() < npar + 5:
             return _failed("too few consistent edge segments", pose, outside)
-        # covariance: Newey-West sandwich on the kept, contour-ordered segments
+        # covariance on the kept segments (docs/stage1.md, "Sigma"): the formal one scaled by
+        # the offsets' reduced chi^2 (their variance runs ~1.5x the formal one: the grain's
+        # correlation within a segment), or the Newey-West sandwich
         Xw = X[keep] * np.sqrt(wts[keep])[:, None]
         ew = (y[keep] - X[keep] @ beta) * np.sqrt(wts[keep])
         bread = np.linalg.pinv(Xw.T @ Xw)
-        meat = _newey_west(Xw, ew, settings.hac_lags)
         n_k = int(keep.sum())
-        cov_b = bread @ meat @ bread * n_k / max(n_k - npar, 1)
+        if settings.covariance == "scaled":
+            cov_b = bread * float(ew @ ew) / max(n_k - npar, 1)
+        else:
+            meat = _newey_west(Xw, ew, settings.hac_lags)
+            cov_b = bread @ meat @ bread * n_k / max(n_k - npar, 1)
         dpose = np.zeros(3)
         dpose[0], dpose[1] = beta[0], beta[1]
         if fit_phi:
