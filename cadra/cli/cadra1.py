@@ -98,7 +98,8 @@ def _main(argv: list[str] | None) -> int:
             print(f"cadra1: station {r.station}: warning: {r.warnings}", file=sys.stderr)
     print(f"cadra1: {len(t) - n_fail}/{len(t)} stations measured ({n_warn} with warnings) "
           f"in {res.seconds:.1f} s; wrote {out}/trajectory.csv, quality.csv, trajectory.png, "
-          f"overlays/, report.md")
+          f"overlays/, report.md"
+          + (", truth_comparison.csv" if (out / "truth_comparison.csv").is_file() else ""))
     return 1 if n_fail else 0
 
 
