@@ -49,26 +49,12 @@ def tree_hash(root: Path) -> str:
 
 
 def _trajectory(sim, shot_file: Path, out_dir: Path, rng) -> Path:
-    """A stage-one folder for ``sim``: its exact truth plus seeded noise (as
-    tests/test_cadra2_cli.py makes them: no images needed, and the fit converges)."""
-    import pandas as pd
+    """A stage-one folder for ``sim``: its exact truth plus seeded noise, written by
+    tests/test_cadra2_cli.py's helper (no images needed, and the fit converges)."""
+    from test_cadra2_cli import _trajectory as trajectory_file
 
-    from cadra.io.trajectory import COLUMNS, write_trajectory
-
-    t, sp, sa = sim.truth, 1e-4, 0.1
-    n = len(t)
-    table = pd.DataFrame({
-        "station": t["station"].to_numpy(), "t_s": t["t_s"].to_numpy(), "status": "ok",
-        "x_m": t["x_m"] + rng.normal(0, sp, n), "y_m": t["y_m"] + rng.normal(0, sp, n),
-        "z_m": t["z_m"] + rng.normal(0, sp, n),
-        "theta_deg": t["theta_deg"] + rng.normal(0, sa, n),
-        "psi_deg": t["psi_deg"] + rng.normal(0, sa, n),
-        "sigma_x_m": sp, "sigma_y_m": sp, "sigma_z_m": sp, "sigma_theta_deg": sa,
-        "sigma_psi_deg": sa, "x_top_minus_side_m": 0.0, "x_consistency": 0.0,
-        "reason": "", "warnings": ""})
     out_dir.mkdir()
-    write_trajectory(out_dir / "trajectory.csv", table.loc[:, list(COLUMNS)],
-                     {"shot_id": sim.spec.shot_id, "shot_file": str(shot_file.resolve())})
+    trajectory_file(sim, shot_file, out_dir / "trajectory.csv", rng)
     return out_dir
 
 
