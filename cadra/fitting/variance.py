@@ -81,7 +81,7 @@ def fit_variance_components(shots, result: FitResult, options, *, local_free=Non
     - ``factors``: the cumulative variance factor per channel;
     - ``sigma_scale``: its square root;
     - ``factor_sigma``: the factor's 1-sigma, ``f * sqrt(2 / dof_c)``;
-    - ``rounds``;
+    - ``rounds``: the refits taken;
     - ``reduced_chi2_before``: the fit's chi^2/nu with stage one's own sigmas.
     """
     from cadra.fitting.solver import fit
@@ -90,12 +90,11 @@ def fit_variance_components(shots, result: FitResult, options, *, local_free=Non
     dof_last = {}
     before = result.reduced_chi2
     current, scaled = result, list(shots)
-    rounds = 0
-    for rounds in range(1, max_rounds + 1):  # noqa: B007 (reported)
+    rounds = 0                       # refits taken (a refit that fails to converge is not)
+    for _ in range(max_rounds):
         factors = channel_variance_factors(current)
         dof_last = {ch: d for ch, (_, d) in factors.items()}
         if all(abs(f - 1.0) <= TOLERANCE for f, _ in factors.values()):
-            rounds -= 1
             break
         trial = {ch: cumulative[ch] * f for ch, (f, _) in factors.items()}
         trial_shots = rescale_channels(shots, trial)
@@ -105,6 +104,7 @@ def fit_variance_components(shots, result: FitResult, options, *, local_free=Non
             break
         cumulative.update(trial)
         current, scaled = refit, trial_shots
+        rounds += 1
     info = {"factors": {ch: cumulative[ch] for ch in dof_last},
             "sigma_scale": {ch: math.sqrt(cumulative[ch]) for ch in dof_last},
             "factor_sigma": {ch: cumulative[ch] * math.sqrt(2.0 / dof_last[ch])
