@@ -34,6 +34,7 @@ seconds_per_realisation, and per-set details).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import multiprocessing
@@ -100,25 +101,33 @@ def measure_one(job):
     return set_name, r, name, e2e, control, errors, time.perf_counter() - t0
 
 
+@functools.cache
+def truth_model(set_name: str):
+    """The set's truth aero model (its first shot's spec; every shot of a set shares it),
+    once per process."""
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
+
+    spec = load_shot_spec(ROOT / "sample_shots" / "specs" / f"{SETS[set_name][0]}.toml")
+    return simulate_shot(spec).model
+
+
 def fit_one(job):
     """Worker: the zero-start multi-fit of one realisation's set (e2e or control)."""
     from cadra.fitting import fit_shots
     from cadra.fitting.sensitivity import Integration
     from cadra.fitting.solver import FitOptions
-    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     set_name, r, kind, shots = job
     vc = kind == "e2e_vc"
-    spec = load_shot_spec(ROOT / "sample_shots" / "specs" / f"{SETS[set_name][0]}.toml")
-    truth_model = simulate_shot(spec).model
-    zero = truth_model.with_values({n: 0.0 for n in truth_model.free_names()})
+    truth = truth_model(set_name)
+    zero = truth.with_values({n: 0.0 for n in truth.free_names()})
     t0 = time.perf_counter()
     res, _ = fit_shots(shots, zero, options=FitOptions(integration=Integration(threads=1)),
                        variance_components=vc)
     scales = res.options.get("variance_components", {}).get("sigma_scale", {})
-    truth = np.array([truth_model.parameter(n).value for n in res.aero_names])
+    values = np.array([truth.parameter(n).value for n in res.aero_names])
     return dict(set=set_name, r=r, kind=kind, names=res.aero_names,
-                pulls=(np.asarray(res.aero_values) - truth) / np.asarray(res.aero_sigma),
+                pulls=(np.asarray(res.aero_values) - values) / np.asarray(res.aero_sigma),
                 chi2=res.chi2, dof=res.dof, status=res.status, iterations=res.iterations,
                 sigma_scale=scales,
                 chi2_before=res.options.get("variance_components", {}).get(
@@ -218,6 +227,8 @@ def main(argv=None) -> int:
         if args.variance_components:
             fit_jobs.append((s, r, "e2e_vc", [e for e, _ in ordered]))
     fits: dict = {}
+    for s in args.sets:          # once, in the parent: forked workers inherit it
+        truth_model(s)
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx) as ex:
         futures = [ex.submit(fit_one, j) for j in fit_jobs]
         for f in tqdm(as_completed(futures), total=len(futures),
