@@ -63,6 +63,21 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from gap_cases import (  # noqa: E402
+    AERO_CASES,
+    BODY_CASES,
+    BODY_PAIRS,
+    LATERAL_OFFSET_M,
+    M1_CASES,
+    M1_SHOTS,
+    MAX_REDRAWS,
+    OFFSET_CASES,
+    ROOT,
+    SET_CASES,
+    SHOTS,
+    make_case,
+    measure,
+)
 from gap_scoring import (  # noqa: E402  (a sibling module of this script)
     SHRINK_LIMIT,
     body_truth_in_fit_frame,
@@ -76,189 +91,6 @@ from gap_scoring import (  # noqa: E402  (a sibling module of this script)
     pooled_shrink,
     size_within_2sigma,
 )
-
-ROOT = Path(__file__).resolve().parents[1]
-SHOTS = ["m2_2425", "m2_2426", "m2_2427", "m2_2428", "m2_2429", "m2_2431", "m2_2433"]
-#: cases run on the symmetric M1 M1.10 shots (total-angle model): with an alpha-beta model's
-#: separate pitch and yaw stiffness (C_m, C_n) an Iyy - Izz split is absorbed entirely (one
-#: frequency each), and m2_m070 already has a Mach term (Cm_A3); m1_m110 has neither
-M1_SHOTS = ["m1_2366", "m1_2379", "m1_2380", "m1_2388", "m1_2393"]
-M1_CASES = ("inertia_asym", "cmM")
-#: facility effects validated on sets of shots through the same stations: a station's timing
-#: bias is the same as an x bias in one shot (v dt along x) and only separates across shots
-#: at different speeds (the three sphere shots, 450 / 800 / 1200 m/s: a sphere calibration
-#: set); a station's scale error is the same as a z (or y) bias in one shot when the model
-#: flies near the axis in the other direction, and separates across shots at different
-#: positions (three M2 shots)
-#: Two model effects are validated on sets of three M2 shots too, since one shot's fitted
-#: coefficients absorb them (at chi^2/dof ~ 1 the effect "matters" only by moving a
-#: coefficient, and no residual test of that shot can see it): a product of inertia (in a
-#: shot that does not spin its signature is mostly in the roll, which the data barely see;
-#: a body effect does not repeat, so in one shot of a set it contradicts the shared aero),
-#: and a missing cubic C_m term (at one amplitude it is a change of the linear slope; a
-#: set sees it at several). Single shots: 13 of 40 such trials ended "no significant
-#: effect" at chi^2/dof 0.9-1.4 (session 7).
-SET_CASES = {"timing": ["sphere_1", "sphere_2", "sphere_3"], "scale": 3, "station_bias": 3,
-             "products": 3, "cm3": 3}
-#: the seven M2 sample shots fly nearly the same path (y ~ 0, z within 10 % of each other at
-#: any station), so a station's z bias and its scale error stay aliased even across them:
-#: in the scale and station-bias sets each shot is launched at its own lateral offset, drawn
-#: uniformly within +-LATERAL_OFFSET_M in y and z (the dynamics do not depend on y and z, so
-#: that is the same path translated; a calibration campaign would vary the launch this way)
-OFFSET_CASES = ("scale", "station_bias")
-#: body effects (per shot) and aero terms (every shot of a set)
-BODY_CASES = ("cg", "inertia_asym", "products")
-AERO_CASES = ("cm3", "cmq2", "cmM")
-LATERAL_OFFSET_M = 0.02
-#: body asymmetries are fitted in the fit's body frame, whose roll about the axis of a body
-#: of revolution is not the simulator's (the model carries no roll mark, so the fit's roll is
-#: wherever its start and its iterations left it; docs/gap.md): each pair's size is its
-#: magnitude across the axis (``magnitude_within_2sigma``); as a vector it is compared with
-#: the truth turned into the fit's frame (``body_truth_in_fit_frame``)
-BODY_PAIRS = {"inertia_asym": [("Iyy_minus_Izz_kg_m2", "Iyz_kg_m2")],
-              "cg": [("cg_offset_y_m", "cg_offset_z_m")],
-              "products": [("Ixy_kg_m2", "Ixz_kg_m2")]}
-SP, SP_SPHERE, SA_DEG = 2.8e-7, 2.2e-7, 0.0012
-#: draws of an effect that does not matter redrawn at most this many times per trial
-MAX_REDRAWS = 5
-
-
-def _draw(rng, lo, hi):
-    return float(rng.uniform(lo, hi) * rng.choice([-1.0, 1.0]))
-
-
-def make_case(name, rng, specs, model_file_dir):
-    """(first spec with the effect, edit of the measurements or None, expected effect, truth
-    sizes by parameter name, injected station/channels for out-of-library). ``specs``: the
-    trial's shots (an aero term is scaled to their largest swing)."""
-    from cadra.aero import load_bundled_model, save_model
-    from cadra.dynamics.effects import Effects
-    from cadra.gap.candidates import aero_candidates, augmented_model
-
-    spec = specs[0]
-    I_yy = float(np.asarray(spec.inertia_model_kg_m2)[1][1])   # the shot's own, kg m^2
-    if name == "cg":
-        d = _draw(rng, 1e-4, 3e-4)
-        axis = int(rng.integers(2))
-        off = [0.0, 0.0, 0.0]
-        off[1 + axis] = d
-        return (replace(spec, effects=Effects(cg_offset_body_m=tuple(off))), None,
-                "lateral cg offset", {"cg_offset_y_m": off[1], "cg_offset_z_m": off[2]}, None)
-    if name == "inertia_asym":
-        # principal transverse moments differing by d, their axes at a random angle phi
-        # about the body axis: (Iyy - Izz, Iyz) = (d cos 2 phi, d/2 sin 2 phi)
-        d = _draw(rng, 5e-4, 2e-3) * I_yy
-        two_phi = float(rng.uniform(0.0, 2.0 * math.pi))
-        a, b = d * math.cos(two_phi), d / 2 * math.sin(two_phi)
-        dI = ((0, 0, 0), (0, a / 2, b), (0, b, -a / 2))
-        return (replace(spec, effects=Effects(inertia_delta_body_kg_m2=dI)), None,
-                "inertia asymmetry", {"Iyy_minus_Izz_kg_m2": a, "Iyz_kg_m2": b}, None)
-    if name == "products":
-        # one product coupling the roll with pitch or yaw (a product Iyz within the
-        # transverse plane is an inertia asymmetry with its axes at 45 deg: that case)
-        a = _draw(rng, 0.03, 0.08) * I_yy
-        k = int(rng.integers(2))
-        dI = np.zeros((3, 3))
-        dI[0, 1 + k] = dI[1 + k, 0] = a
-        truth = {"Ixy_kg_m2": 0.0, "Ixz_kg_m2": 0.0}
-        truth[("Ixy_kg_m2", "Ixz_kg_m2")[k]] = a
-        return (replace(spec, effects=Effects(inertia_delta_body_kg_m2=tuple(map(tuple, dI)))),
-                None, "products of inertia", truth, None)
-    if name == "density":
-        g = _draw(rng, 1e-3, 3e-3)
-        return (replace(spec, effects=Effects(density_gradient_per_m=g)), None,
-                "density gradient", {"drho_dx_over_rho_per_m": g}, None)
-    if name == "crossflow":
-        w = _draw(rng, 0.5, 1.5)
-        axis = int(rng.integers(2))
-        wind = [0.0, 0.0, 0.0]
-        wind[1 + axis] = w
-        return (replace(spec, effects=Effects(wind_facility_m_s=tuple(wind))), None,
-                "cross-flow", {"wind_y_m_s": wind[1], "wind_z_m_s": wind[2]}, None)
-    if name in ("cm3", "cmq2", "cmM"):
-        base = load_bundled_model("m1_m110" if name in M1_CASES else "m2_m070")
-        cands = {c.name: c for c in aero_candidates(base, 1.10 if name in M1_CASES else 0.70)}
-        cname, pname, lo, hi = {"cm3": ("higher-order Cm", "gap_Cm3", 0.07, 0.15),
-                                "cmq2": ("alpha-dependent Cmq", "gap_Cmq2", 30.0, 80.0),
-                                "cmM": ("Mach dependence of Cm", "gap_CmM", 0.05, 0.15)}[name]
-        v = _draw(rng, lo, hi)
-        if name == "cm3":
-            # scaled to the shot's own swing: at the largest |s| the cubic adds the fraction
-            # v of the linear term's moment (the shots' swings differ fivefold)
-            from cadra.synthetic.simulate import simulate_shot
-
-            a = np.concatenate([np.radians(simulate_shot(sp).truth["alpha_deg"].to_numpy())
-                                for sp in specs])
-            s_max = float(np.max(np.abs(np.sin(a) - np.sin(base.parameter("alpha_ref").value))))
-            v = v * abs(base.parameter("Cm_A1").value) / s_max**2
-        aug = augmented_model(base, cands[cname]).with_values({pname: v})
-        path = Path(model_file_dir) / f"{name}_{rng.integers(1 << 30)}.toml"
-        save_model(aug, path)
-        return (replace(spec, aero_model=str(path)), None, cname, {pname: v}, None)
-    if name == "station_bias":
-        st = int(rng.integers(1, 15))
-        c = int(rng.integers(1, 3))
-        b = _draw(rng, 2e-6, 5e-6)
-
-        def edit(m, st=st, c=c, b=b):
-            m[st, c] += b
-            return m
-        return (spec, edit, f"station {st + 1} {'xyz'[c]} bias",
-                {f"st{st + 1}_{'xyz'[c]}_m": b}, None)
-    if name == "timing":
-        st = int(rng.integers(1, 15))
-        dt = _draw(rng, 5e-8, 1.5e-7)
-        return spec, ("timing", st, dt), f"station {st + 1} timing bias", \
-            {f"st{st + 1}_dt_s": dt}, None
-    if name == "scale":
-        st = int(rng.integers(1, 15))
-        s = _draw(rng, 3e-4, 8e-4)
-        return spec, ("scale", st, s), f"station {st + 1} optical scale", \
-            {f"st{st + 1}_scale": s}, None
-    if name == "null":
-        return spec, None, None, {}, None
-    if name == "out_of_library":
-        sts = rng.choice(np.arange(1, 15), size=int(rng.integers(1, 3)), replace=False)
-        chans = [int(rng.integers(3, 5)) for _ in sts]
-        vals = [math.radians(_draw(rng, 0.01, 0.03)) for _ in sts]
-
-        def edit(m, sts=sts, chans=chans, vals=vals):
-            for st, c, v in zip(sts, chans, vals, strict=True):
-                m[st, c] += v
-            return m
-        where = {(int(st) + 1, ("theta", "psi")[c - 3]) for st, c in zip(sts, chans,
-                                                                         strict=True)}
-        return spec, edit, None, {}, where
-    raise ValueError(f"unknown case {name!r}")
-
-
-def _measure(sim, nominal, spec, seed, edit, offset=(0.0, 0.0)):
-    """Stage-one-like measurements of a simulated shot, with a measurement edit applied;
-    ``offset``: (y, z) m by which the whole path is translated (a lateral launch offset);
-    ``seed`` None: without noise."""
-    from cadra.fitting import shot_data_from_truth
-
-    sphere = sim.body.kind == "sphere"
-    truth = sim.truth.copy()
-    truth["y_m"] += offset[0]
-    truth["z_m"] += offset[1]
-    sd = shot_data_from_truth(truth, nominal, spec.shot_id, sim.body.kind,
-                              sigma_position_m=SP_SPHERE if sphere else SP,
-                              sigma_angle_rad=math.radians(SA_DEG),
-                              rng=None if seed is None else np.random.default_rng(seed))
-    if edit is None:
-        return sd
-    meas = sd.meas.copy()
-    if isinstance(edit, tuple):
-        kind, st, v = edit
-        if kind == "timing":      # the spark fired v after its recorded time
-            meas[st, :3] += truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()[st] * v
-        else:                     # scale about the station's optical centre (x_station, 0, 0)
-            c = np.array([truth["x_m"].iloc[st], 0.0, 0.0])
-            meas[st, :3] += v * (truth[["x_m", "y_m", "z_m"]].to_numpy()[st] - c)
-    else:
-        meas = edit(meas)
-    return replace(sd, meas=meas)
 
 
 def run_trial(case, rng, tmpdir, force=False):
@@ -300,9 +132,9 @@ def run_trial(case, rng, tmpdir, force=False):
         nominal = clean_sim.rigid.with_effects(Effects())
         offset = (tuple(rng.uniform(-LATERAL_OFFSET_M, LATERAL_OFFSET_M, 2))
                   if case in OFFSET_CASES else (0.0, 0.0))
-        shots.append(_measure(sim, nominal, spec, seed, edit, offset))
-        clean_shots.append(_measure(clean_sim, nominal, spec, seed, None, offset))
-        free = _measure(clean_sim, nominal, spec, None, None, offset)
+        shots.append(measure(sim, nominal, spec, seed, edit, offset))
+        clean_shots.append(measure(clean_sim, nominal, spec, seed, None, offset))
+        free = measure(clean_sim, nominal, spec, None, None, offset)
         e = (clean_shots[-1].meas - free.meas) / free.sigma
         noise.update({(spec.shot_id, int(st), ch): float(e[i, j])
                       for i, st in enumerate(free.stations) for j, ch in enumerate(CHANNELS)})
@@ -402,7 +234,7 @@ def multifit_timing(seed: int = 0) -> dict:
         def edit(m):
             m[8, 2] += 2e-6               # station 9
             return m
-        shots.append(_measure(sim, sim.rigid.with_effects(Effects()), spec, seed + k, edit))
+        shots.append(measure(sim, sim.rigid.with_effects(Effects()), spec, seed + k, edit))
         model = sim.model
     t0 = time.perf_counter()
     res, _ = fit_shots(shots, model)
