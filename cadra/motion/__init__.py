@@ -8,10 +8,35 @@ dataclasses out; no file I/O. May import only the numerical core (numpy, scipy,
 cadra.conventions, cadra.units, cadra.numfmt).
 """
 
+from cadra.motion.coefficients import (
+    CgSeriesFit,
+    FlightConditions,
+    LinearCoefficients,
+    MomentDerivatives,
+    SwerveFit,
+    fit_cg_series,
+    lift_from_swerve,
+    linear_coefficients,
+    pitch_coefficients,
+    transfer_cg,
+)
 from cadra.motion.epicyclic import Arm, EpicyclicFit, Layout, MotionFitError, fit_epicyclic
+from cadra.motion.kb import KBResult, kb_pitch_reduction, kb_reduction
+from cadra.motion.nonplanar import (
+    CubicCorrelator,
+    NonplanarRatio,
+    cubic_correlator,
+    nonplanar_ratio,
+)
 from cadra.motion.nonrolling import fixed_plane_angles, nonrolling_angle, nonrolling_rate
+from cadra.motion.pitch import PitchFit, fit_pitch
+from cadra.motion.sectional import Sections, sectional_epicyclic, sectional_pitch
 
 __all__ = [
-    "Arm", "EpicyclicFit", "Layout", "MotionFitError", "fit_epicyclic",
-    "fixed_plane_angles", "nonrolling_angle", "nonrolling_rate",
+    "Arm", "CgSeriesFit", "CubicCorrelator", "EpicyclicFit", "FlightConditions", "KBResult",
+    "Layout", "LinearCoefficients", "MomentDerivatives", "MotionFitError", "NonplanarRatio",
+    "PitchFit", "Sections", "SwerveFit", "cubic_correlator", "fit_cg_series", "fit_epicyclic",
+    "fit_pitch", "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
+    "linear_coefficients", "nonplanar_ratio", "nonrolling_angle", "nonrolling_rate",
+    "pitch_coefficients", "sectional_epicyclic", "sectional_pitch", "transfer_cg",
 ]

@@ -203,7 +203,8 @@ class EpicyclicFit:
             return 0.0, float(np.sqrt(C[0, 0])), 0.0, float("inf")
         gK = np.array([re, im]) / K
         gp = np.array([-im, re]) / K**2
-        return K, float(np.sqrt(gK @ C @ gK)), float(np.arctan2(im, re)), float(np.sqrt(gp @ C @ gp))
+        ph = float(np.arctan2(im, re))
+        return K, float(np.sqrt(gK @ C @ gK)), ph, float(np.sqrt(gp @ C @ gp))
 
 
 def _start(layout: Layout, s: np.ndarray, xi: np.ndarray, s_ref: float,
@@ -252,6 +253,11 @@ def _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable):
     if res.status <= 0 or not np.all(np.isfinite(res.x)):
         raise MotionFitError(f"epicyclic fit did not converge: {res.message}")
     J = res.jac
+    xs = res.x
+    if layout.arms == 2 and xs[layout.per_arm + 3] > xs[3]:   # arm 1: the larger ω
+        m = layout.per_arm
+        perm = np.r_[np.arange(m, 2 * m), np.arange(m), np.arange(2 * m, xs.size)]
+        xs, J = xs[perm], J[:, perm]
     dof = 2 * n - x0.size
     chi2 = float(res.fun @ res.fun)
     chi2_dof = chi2 / dof if dof > 0 else float("nan")
@@ -261,8 +267,8 @@ def _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable):
     sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sig, sig)
-    d = model(layout, res.x, u, p) - xi
-    return dict(values=res.x, sigmas=sig, covariance=cov, correlation=corr, s_ref=s_ref,
+    d = model(layout, xs, u, p) - xi
+    return dict(values=xs, sigmas=sig, covariance=cov, correlation=corr, s_ref=s_ref,
                 trim_rate=p, variable=variable, chi2=chi2, dof=dof, chi2_dof=chi2_dof,
                 covariance_scaled=bool(scale_covariance), rms=float(np.sqrt(np.mean(np.abs(d)**2))),
                 rms_alpha=float(np.sqrt(np.mean(d.imag**2))),
