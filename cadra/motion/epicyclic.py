@@ -324,6 +324,13 @@ def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: in
         if start.layout != layout:
             raise ValueError("start: its layout (arms, trim, offset, curvature) differs")
         x0 = rereferred(start, s_ref)
+    elif curvature:   # the 10-constant fit first, then the ω̇ terms from zero
+        flat = Layout(arms=arms, trim=layout.trim, free_trim_rate=free_trim_rate, offset=offset)
+        xf = _solve(flat, s, xi, w_b, w_a, s_ref, p, _start(flat, s, xi, s_ref, p), False,
+                    variable)["values"]
+        m = flat.per_arm
+        x0 = np.concatenate([np.r_[xf[j * m:(j + 1) * m], 0.0] for j in range(arms)]
+                            + [xf[arms * m:]])
     else:
         x0 = _start(layout, s, xi, s_ref, p)
     out = _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable)

@@ -43,7 +43,7 @@ def pencil_exponents(s: np.ndarray, y: np.ndarray, n_exp: int) -> np.ndarray:
     Y = y[idx]
     try:
         _, _, vh = np.linalg.svd(Y, full_matrices=False)
-        V = vh.conj().T[:, :n_exp]
+        V = vh.T[:, :n_exp]
         z = np.linalg.eigvals(np.linalg.pinv(V[:-1]) @ V[1:])
         z = z[np.abs(z) > 1e-12]
         if z.size == n_exp and np.all(np.isfinite(z)):

@@ -1,0 +1,206 @@
+"""cadra.motion epicyclic/tricyclic fits and linear-theory coefficients (issue 19).
+
+Truths: the analytic epicycle (noise-free recovery to 1e-6), Gaussian noise draws (pulls),
+and scipy's solve_ivp of the linear angular equation (seed 000 eq. 2, seed 001 eq. 32) and of
+free flight with lift, whose exact root relations the coefficient formulas invert.
+"""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from cadra.motion import (
+    FlightConditions,
+    MotionFitError,
+    fit_epicyclic,
+    lift_from_swerve,
+    linear_coefficients,
+)
+
+ARMS = [(0.10, 0.3, -0.5, 12.0), (0.05, -1.0, -0.8, 3.0)]   # K (rad), phase, λ (1/s), ω (rad/s)
+TRIM = (0.01, 0.2, 30.0)                                     # K_t, phase, p
+
+
+def epicycle(t, arms=ARMS, trim=TRIM, omega_dot=(0.0, 0.0)):
+    xi = sum(K * np.exp(1j * ph) * np.exp((lam + 1j * om) * t + 0.5j * od * t * t)
+             for (K, ph, lam, om), od in zip(arms, omega_dot, strict=True))
+    if trim is not None:
+        xi = xi + trim[0] * np.exp(1j * (trim[2] * t + trim[1]))
+    return xi
+
+
+def check_arms(fit, arms, rtol):
+    for j, (K, ph, lam, om) in enumerate(arms, start=1):
+        a = fit.arm(j)
+        assert a.K == pytest.approx(K, rel=rtol)
+        assert a.phase == pytest.approx(ph, rel=rtol, abs=rtol)
+        assert a.lam == pytest.approx(lam, rel=rtol)
+        assert a.omega == pytest.approx(om, rel=rtol)
+
+
+def test_noise_free_tricyclic_10_constant_recovered_to_1e6():
+    t = np.linspace(0.0, 2.0, 200)
+    xi = epicycle(t)
+    fit = fit_epicyclic(t, xi.imag, xi.real, trim_rate=TRIM[2])
+    assert len(fit.names) == 10
+    check_arms(fit, ARMS, 1e-6)
+    trim = fit.arm(0)
+    assert trim.K == pytest.approx(TRIM[0], rel=1e-6)
+    assert trim.phase == pytest.approx(TRIM[1], rel=1e-6)
+    assert fit.rms < 1e-9
+
+
+def test_noise_free_12_constant_and_uneven_sampling_recovered_to_1e6():
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(0.0, 2.0, 150))
+    xi = epicycle(t, omega_dot=(0.8, -0.3))
+    fit = fit_epicyclic(t, xi.imag, xi.real, trim_rate=TRIM[2], curvature=True, s_ref=0.0)
+    assert len(fit.names) == 12
+    check_arms(fit, ARMS, 1e-6)
+    assert fit.arm(1).omega_dot == pytest.approx(0.8, rel=1e-6)
+    assert fit.arm(2).omega_dot == pytest.approx(-0.3, rel=1e-6)
+
+
+def test_the_10_constant_form_misses_a_chirp_the_12_constant_form_takes():
+    t = np.linspace(0.0, 2.0, 200)
+    xi = epicycle(t, omega_dot=(0.8, -0.3))
+    ten = fit_epicyclic(t, xi.imag, xi.real, trim_rate=TRIM[2])
+    twelve = fit_epicyclic(t, xi.imag, xi.real, trim_rate=TRIM[2], curvature=True)
+    assert ten.rms > 1e-3 and twelve.rms < 1e-9
+
+
+def test_pulls_over_50_noise_draws_are_honest():
+    t = np.linspace(0.0, 2.0, 200)
+    xi = epicycle(t)
+    rng = np.random.default_rng(2026)
+    sig = np.radians(0.3)
+    truth = {"lambda1": -0.5, "omega1": 12.0, "lambda2": -0.8, "omega2": 3.0}
+    pulls = {k: [] for k in truth}
+    for _ in range(50):
+        n = rng.normal(0.0, sig, (2, t.size))
+        fit = fit_epicyclic(t, xi.imag + n[0], xi.real + n[1], trim_rate=TRIM[2])
+        assert fit.covariance_scaled
+        for k, v in truth.items():
+            pulls[k].append((fit.value(k) - v) / fit.sigma(k))
+    for k, p in pulls.items():
+        assert 0.7 <= np.std(p) <= 1.4, (k, np.std(p))
+        assert abs(np.mean(p)) < 0.5, (k, np.mean(p))
+
+
+def test_correlation_matrix_and_reported_chi2():
+    t = np.linspace(0.0, 2.0, 200)
+    xi = epicycle(t)
+    rng = np.random.default_rng(5)
+    sig = 0.002
+    n = rng.normal(0.0, sig, (2, t.size))
+    fit = fit_epicyclic(t, xi.imag + n[0], xi.real + n[1], sig, sig, trim_rate=TRIM[2])
+    assert np.allclose(np.diag(fit.correlation), 1.0)
+    assert np.allclose(fit.correlation, fit.correlation.T)
+    assert fit.dof == 2 * t.size - 10
+    assert 0.8 < fit.chi2_dof < 1.2          # the sigmas given are the noise's
+    assert fit.rms == pytest.approx(sig * np.sqrt(2), rel=0.1)
+
+
+@pytest.mark.parametrize("kwargs, word", [
+    (dict(s=np.linspace(0, 1, 4)), "s"),
+    (dict(alpha=np.r_[np.nan, np.zeros(39)]), "alpha"),
+    (dict(beta=np.zeros(39)), "beta"),
+    (dict(sigma_alpha=np.zeros(40)), "sigma_alpha"),
+    (dict(s=np.r_[np.linspace(0, 1, 39), 0.5]), "s"),
+    (dict(arms=3), "arms"),
+])
+def test_bad_input_names_the_argument(kwargs, word):
+    args = dict(s=np.linspace(0, 1, 40), alpha=np.zeros(40), beta=np.zeros(40))
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=rf"^{word}\b"):
+        fit_epicyclic(args.pop("s"), args.pop("alpha"), args.pop("beta"), **args)
+
+
+def test_pure_noise_does_not_pass_for_a_result():
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 1, 40)
+    try:
+        fit = fit_epicyclic(t, rng.normal(size=40), rng.normal(size=40))
+    except MotionFitError:
+        return
+    assert fit.chi2_dof > 0.5 and np.all(fit.sigmas > 0)
+
+
+# ------------------------------------------------------------------ coefficients vs solve_ivp
+
+COND = FlightConditions(mass_kg=1.0, Ix_kg_m2=1.0e-3, I_kg_m2=5.0e-3, d_m=0.05,
+                        density_kg_m3=1.2, speed_m_s=50.0, spin_rad_s=150.0)
+CM_ALPHA, CMQ, CMAD, CMPA, CLA = -3.0, -12.0, -4.0, 0.8, 2.5
+
+
+def simulate(cond, t, lift: bool):
+    """Axis θ_c, flight path γ_c and lateral position Z (complex, + port + up), ξ = θ_c − γ_c."""
+    c = cond
+    qsd, d2v = c.q_inf * c.S * c.d_m, c.d_m / (2 * c.speed_m_s)
+    a = c.density_kg_m3 * c.S * c.speed_m_s * CLA / (2 * c.mass_kg) if lift else 0.0
+    p = c.spin_rad_s
+
+    def rhs(_, y):
+        th, thd, ga, Z = (y[0] + 1j * y[1], y[2] + 1j * y[3], y[4] + 1j * y[5], y[6] + 1j * y[7])
+        xi = th - ga
+        gad = a * xi
+        xid = thd - gad
+        mom = qsd * (CM_ALPHA * xi + d2v * (CMQ * thd + CMAD * xid) + 1j * p * d2v * CMPA * xi)
+        thdd = (mom + 1j * p * c.Ix_kg_m2 * thd) / c.I_kg_m2
+        Zd = c.speed_m_s * ga
+        out = [thd, thdd, gad, Zd]
+        return [v for z in out for v in (z.real, z.imag)]
+
+    y0 = [0.05, 0.02, 0.0, 3.0, 0, 0, 0, 0]
+    sol = solve_ivp(rhs, (t[0], t[-1]), y0, t_eval=t, method="DOP853", rtol=1e-12, atol=1e-14)
+    th, ga, Z = sol.y[0] + 1j * sol.y[1], sol.y[4] + 1j * sol.y[5], sol.y[6] + 1j * sol.y[7]
+    return th - ga, Z
+
+
+def test_linear_coefficients_recover_the_integrated_gimbal_motion():
+    t = np.linspace(0.0, 1.5, 400)
+    xi, _ = simulate(COND, t, lift=False)
+    fit = fit_epicyclic(t, xi.imag, xi.real)
+    lc = linear_coefficients(fit, COND)
+    assert lc.Cm_alpha == pytest.approx(CM_ALPHA, rel=1e-6)
+    assert lc.Cmq_sum == pytest.approx(CMQ + CMAD, rel=1e-6)
+    assert lc.Cm_p_alpha == pytest.approx(CMPA, rel=1e-6)
+    assert lc.spin_from_fit == pytest.approx(COND.spin_rad_s, rel=1e-6)
+
+
+def test_free_flight_lift_from_swerve_and_the_lift_terms():
+    t = np.linspace(0.0, 1.5, 400)
+    xi, Z = simulate(COND, t, lift=True)
+    fit = fit_epicyclic(t, xi.imag, xi.real)
+    sw = lift_from_swerve(fit, t, Z.real, Z.imag, conditions=COND)
+    assert sw.C_L_alpha == pytest.approx(CLA, rel=1e-5)
+    with_lift = linear_coefficients(fit, COND, lift=(sw.C_L_alpha, sw.C_L_alpha_sigma))
+    angular_only = linear_coefficients(fit, COND)
+    assert with_lift.Cmq_sum == pytest.approx(CMQ + CMAD, rel=1e-4)
+    assert with_lift.Cm_p_alpha == pytest.approx(CMPA, rel=1e-4)
+    # the neglected M_q a / I term: |C_mq d a/(2V C_mα)| ≈ 1e-3
+    assert with_lift.Cm_alpha == pytest.approx(CM_ALPHA, rel=3e-3)
+    assert abs(angular_only.Cmq_sum - (CMQ + CMAD)) > 0.5     # lift matters to the damping
+
+
+def test_coefficient_sigmas_are_honest_over_noise_draws():
+    t = np.linspace(0.0, 1.5, 300)
+    xi, _ = simulate(COND, t, lift=False)
+    rng = np.random.default_rng(11)
+    pulls = []
+    for _ in range(30):
+        n = rng.normal(0.0, np.radians(0.2), (2, t.size))
+        lc = linear_coefficients(fit_epicyclic(t, xi.imag + n[0], xi.real + n[1]), COND)
+        pulls.append([(lc.Cm_alpha - CM_ALPHA) / lc.Cm_alpha_sigma,
+                      (lc.Cmq_sum - CMQ - CMAD) / lc.Cmq_sum_sigma,
+                      (lc.Cm_p_alpha - CMPA) / lc.Cm_p_alpha_sigma])
+    sd = np.std(pulls, axis=0)
+    assert np.all((sd > 0.6) & (sd < 1.5)), sd
+
+
+def test_distance_fits_need_the_drag_coefficient():
+    t = np.linspace(0.0, 1.5, 200)
+    xi, _ = simulate(COND, t, lift=False)
+    fit = fit_epicyclic(t * COND.speed_m_s, xi.imag, xi.real, variable="distance")
+    with pytest.raises(ValueError, match="^conditions"):
+        linear_coefficients(fit, COND)
