@@ -141,7 +141,7 @@ def simulate(cond, t, lift: bool):
     p = c.spin_rad_s
 
     def rhs(_, y):
-        th, thd, ga, Z = (y[0] + 1j * y[1], y[2] + 1j * y[3], y[4] + 1j * y[5], y[6] + 1j * y[7])
+        th, thd, ga, _ = (y[0] + 1j * y[1], y[2] + 1j * y[3], y[4] + 1j * y[5], y[6] + 1j * y[7])
         xi = th - ga
         gad = a * xi
         xid = thd - gad
