@@ -204,3 +204,37 @@ def test_distance_fits_need_the_drag_coefficient():
     fit = fit_epicyclic(t * COND.speed_m_s, xi.imag, xi.real, variable="distance")
     with pytest.raises(ValueError, match="^conditions"):
         linear_coefficients(fit, COND)
+
+
+def test_distance_fit_with_drag_recovers_the_decelerating_flight():
+    """No spin, V falling by drag (V̇ = −k_D V², k_D = ρSC_D/2m): the motion is linear with
+    constant coefficients in distance, and the reduction must add Murphy's drag term."""
+    c = FlightConditions(mass_kg=0.2, Ix_kg_m2=1.0e-4, I_kg_m2=5.0e-4, d_m=0.05,
+                         density_kg_m3=1.2, speed_m_s=300.0, drag_coefficient=0.9)
+    kD = c.density_kg_m3 * c.S * c.drag_coefficient / (2 * c.mass_kg)
+    kL = c.density_kg_m3 * c.S * CLA / (2 * c.mass_kg)
+
+    def rhs(_, y):
+        th, thd, ga, V = y[0] + 1j * y[1], y[2] + 1j * y[3], y[4] + 1j * y[5], y[8]
+        xi = th - ga
+        gad = kL * V * xi
+        q = 0.5 * c.density_kg_m3 * V * V * c.S * c.d_m
+        mom = q * (CM_ALPHA * xi + c.d_m / (2 * V) * (CMQ * thd + CMAD * (thd - gad)))
+        Zd = V * ga
+        out = [thd, mom / c.I_kg_m2, gad, Zd]
+        return [v for z in out for v in (z.real, z.imag)] + [-kD * V * V, V]
+
+    t = np.linspace(0.0, 0.25, 300)
+    y0 = [0.05, 0.02, 0.0, 3.0, 0, 0, 0, 0, c.speed_m_s, 0.0]
+    sol = solve_ivp(rhs, (0, t[-1]), y0, t_eval=t, method="DOP853", rtol=1e-12, atol=1e-14)
+    x = sol.y[9]
+    xi = (sol.y[0] - sol.y[4]) + 1j * (sol.y[1] - sol.y[5])
+    assert sol.y[8][-1] < 0.9 * c.speed_m_s                  # a real deceleration
+    fit = fit_epicyclic(x, xi.imag, xi.real, variable="distance")
+    sw = lift_from_swerve(fit, x, sol.y[6], sol.y[7], conditions=c)
+    assert sw.C_L_alpha == pytest.approx(CLA, rel=1e-4)
+    lc = linear_coefficients(fit, c, lift=(sw.C_L_alpha, sw.C_L_alpha_sigma))
+    assert lc.Cmq_sum == pytest.approx(CMQ + CMAD, rel=1e-3)
+    assert lc.Cm_alpha == pytest.approx(CM_ALPHA, rel=3e-3)   # less the M_q a term, as above
+    no_drag = FlightConditions(**{**c.__dict__, "drag_coefficient": 0.0})
+    assert abs(linear_coefficients(fit, no_drag, lift=(CLA, 0.0)).Cmq_sum - lc.Cmq_sum) > 1.0
