@@ -423,6 +423,7 @@ def case_figures(rows) -> dict:
             "rate": float(np.mean(y)) if ok else math.nan,
             "wrong": float(np.mean([r["wrong"] for r in ok])) if ok else math.nan,
             "n_valid": len(ok), "errors": sum("error" in r for r in rows),
+            "unsettled": sum(not r.get("ref_settled", True) for r in ok),
             "seconds_median": (float(np.median([r["seconds"] for r in ok])) if ok
                                else math.nan)}
 
@@ -457,6 +458,8 @@ def summarize(per: dict, trials: int) -> dict:
         "detection_trials_per_case": trials,
         "detection_valid_trials_by_case": {c: f["n_valid"] for c, f in figs.items()},
         "detection_errors_by_case": {c: f["errors"] for c, f in figs.items()},
+        # trials whose reference size had not settled to REF_TOLERANCE in REF_ITERATIONS fits
+        "detection_reference_unsettled_by_case": {c: f["unsettled"] for c, f in figs.items()},
         "detection_alpha": ALPHA,
         "detection_m_range": list(M_RANGE),
         "detection_seconds_per_trial": float(np.median(secs)) if secs else math.nan,
