@@ -181,6 +181,8 @@ def test_free_flight_lift_from_swerve_and_the_lift_terms():
     # the neglected M_q a / I term: |C_mq d a/(2V C_mα)| ≈ 1e-3
     assert with_lift.Cm_alpha == pytest.approx(CM_ALPHA, rel=3e-3)
     assert abs(angular_only.Cmq_sum - (CMQ + CMAD)) > 0.5     # lift matters to the damping
+    chained = linear_coefficients(fit, COND, swerve=(t, Z.real, Z.imag))
+    assert chained.C_L_alpha == sw.C_L_alpha and chained.Cmq_sum == with_lift.Cmq_sum
 
 
 def test_coefficient_sigmas_are_honest_over_noise_draws():

@@ -15,6 +15,7 @@ from cadra.motion import (
     fit_epicyclic,
     fixed_plane_angles,
     nonplanar_ratio,
+    nonplanar_ratio_of_fit,
     nonrolling_angle,
 )
 
@@ -50,6 +51,11 @@ def test_npr_of_fitted_planar_and_circular_histories():
     fit = fit_epicyclic(t, mixed.imag, mixed.real)
     npr = nonplanar_ratio(fine, fit.predict(fine), fit.predict(fine, derivative=True)).npr
     assert 0.3 < npr < 1.0
+    # the trim arm is left out: a planar motion plus a trim arm still reads planar
+    trimmed = planar + 0.02 * np.exp(1j * (25.0 * t + 0.5))
+    fit = fit_epicyclic(t, trimmed.imag, trimmed.real, trim_rate=25.0)
+    assert nonplanar_ratio_of_fit(fit, 0.0, 2.0).npr < 1e-6
+    assert nonplanar_ratio(fine, fit.predict(fine), fit.predict(fine, True)).npr > 0.05
 
 
 def test_npr_bad_input():

@@ -27,6 +27,7 @@ from cadra.motion.nonplanar import (
     NonplanarRatio,
     cubic_correlator,
     nonplanar_ratio,
+    nonplanar_ratio_of_fit,
 )
 from cadra.motion.nonrolling import fixed_plane_angles, nonrolling_angle, nonrolling_rate
 from cadra.motion.pitch import PitchFit, fit_pitch
@@ -37,6 +38,7 @@ __all__ = [
     "Layout", "LinearCoefficients", "MomentDerivatives", "MotionFitError", "NonplanarRatio",
     "PitchFit", "Sections", "SwerveFit", "cubic_correlator", "fit_cg_series", "fit_epicyclic",
     "fit_pitch", "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
-    "linear_coefficients", "nonplanar_ratio", "nonrolling_angle", "nonrolling_rate",
-    "pitch_coefficients", "sectional_epicyclic", "sectional_pitch", "transfer_cg",
+    "linear_coefficients", "nonplanar_ratio", "nonplanar_ratio_of_fit", "nonrolling_angle",
+    "nonrolling_rate", "pitch_coefficients", "sectional_epicyclic", "sectional_pitch",
+    "transfer_cg",
 ]

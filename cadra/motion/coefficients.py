@@ -96,15 +96,25 @@ class LinearCoefficients:
 
 
 def linear_coefficients(fit: EpicyclicFit, conditions: FlightConditions,
-                        lift: tuple[float, float] | None = None) -> LinearCoefficients:
+                        lift: tuple[float, float] | None = None, *, swerve=None,
+                        gravity: float = 0.0) -> LinearCoefficients:
     """C_mα, C_mq + C_mα̇ and C_mpα from a two-arm fit (module docstring for the formulas).
 
-    ``lift = (C_Lα, sigma)`` (e.g. from :func:`lift_from_swerve`) adds the flight-path
-    terms of free flight; without it the motion is taken as purely angular (gimbal, pivot).
-    C_mpα is NaN when the spin is zero (it does not act).
+    ``lift = (C_Lα, sigma)`` adds the flight-path terms of free flight; ``swerve = (s, y, z)``
+    or ``(s, y, z, sigma)`` (the cg's lateral positions, m) measures it first with
+    :func:`lift_from_swerve` (``gravity`` passed on). With neither the motion is taken as
+    purely angular (gimbal, pivot). C_mpα is NaN when the spin is zero (it does not act).
     """
     if fit.layout.arms != 2:
         raise ValueError("fit: needs the two-arm (epicyclic or tricyclic) form")
+    if swerve is not None:
+        if lift is not None:
+            raise ValueError("swerve: give either lift or swerve, not both")
+        if len(swerve) not in (3, 4):
+            raise ValueError("swerve: expected (s, y, z) or (s, y, z, sigma)")
+        sw = lift_from_swerve(fit, *swerve[:3], swerve[3] if len(swerve) == 4 else None,
+                              conditions=conditions, gravity=gravity)
+        lift = (sw.C_L_alpha, sw.C_L_alpha_sigma)
     c = conditions
     Vs, k = _domain(fit.variable, c)
     idx = [fit.layout.index(n) for n in ("lambda1", "omega1", "lambda2", "omega2")]

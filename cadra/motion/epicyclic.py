@@ -211,12 +211,20 @@ def _start(layout: Layout, s: np.ndarray, xi: np.ndarray, s_ref: float,
            p: float | None) -> np.ndarray:
     n_exp = layout.arms + int(layout.trim) + int(layout.offset)
     r = list(pencil_exponents(s, xi, n_exp))
-    arms = []
+    amp = list(np.abs(linear_amplitudes(s, xi, np.asarray(r), s_ref)))
+    near = 2 * np.pi / (s[-1] - s[0])      # one cycle over the record
+
+    def drop(target):   # the pole of a known exponent, or the weakest one if none is near it
+        k = int(np.argmin([abs(z - target) for z in r]))
+        if abs(r[k] - target) > max(near, 0.1 * abs(target)):
+            k = int(np.argmin(amp))
+        r.pop(k)
+        amp.pop(k)
+
     if layout.trim:
-        target = 1j * p
-        r.pop(int(np.argmin([abs(z - target) for z in r])))
+        drop(1j * p)
     if layout.offset:
-        r.pop(int(np.argmin(np.abs(r))))
+        drop(0.0)
     arms = sorted(r, key=lambda z: -z.imag)[: layout.arms]
     exps = list(arms)
     if layout.trim:

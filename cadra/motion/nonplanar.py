@@ -21,6 +21,7 @@ import numpy as np
 from scipy.integrate import trapezoid
 
 from cadra.motion import _checks
+from cadra.motion.epicyclic import EpicyclicFit, model
 
 
 @dataclass(frozen=True)
@@ -86,3 +87,22 @@ def nonplanar_ratio(s, xi, dxi) -> NonplanarRatio:
     npr = c / total if total > 0 else float("nan")
     seed = c / p if p > 0 else (float("inf") if c > 0 else float("nan"))
     return NonplanarRatio(float(npr), float(seed))
+
+
+def nonplanar_ratio_of_fit(fit: EpicyclicFit, s_start: float, s_end: float,
+                           n: int = 4001) -> NonplanarRatio:
+    """The NPR of a fit's two arms alone (trim arm and constant left out, as seed 002 does)
+    between ``s_start`` and ``s_end``, on ``n`` points."""
+    if fit.layout.arms != 2:
+        raise ValueError("fit: needs the two-arm form")
+    if not s_end > s_start:
+        raise ValueError("s_end: must be after s_start")
+    L = fit.layout
+    x = fit.values.copy()
+    x[L.arms * L.per_arm:] = 0.0          # trim and constant amplitudes (and p) to zero
+    s = np.linspace(s_start, s_end, int(n))
+    u = s - fit.s_ref
+    arms_only = type(L)(arms=2, curvature=L.curvature)
+    xa = x[: 2 * L.per_arm]
+    return nonplanar_ratio(s, model(arms_only, xa, u, None),
+                           model(arms_only, xa, u, None, derivative=True))
