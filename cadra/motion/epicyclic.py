@@ -244,6 +244,21 @@ def _start(layout: Layout, s: np.ndarray, xi: np.ndarray, s_ref: float,
     return np.asarray(x, float)
 
 
+def covariance(J: np.ndarray, rcond: float = 1e-10) -> np.ndarray:
+    """(JᵀJ)⁻¹ from the SVD of J; a parameter with a part in a direction the data do not
+    determine (singular value below ``rcond`` times the largest) gets an infinite variance
+    and NaN covariances, so it cannot pass for a measured one."""
+    _, sv, vt = np.linalg.svd(J, full_matrices=False)
+    keep = sv > rcond * sv[0]
+    cov = (vt[keep].T / sv[keep] ** 2) @ vt[keep]
+    if not np.all(keep):
+        bad = np.any(np.abs(vt[~keep]) > 1e-6, axis=0)
+        cov[bad, :] = np.nan
+        cov[:, bad] = np.nan
+        cov[bad, bad] = np.inf
+    return cov
+
+
 def _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable):
     u = s - s_ref
     n = s.size
@@ -269,7 +284,7 @@ def _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable):
     dof = 2 * n - x0.size
     chi2 = float(res.fun @ res.fun)
     chi2_dof = chi2 / dof if dof > 0 else float("nan")
-    cov = np.linalg.pinv(J.T @ J, rcond=1e-15, hermitian=True)
+    cov = covariance(J)
     if scale_covariance and dof > 0:
         cov = cov * chi2_dof
     sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))

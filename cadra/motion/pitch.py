@@ -14,7 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from cadra.motion import _checks
-from cadra.motion.epicyclic import MotionFitError
+from cadra.motion.epicyclic import MotionFitError, covariance
 from cadra.motion.starts import pencil_exponents
 
 NAMES = ("alpha_T", "a", "b", "lambda", "omega")
@@ -143,7 +143,7 @@ def fit_pitch(s, alpha, sigma_alpha=None, *, trim: bool = True, variable: str = 
     chi2 = float(res.fun @ res.fun)
     chi2_dof = chi2 / dof if dof > 0 else float("nan")
     cov = np.zeros((5, 5))
-    sub = np.linalg.pinv(J[:, mask].T @ J[:, mask], rcond=1e-15, hermitian=True)
+    sub = covariance(J[:, mask])
     if scale_covariance and dof > 0:
         sub = sub * chi2_dof
     cov[np.ix_(mask, mask)] = sub
