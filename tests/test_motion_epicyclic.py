@@ -11,10 +11,13 @@ from scipy.integrate import solve_ivp
 
 from cadra.motion import (
     FlightConditions,
+    coefficients_report,
     fit_epicyclic,
+    fit_report,
     lift_from_swerve,
     linear_coefficients,
 )
+from cadra.numfmt import pm
 
 ARMS = [(0.10, 0.3, -0.5, 12.0), (0.05, -1.0, -0.8, 3.0)]   # K (rad), phase, λ (1/s), ω (rad/s)
 TRIM = (0.01, 0.2, 30.0)                                     # K_t, phase, p
@@ -244,3 +247,18 @@ def test_distance_fit_with_drag_recovers_the_decelerating_flight():
     assert lc.Cm_alpha == pytest.approx(CM_ALPHA, rel=3e-3)   # less the M_q a term, as above
     no_drag = FlightConditions(**{**c.__dict__, "drag_coefficient": 0.0})
     assert abs(linear_coefficients(fit, no_drag, lift=(CLA, 0.0)).Cmq_sum - lc.Cmq_sum) > 1.0
+
+
+def test_reports_show_what_the_fit_stored():
+    t = np.linspace(0.0, 1.5, 300)
+    xi, _ = simulate(COND, t, lift=False)
+    n = np.random.default_rng(8).normal(0.0, 0.003, (2, t.size))
+    fit = fit_epicyclic(t, xi.imag + n[0], xi.real + n[1], scale_covariance=False)
+    text = fit_report(fit, min_correlation=0.0)
+    assert "epicyclic fit in time: 300 points, 8 constants" in text
+    assert "formal covariance" in text
+    a = fit.arm(2)
+    assert f"ω {pm(a.omega, a.omega_sigma, 'rad/s')}" in text
+    assert f"A1_re – lambda1: {fit.correlation[0, 2]:+.3f}" in text
+    lc = linear_coefficients(fit, COND)
+    assert f"C_mα        {pm(lc.Cm_alpha, lc.Cm_alpha_sigma)}" in coefficients_report(lc)

@@ -31,12 +31,14 @@ from cadra.motion.nonplanar import (
 )
 from cadra.motion.nonrolling import fixed_plane_angles, nonrolling_angle, nonrolling_rate
 from cadra.motion.pitch import PitchFit, fit_pitch
+from cadra.motion.report import coefficients_report, fit_report
 from cadra.motion.sectional import Sections, sectional_epicyclic, sectional_pitch
 
 __all__ = [
     "Arm", "CgSeriesFit", "CubicCorrelator", "EpicyclicFit", "FlightConditions", "KBResult",
     "Layout", "LinearCoefficients", "MomentDerivatives", "MotionFitError", "NonplanarRatio",
-    "PitchFit", "Sections", "SwerveFit", "cubic_correlator", "fit_cg_series", "fit_epicyclic",
+    "PitchFit", "Sections", "SwerveFit", "coefficients_report", "cubic_correlator",
+    "fit_cg_series", "fit_epicyclic", "fit_report",
     "fit_pitch", "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
     "linear_coefficients", "nonplanar_ratio", "nonplanar_ratio_of_fit", "nonrolling_angle",
     "nonrolling_rate", "pitch_coefficients", "sectional_epicyclic", "sectional_pitch",
