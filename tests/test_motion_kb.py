@@ -150,6 +150,17 @@ def test_sectional_bad_input_names_the_argument(kwargs, word):
         sectional_pitch(args.pop("s"), args.pop("alpha"), **args)
 
 
+@pytest.mark.parametrize("s, alpha, sigma, word", [
+    (np.linspace(0, 1, 5), np.zeros(5), None, "s"),
+    (np.linspace(0, 1, 50), np.r_[np.zeros(49), np.nan], None, "alpha"),
+    (np.linspace(0, 1, 50), np.zeros(49), None, "alpha"),
+    (np.linspace(0, 1, 50), np.zeros(50), np.ones(49), "sigma_alpha"),
+])
+def test_pitch_fit_bad_input_names_the_argument(s, alpha, sigma, word):
+    with pytest.raises(ValueError, match=rf"^{word}\b"):
+        fit_pitch(s, alpha, sigma)
+
+
 def test_kb_refuses_the_wrong_sections():
     t = np.linspace(0, 1, 200)
     sec = sectional_pitch(t, np.sin(40 * t), window=60, step=20)

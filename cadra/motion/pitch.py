@@ -104,6 +104,8 @@ def fit_pitch(s, alpha, sigma_alpha=None, *, trim: bool = True, variable: str = 
         du = s_ref - start.s_ref
         A = (x0[1] - 1j * x0[2]) * np.exp((x0[3] + 1j * x0[4]) * du)
         x0[1], x0[2] = A.real, -A.imag
+        if not trim:
+            x0[0] = 0.0
     else:
         r = pencil_exponents(s, y.astype(complex), 3 if trim else 2)
         r = r[np.argsort(np.abs(r))]
