@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 
 from cadra.motion import _checks
 from cadra.motion.nonrolling import nonrolling_rate
-from cadra.motion.starts import linear_amplitudes, pencil_exponents
+from cadra.motion.starts import fft_exponents, linear_amplitudes, pencil_exponents
 
 
 class MotionFitError(RuntimeError):
@@ -207,10 +207,23 @@ class EpicyclicFit:
         return K, float(np.sqrt(gK @ C @ gK)), ph, float(np.sqrt(gp @ C @ gp))
 
 
-def _start(layout: Layout, s: np.ndarray, xi: np.ndarray, s_ref: float,
-           p: float | None) -> np.ndarray:
+def _starts(layout: Layout, s: np.ndarray, xi: np.ndarray, s_ref: float,
+            p: float | None) -> list[np.ndarray]:
+    """The matrix-pencil start, and the FFT-peak start too when their arm frequencies differ
+    by more than a quarter cycle over the record (short or unevenly sampled records)."""
     n_exp = layout.arms + int(layout.trim) + int(layout.offset)
-    r = list(pencil_exponents(s, xi, n_exp))
+    a = _start(layout, s, xi, s_ref, p, pencil_exponents(s, xi, n_exp))
+    b = _start(layout, s, xi, s_ref, p, fft_exponents(s, xi, n_exp))
+    m = layout.per_arm
+    idx = [j * m + 3 for j in range(layout.arms)]
+    if np.all(np.abs(a[idx] - b[idx]) < 0.5 * np.pi / (s[-1] - s[0])):
+        return [a]
+    return [a, b]
+
+
+def _start(layout: Layout, s: np.ndarray, xi: np.ndarray, s_ref: float,
+           p: float | None, exponents: np.ndarray) -> np.ndarray:
+    r = list(exponents)
     amp = list(np.abs(linear_amplitudes(s, xi, np.asarray(r), s_ref)))
     near = 2 * np.pi / (s[-1] - s[0])      # one cycle over the record
 
@@ -298,6 +311,22 @@ def _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable):
                 rms_beta=float(np.sqrt(np.mean(d.real**2))), n_points=n, nfev=int(res.nfev))
 
 
+def _best(layout, s, xi, w_b, w_a, s_ref, p, starts, scale_covariance, variable):
+    """The converged fit of lowest χ² over the starts (MotionFitError if none converges)."""
+    best, err = None, None
+    for x0 in starts:
+        try:
+            out = _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable)
+        except MotionFitError as e:
+            err = e
+            continue
+        if best is None or out["chi2"] < best["chi2"]:
+            best = out
+    if best is None:
+        raise err
+    return best
+
+
 def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: int = 2,
                   trim_rate: float | None = None, free_trim_rate: bool = False,
                   offset: bool = False, curvature: bool = False, nonrolling: bool = False,
@@ -349,14 +378,18 @@ def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: in
         x0 = rereferred(start, s_ref)
     elif curvature:   # the 10-constant fit first, then the ω̇ terms from zero
         flat = Layout(arms=arms, trim=layout.trim, free_trim_rate=free_trim_rate, offset=offset)
-        xf = _solve(flat, s, xi, w_b, w_a, s_ref, p, _start(flat, s, xi, s_ref, p), False,
-                    variable)["values"]
+        xf = _best(flat, s, xi, w_b, w_a, s_ref, p, _starts(flat, s, xi, s_ref, p), False,
+                   variable)["values"]
         m = flat.per_arm
         x0 = np.concatenate([np.r_[xf[j * m:(j + 1) * m], 0.0] for j in range(arms)]
                             + [xf[arms * m:]])
     else:
-        x0 = _start(layout, s, xi, s_ref, p)
-    out = _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable)
+        x0 = None
+    if x0 is None:
+        out = _best(layout, s, xi, w_b, w_a, s_ref, p, _starts(layout, s, xi, s_ref, p),
+                    scale_covariance, variable)
+    else:
+        out = _solve(layout, s, xi, w_b, w_a, s_ref, p, x0, scale_covariance, variable)
     fit = EpicyclicFit(layout=layout, names=layout.names(), **out)
     if not nonrolling:
         return fit
