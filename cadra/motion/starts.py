@@ -37,13 +37,15 @@ def pencil_exponents(s: np.ndarray, y: np.ndarray, n_exp: int) -> np.ndarray:
     s, y = _uniform(np.asarray(s, float), np.asarray(y, complex))
     n = y.size
     h = (s[-1] - s[0]) / (n - 1)
-    L = int(min(max(n // 3, n_exp + 1), 60))
+    L = int(min(max(n // 3, n_exp + 1), 40))
     rows = n - L
     idx = np.arange(rows)[:, None] + np.arange(L + 1)[None, :]
     Y = y[idx]
     try:
-        _, _, vh = np.linalg.svd(Y, full_matrices=False)
-        V = vh.T[:, :n_exp]
+        # the right singular vectors from the small Gram matrix: einsum and a (L+1)² eigh
+        # instead of the SVD of the Hankel matrix, whose threaded BLAS stalls on a busy machine
+        _, U = np.linalg.eigh(np.einsum("ki,kj->ij", Y.conj(), Y))
+        V = U[:, ::-1][:, :n_exp].conj()
         z = np.linalg.eigvals(np.linalg.pinv(V[:-1]) @ V[1:])
         z = z[np.abs(z) > 1e-12]
         if z.size == n_exp and np.all(np.isfinite(z)):
