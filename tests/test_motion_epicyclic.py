@@ -110,6 +110,8 @@ def test_correlation_matrix_and_reported_chi2():
     (dict(sigma_alpha=np.zeros(40)), "sigma_alpha"),
     (dict(s=np.r_[np.linspace(0, 1, 39), 0.5]), "s"),
     (dict(arms=3), "arms"),
+    (dict(nonrolling=True, nonrolling_iterations=0), "nonrolling_iterations"),
+    (dict(trim_rate=float("nan")), "trim_rate"),
 ])
 def test_bad_input_names_the_argument(kwargs, word):
     args = dict(s=np.linspace(0, 1, 40), alpha=np.zeros(40), beta=np.zeros(40))

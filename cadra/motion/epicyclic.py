@@ -357,6 +357,10 @@ def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: in
         raise ValueError(f"arms: must be 1 or 2, got {arms!r}")
     if variable not in ("time", "distance"):
         raise ValueError(f"variable: 'time' or 'distance', got {variable!r}")
+    if nonrolling and (int(nonrolling_iterations) != nonrolling_iterations
+                       or nonrolling_iterations < 1):
+        raise ValueError(f"nonrolling_iterations: a positive integer, got "
+                         f"{nonrolling_iterations!r}")
     if trim_rate is None and free_trim_rate:
         raise ValueError("free_trim_rate: needs a trim_rate to start from")
     layout = Layout(arms=arms, curvature=curvature, trim=trim_rate is not None,
