@@ -64,7 +64,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from gap_cases import (  # noqa: E402
-    AERO_CASES,
+    ALL_SHOTS_CASES,
     BODY_CASES,
     BODY_PAIRS,
     LATERAL_OFFSET_M,
@@ -72,9 +72,12 @@ from gap_cases import (  # noqa: E402
     M1_SHOTS,
     MAX_REDRAWS,
     OFFSET_CASES,
+    PAIR_CASES,
     ROOT,
     SET_CASES,
     SHOTS,
+    STRONG_SUBCASES,
+    draw_uniform,
     make_case,
     measure,
 )
@@ -92,10 +95,25 @@ from gap_scoring import (  # noqa: E402  (a sibling module of this script)
     size_within_2sigma,
 )
 
+#: the issue-21 cases (scored by ``_score_new``)
+NEW_CASES = ("where_only", "strong", "shared_density", "held", "held_null", "pair_station",
+             "pair_dynamics")
+#: a strong-effect draw outside that range is drawn again at most this many times
+STRONG_REDRAWS = 5
+#: a strong-effect trial's fit without the effect lies in this chi^2/dof range
+STRONG_RCHI2 = (20.0, 200.0)
+#: the library case of each effect a strong-effect trial can draw
+CASE_OF_EFFECT = {"lateral cg offset": "cg", "density gradient": "density",
+                  "cross-flow": "crossflow", "Mach dependence of Cm": "cmM"}
 
-def run_trial(case, rng, tmpdir, force=False):
+
+def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0):
     """One trial; a draw whose effect does not matter returns early (no diagnosis) unless
-    ``force``."""
+    ``force``. A strong-effect trial draws one of STRONG_SUBCASES at k times its usual size
+    (k log-uniform in 0.01-1 on the M1 sets); when the fit without it lands outside
+    STRONG_RCHI2 the same trial (shots, direction, noise) is redone with k rescaled towards
+    chi^2/dof ~ 60 (``strong_k``; at most three times)."""
+    saved = rng.bit_generator.state
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
     from cadra.fitting.data import CHANNELS
@@ -111,10 +129,22 @@ def run_trial(case, rng, tmpdir, force=False):
     else:
         names = list(group)
     specs = [load_shot_spec(ROOT / "sample_shots" / "specs" / f"{n}.toml") for n in names]
-    spec_e, edit, expected, truth, where = make_case(case, rng, specs, tmpdir)
-    groups = BODY_PAIRS.get(case)
+    if case == "strong":
+        sub = str(rng.choice(STRONG_SUBCASES))
+        k = float(np.exp(rng.uniform(np.log(0.01), np.log(1.0))))
+        k = k if strong_k is None else strong_k
+
+        def big(r, lo, hi, k=k):
+            return draw_uniform(r, lo * k, hi * k)
+        spec_e, edit, expected, truth, where = make_case(sub, rng, specs, tmpdir, draw=big)
+    else:
+        spec_e, edit, expected, truth, where = make_case(case, rng, specs, tmpdir)
+    # a strong-effect trial is one of the library cases at a larger size
+    sub = CASE_OF_EFFECT.get(expected, case) if case == "strong" else case
+    groups = BODY_PAIRS.get(sub)
     sid = specs[0].shot_id
-    if len(specs) > 1 and case in BODY_CASES:
+    if len(specs) > 1 and (sub in BODY_CASES or (case == "strong"
+                                                  and sub in ("density", "crossflow"))):
         # a body effect in the set's first shot: parameters per shot, ``name@shot``
         truth = {f"{p}@{sid}": v for p, v in truth.items()}
         if groups is not None:
@@ -124,8 +154,9 @@ def run_trial(case, rng, tmpdir, force=False):
     for k, spec in enumerate(specs):
         # a body effect is in the first shot only; an aero term in every shot (it is the
         # same air and shape); a measurement edit in every shot (the same stations)
-        se = (spec_e if k == 0 else replace(spec, aero_model=spec_e.aero_model)
-              if case in AERO_CASES else spec)
+        se = (spec_e if k == 0 else replace(spec, aero_model=spec_e.aero_model,
+                                            effects=spec_e.effects)
+              if sub in ALL_SHOTS_CASES else spec)
         seed = int(rng.integers(1 << 31))
         sim = simulate_shot(se)
         clean_sim = simulate_shot(spec) if se is not spec else sim
@@ -154,14 +185,36 @@ def run_trial(case, rng, tmpdir, force=False):
     out = {"case": case, "shot": "+".join(names), "converged": bool(res),
            "fit_status": res.status,
            "matters": bool(max(ratios0) >= 1.2 or (shifts and max(shifts) > 1.0)),
-           "rms_raise": float(max(ratios0)), "shift_sigma": float(max(shifts, default=0.0))}
-    if expected is not None and not out["matters"] and not force:
+           "rms_raise": float(max(ratios0)), "shift_sigma": float(max(shifts, default=0.0)),
+           "base_rchi2": float(res.reduced_chi2),
+           "effect_dchi2": float(res.chi2 - clean.chi2)}
+    if case == "held":
+        # the issue's criterion: a held value wrong by an amount that shifts a free
+        # parameter by 3 sigma or more
+        out["matters"] = out["shift_sigma"] >= 3.0
+    if case == "strong":
+        # a strong effect: the fit without it at chi^2/dof 20-200; outside, the same trial at
+        # a rescaled size (chi^2 of an effect grows about as its size squared)
+        out["matters"] = bool(STRONG_RCHI2[0] <= res.reduced_chi2 <= STRONG_RCHI2[1])
+        out["strong_k"] = k
+        if not out["matters"] and _depth < 3 and not force:
+            rng.bit_generator.state = saved
+            factor = math.sqrt(61.0 / max(res.reduced_chi2 - 1.0, 1e-2))
+            return run_trial(case, rng, tmpdir, force, k * min(factor, 30.0), _depth + 1)
+    if (expected is not None and case not in ("where_only", "shared_density")
+            and not out["matters"]
+            and not force):
         return out             # not a trial of this case: the caller draws another
     t0 = time.perf_counter()
     dg = diagnose_gap(res, shots, model)
     out.update({"seconds": t_fit + time.perf_counter() - t0, "verdict": dg.verdict,
                 "after_status": dg.fit_after.status if dg.fit_after is not None else "-"})
     first = dg.added[0] if dg.added else None
+    named = {a["effect"] for a in dg.added} | {x for a in dg.added for x in a["aliases"]}
+    out["held_flag"] = any(a["kind"] == "held" for a in dg.added)
+    if case in NEW_CASES:
+        return _score_new(case, out, dg, res, expected, truth, where, named, groups, sub,
+                          first_sim, sid)
     if expected is not None:
         out["top1"] = first is not None and first["effect"] == expected
         out["top1_alias"] = first is not None and (first["effect"] == expected
@@ -217,6 +270,120 @@ def run_trial(case, rng, tmpdir, force=False):
     return out
 
 
+def _score_new(case, out, dg, res, expected, truth, where, named, groups, sub, first_sim,
+               sid):
+    """Scores of the issue-21 cases: where-only misfits, strong effects, the shared density
+    gradient, held parameters, pairs."""
+    from scipy import stats
+
+    first = dg.added[0] if dg.added else None
+    out["pinned"] = [a["effect"] for a in dg.added]
+    out["unexplained"] = bool(dg.unexplained)
+    if case in PAIR_CASES:
+        out["both_named"] = all(e in named for e in expected)
+        return out
+    if case == "where_only":
+        (st, ch), = where
+        in_verdict = bool(dg.unexplained) and f"station {st} {ch}" in dg.verdict
+        out["where_found"] = in_verdict or (expected is not None and expected in named)
+        # the global chi^2 test alone, at the diagnosis' alpha, on the fit given
+        out["global_passes"] = bool(stats.chi2.sf(res.chi2, max(res.dof, 1)) >= 0.01)
+        return out
+    if case == "held_null":
+        out["clean"] = not dg.added and not dg.unexplained
+        return out
+    out["top1"] = first is not None and first["effect"] == expected
+    out["top1_alias"] = first is not None and (first["effect"] == expected
+                                               or expected in first["aliases"])
+    out["flagged"] = expected in named
+    out["base_status"] = (dg.fit_given.status if dg.fit_given is not None else "-")
+    out["size_ok"] = False
+    out["truth"] = {k: float(v) for k, v in truth.items()}
+    if out["top1"]:
+        if sub in BODY_CASES:
+            sf = next(f for f in dg.fit_after.shots if f.shot_id == sid)
+            truth = body_truth_in_fit_frame(sub, truth, first_sim, sf.t0_s, sf.state[6:10])
+        out["size_ok"] = (size_within_2sigma(first, truth) if groups is None
+                          else magnitude_within_2sigma(first, truth, groups))
+    return out
+
+
+def _new_case_ok(case, r) -> bool:
+    """The issue-21 criterion of one trial."""
+    if case in PAIR_CASES:
+        return r["both_named"]
+    if case == "where_only":
+        return r["where_found"]
+    if case == "held_null":
+        return r["clean"] and not r["held_flag"]
+    if case == "held":
+        return r["flagged"]
+    return r["top1_alias"] and r["size_ok"]
+
+
+def _new_case_line(case, rows) -> str:
+    ok = np.mean([_new_case_ok(case, r) for r in rows])
+    if case == "where_only":
+        return (f"found at the right station and channel (unexplained there, or the right "
+                f"station effect) {ok:.2f}; the global chi^2 alone passes in "
+                f"{np.mean([r['global_passes'] for r in rows]):.2f}")
+    if case == "held_null":
+        return (f"clean {np.mean([r['clean'] for r in rows]):.2f}, a held parameter flagged "
+                f"{np.mean([r['held_flag'] for r in rows]):.2f}")
+    if case in PAIR_CASES:
+        return f"both effects named {ok:.2f}"
+    rchi = [r["base_rchi2"] for r in rows]
+    line = (f"named first (or as its alias) with its size within 2 sigma {ok:.2f}; first "
+            f"{np.mean([r['top1'] for r in rows]):.2f}, first or alias "
+            f"{np.mean([r['top1_alias'] for r in rows]):.2f}, flagged anywhere "
+            f"{np.mean([r['flagged'] for r in rows]):.2f}, size within 2 sigma "
+            f"{np.mean([r['size_ok'] for r in rows]):.2f}; chi^2/dof of the fit without it "
+            f"{min(rchi):.3g}-{max(rchi):.3g}")
+    if case == "strong":
+        line += (f"; base fit short of convergence at the default budget in "
+                 f"{sum(r['fit_status'] != 'converged' for r in rows)} of {len(rows)}")
+    return line
+
+
+def _new_case_summary(per) -> dict:
+    """The issue-21 keys of the JSON line (NaN for a case not run)."""
+    def rate(case, key):
+        rows = per.get(case)
+        return float(np.mean([r[key] for r in rows])) if rows else math.nan
+
+    pairs = [c for c in PAIR_CASES if c in per]
+    nulls = [r for c in ("null", "held_null") for r in per.get(c, [])]
+    out = {
+        "where_only_found_rate": rate("where_only", "where_found"),
+        "where_only_global_pass_rate": rate("where_only", "global_passes"),
+        "strong_effect_diagnosed_rate": (
+            float(np.mean([_new_case_ok("strong", r) for r in per["strong"]]))
+            if "strong" in per else math.nan),
+        "strong_effect_named_rate": rate("strong", "top1_alias"),
+        "shared_density_top1_rate": (
+            float(np.mean([_new_case_ok("shared_density", r) for r in per["shared_density"]]))
+            if "shared_density" in per else math.nan),
+        "held_param_flag_rate": rate("held", "flagged"),
+        "held_param_false_flag_rate": (float(np.mean([r["held_flag"] for r in nulls]))
+                                       if nulls else math.nan),
+        "held_null_clean_rate": rate("held_null", "clean"),
+        "pair_both_named_rate": (min(rate(c, "both_named") for c in pairs) if pairs
+                                 else math.nan),
+        "pair_both_named_by_case": {c: rate(c, "both_named") for c in pairs},
+    }
+    return out
+
+
+def _detection(cases, trials, seed) -> dict:
+    """The detection-efficiency scan (tools/gap_detection.py) of the library effects among
+    ``cases``: its keys (``detection_efficiency_max`` ...) join the JSON line."""
+    from gap_detection import CASES as DETECTION_CASES
+    from gap_detection import detection_summary
+
+    chosen = [c for c in cases if c in DETECTION_CASES]
+    return detection_summary(chosen, trials, seed + 15, progress=True) if chosen else {}
+
+
 def multifit_timing(seed: int = 0) -> dict:
     """Diagnosis time of one seven-shot M2 multi-fit (every M2 sample shot, stage-one noise, a
     2 um z bias at station 9 in every shot: a facility effect), and what it found."""
@@ -247,7 +414,7 @@ def multifit_timing(seed: int = 0) -> dict:
 
 
 CASES = ["cg", "inertia_asym", "products", "density", "crossflow", "cm3", "cmq2", "cmM",
-         "station_bias", "timing", "scale", "null", "out_of_library"]
+         "station_bias", "timing", "scale", "null", "out_of_library", *NEW_CASES]
 
 
 def main(argv=None) -> int:
@@ -257,6 +424,9 @@ def main(argv=None) -> int:
     parser.add_argument("--cases", default=",".join(CASES))
     parser.add_argument("--no-multifit", action="store_true",
                         help="skip the seven-shot multi-fit diagnosis timing")
+    parser.add_argument("--no-detection", action="store_true",
+                        help="skip the detection-efficiency scan (tools/gap_detection.py, "
+                             "~1 h for 20 trials per effect)")
     parser.add_argument("--verbose", action="store_true",
                         help="also list trials whose size or shrink ratio fails")
     args = parser.parse_args(argv)
@@ -273,15 +443,18 @@ def main(argv=None) -> int:
                 # a draw whose effect does not matter (the issue's definition: rms up 20 %,
                 # or a coefficient moved by more than its sigma) is not a trial of the case:
                 # drawn again, at most MAX_REDRAWS times, and counted
-                for _attempt in range(MAX_REDRAWS + 1):
-                    row = run_trial(case, rng, tmp, force=_attempt == MAX_REDRAWS)
+                n_max = STRONG_REDRAWS if case == "strong" else MAX_REDRAWS
+                for _attempt in range(n_max + 1):
+                    row = run_trial(case, rng, tmp, force=_attempt == n_max)
                     if "verdict" in row:
                         break
                     n_redrawn += 1
                 rows.append(row)
             per[case] = rows
             redrawn[case] = n_redrawn
-            if case == "null":
+            if case in NEW_CASES:
+                line = _new_case_line(case, rows)
+            elif case == "null":
                 line = f"clean {np.mean([r['clean'] for r in rows]):.2f}"
             elif case == "out_of_library":
                 line = (f"unexplained {np.mean([r['unexplained'] for r in rows]):.2f}, "
@@ -307,6 +480,11 @@ def main(argv=None) -> int:
                          f"{np.sum(vec) / len(rows):.2f}")
             print(f"{case:16s} {line}")
             for r in rows:
+                if case in NEW_CASES:
+                    if not _new_case_ok(case, r):
+                        print(f"    {r['shot']} (fit {r['fit_status']}, chi^2/dof "
+                              f"{r['base_rchi2']:.3g}): {r['verdict'][:240]}")
+                    continue
                 if args.verbose and case not in ("null", "out_of_library") and r["top1"] and (
                         not r["size_ok"] or r["shrink_ratio"] > SHRINK_LIMIT):
                     print(f"    {r['shot']} (size ok {r['size_ok']}, shrink "
@@ -323,7 +501,7 @@ def main(argv=None) -> int:
                         case == "out_of_library" and not r["where_ok"]):
                     print(f"    {r['shot']} (fit {r['fit_status']}, rms x{r['rms_raise']:.2f}, "
                           f"shift {r['shift_sigma']:.1f} sigma): {r['verdict'][:160]}")
-    eff = [c for c in cases if c not in ("null", "out_of_library")]
+    eff = [c for c in cases if c not in ("null", "out_of_library") and c not in NEW_CASES]
     summary = {
         "trials_per_case": args.trials,
         "top1_rate_min": min((np.mean([r["top1"] for r in per[c]]) for c in eff),
@@ -374,8 +552,10 @@ def main(argv=None) -> int:
         "out_of_library_unexplained_rate": (
             float(np.mean([r["where_ok"] for r in per["out_of_library"]]))
             if "out_of_library" in per else math.nan),
+        **_new_case_summary(per),
         "seconds_per_diagnosis": float(np.median([r["seconds"] for c in per for r in per[c]])),
         **({} if args.no_multifit else multifit_timing()),
+        **({} if args.no_detection else _detection(cases, args.trials, args.seed)),
         "total_seconds": time.perf_counter() - t_all,
     }
     print(json.dumps(summary, default=float))

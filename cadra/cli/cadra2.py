@@ -465,21 +465,21 @@ def _diagnose(args) -> int:
     try:
         model = _model(args)
         shots, trajs = _shots(args)
+        # a fit short of convergence is still diagnosed: diagnose_gap continues it with more
+        # budget and, if it still falls short, runs from its best point and says so
         result, _ = fit_shots(shots, model,
                               options=FitOptions(max_iterations=args.max_iterations))
-        if not result:
-            raise ValueError(f"the fit did not converge ({result.message}): nothing to "
-                             "diagnose")
         dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=not _quiet(args))
         stage_one = {}
         for sd, traj in zip(shots, trajs, strict=True):
             table = load_trajectory(traj).table
             if "x_consistency" in table:
                 stage_one[sd.shot_id] = table
-        tables = where_analysis(result, shots, result.residuals, stage_one or None)
+        base = dg.fit_given if dg.fit_given is not None else result
+        tables = where_analysis(base, shots, base.residuals, stage_one or None)
     except _REFUSED as exc:
         return _refused("diagnose", exc)
-    write_diagnosis(dg, result, out, overwrite=args.overwrite, where_tables=tables)
+    write_diagnosis(dg, base, out, overwrite=args.overwrite, where_tables=tables)
     print(dg.verdict)
     if not _quiet(args):
         ranking = dg.ranking if _verbose(args) else dg.ranking.head(8)[

@@ -19,6 +19,8 @@ An :class:`Extra` is one scalar unknown shared by the shots it applies to, of on
                 after its recorded time)
   scale         ``s (y, z)`` to y, z (image scale off     --         predicted y, z
                 about the range axis)
+  angle_theta   ``b`` to theta (psi likewise): an offset  rad        1
+                of the station's angle reference
   ============  ========================================  =========  =====================
 
   Timing: the attitude's change over ``dt`` (rate x tens of ns, ~1e-6 rad) and the
@@ -43,7 +45,8 @@ from cadra.channels import NAMES as CHANNELS
 from cadra.channels import POSITION
 from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET
 
-MEASURES = ("position_x", "position_y", "position_z", "timing", "scale")
+MEASURES = ("position_x", "position_y", "position_z", "timing", "scale", "angle_theta",
+            "angle_psi")
 #: the lateral position channels (y, z) a scale error acts on
 _YZ = np.array([CHANNELS.index("y"), CHANNELS.index("z")])
 
@@ -114,6 +117,8 @@ def station_columns(extras: Sequence[Extra], shot_id: str, stations: np.ndarray,
         rows = np.flatnonzero(np.asarray(stations) == e.station)
         if e.measure.startswith("position_"):
             C[rows, CHANNELS.index(e.measure[-1]), j] = 1.0
+        elif e.measure.startswith("angle_"):
+            C[rows, CHANNELS.index(e.measure[len("angle_"):]), j] = 1.0
         elif e.measure == "timing":
             C[rows[:, None], POSITION, j] = states[rows, 3:6]
         else:

@@ -13,14 +13,23 @@ three kinds:
 - ``measurement``: per-station terms added to what stage one measures (a station's position
   bias in x, y or z -- one candidate per channel, so a one-channel survey error is not charged
   for three parameters --, its timing bias, its optical scale error), linear in their
-  parameters.
+  parameters;
+- ``held``: a parameter the model holds (``vary = false``), freed from its held value: a
+  held value the data reject is an unmodelled effect too, and the sigmas of the free
+  parameters it moves are not valid while it is held (seed 004 holds parameters as everyday
+  practice). Reference points of the forms (:data:`REFERENCE_PARAMETERS`) are not tested.
+
+The range air's effects (density gradient, cross-flow) come in two forms in a fit of several
+shots: per shot (``scope = "shot"``, one parameter per shot: the air of each firing) and
+shared by the set (``scope = "set"``: the same range air for every shot, one parameter); the
+ranking charges the per-shot form for its parameters (docs/gap.md).
 
 All parameters are SI; each candidate names its parameters with units.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -40,7 +49,9 @@ class Candidate:
 
     ``phys_dirs`` (k, N_PHYS) for a dynamics effect; ``terms`` {coefficient: expression} in the
     new parameters ``params`` for an aero effect; ``station``/``measure`` ("position_x",
-    "position_y", "position_z", "timing", "scale") for a measurement effect.
+    "position_y", "position_z", "timing", "scale") for a measurement effect; for a held
+    parameter, ``params`` is its name. ``scope``: a dynamics effect's parameters per shot
+    ("shot") or one set for every shot of the fit ("set").
     """
 
     name: str
@@ -51,6 +62,7 @@ class Candidate:
     terms: dict = field(default_factory=dict)
     station: int | None = None
     measure: str = ""
+    scope: str = "shot"
 
     @property
     def n_params(self) -> int:
@@ -64,7 +76,46 @@ def _dir(*pairs) -> np.ndarray:
     return d
 
 
-def dynamics_candidates() -> list[Candidate]:
+#: held parameters that are reference points of the forms (the Mach and angle about which a
+#: form is expanded), not coefficients: freeing one reparametrizes the forms, so they are not
+#: tested as held values
+REFERENCE_PARAMETERS = ("M_ref", "alpha_ref")
+#: the per-shot and the shared form of one range-air effect (name of the per-shot candidate
+#: -> name of the shared one)
+SHARED_FORMS = {"density gradient": "shared density gradient",
+                "cross-flow": "shared cross-flow"}
+
+
+def dynamics_candidates(n_shots: int = 1) -> list[Candidate]:
+    """Body and air effects; with ``n_shots`` > 1 also the range air's shared forms."""
+    out = _dynamics()
+    if n_shots > 1:
+        for c in list(out):
+            if c.name in SHARED_FORMS:
+                out.append(Candidate(SHARED_FORMS[c.name], "dynamics", c.params,
+                                     c.description + ", the same for every shot of the set",
+                                     c.phys_dirs, scope="set"))
+    return out
+
+
+def held_candidates(model: AeroModel) -> list[Candidate]:
+    """Every held parameter of ``model`` but the forms' reference points, freed."""
+    return [Candidate(f"held {p.name}", "held", (p.name,),
+                      f"{p.name} is held at {p.value:.6g}: freed")
+            for p in model.parameters if not p.vary and p.name not in REFERENCE_PARAMETERS]
+
+
+def form_counterpart(name: str) -> str | None:
+    """The other form (per shot / shared) of a range-air effect, or None."""
+    for per_shot, shared in SHARED_FORMS.items():
+        if name == per_shot:
+            return shared
+        if name == shared:
+            return per_shot
+    return None
+
+
+def _dynamics() -> list[Candidate]:
     I = P_INERTIA
     return [
         Candidate("lateral cg offset", "dynamics", ("cg_offset_y_m", "cg_offset_z_m"),
@@ -99,7 +150,9 @@ def aero_candidates(model: AeroModel, mach_nominal: float) -> list[Candidate]:
     when the model has ``alpha_ref``, sin(alpha) otherwise; sin(sigma) for total-angle
     models)."""
     names = set(model.names)
-    M0 = f"{mach_nominal:.6g}"
+    # about the model's own reference Mach where it has one (then the term is the model's
+    # held Mach term when that is a blank cell: ``same_term``)
+    M0 = f"{model.parameter('M_ref').value if 'M_ref' in names else mach_nominal:.6g}"
     if model.angle_plane == "sigma":
         s = "sin(sigma)"
         out = [
@@ -146,7 +199,10 @@ def measurement_candidates(stations) -> list[Candidate]:
 
 
 def augmented_model(model: AeroModel, cand: Candidate) -> AeroModel:
-    """``model`` with the candidate's terms added (new parameters at 0, free)."""
+    """``model`` with the candidate's terms added (new parameters at 0, free); a held
+    candidate's parameter freed at its held value."""
+    if cand.kind == "held":
+        return model.with_vary({n: True for n in cand.params})
     forms = dict(model.coefficients)
     for coef, expr in cand.terms.items():
         forms[coef] = f"({forms[coef]}) + ({expr})" if coef in forms else expr
@@ -156,7 +212,44 @@ def augmented_model(model: AeroModel, cand: Candidate) -> AeroModel:
                      reference=model.reference, moment_reference=model.moment_reference)
 
 
-def library(model: AeroModel, stations, mach_nominal: float) -> list[Candidate]:
-    """Every candidate for a fit with ``model`` over ``stations``."""
-    return dynamics_candidates() + aero_candidates(model, mach_nominal) + \
-        measurement_candidates(stations)
+def _term_change(model: AeroModel, changed: AeroModel, mach_nominal: float) -> np.ndarray:
+    """Every coefficient's change from ``model`` to ``changed`` on a grid of angles and
+    Mach numbers about the nominal one (flattened)."""
+    a = np.radians(np.linspace(-40.0, 40.0, 9))[:, None, None]
+    b = np.radians(np.array([-7.0, 0.0, 11.0]))[None, :, None]
+    m = mach_nominal + np.array([-0.05, 0.0, 0.04])[None, None, :]
+    c0, c1 = model.evaluate(a, b, None, m, p_hat=0.01, q_hat=0.002), changed.evaluate(
+        a, b, None, m, p_hat=0.01, q_hat=0.002)
+    return np.concatenate([np.ravel(c1[k] - c0[k]) for k in c0])
+
+
+def same_term(model: AeroModel, held: Candidate, aero: Candidate, mach_nominal: float) -> bool:
+    """Freeing the held parameter adds exactly the aero candidate's term (a blank cell of the
+    model's table that is the candidate: M1 M1.10's Cm_A2 (M - M_ref) sin(sigma) is the Mach
+    dependence of C_m): the same change of every coefficient per unit, on a grid."""
+    name = held.params[0]
+    d_held = _term_change(model, model.with_values(
+        {name: model.parameter(name).value + 1.0}), mach_nominal)
+    aug = augmented_model(model, aero)
+    d_aero = _term_change(aug, aug.with_values({aero.params[0]: 1.0}), mach_nominal)
+    scale = max(float(np.max(np.abs(d_held))), float(np.max(np.abs(d_aero))), 1e-300)
+    return bool(np.max(np.abs(d_held - d_aero)) <= 1e-9 * scale)
+
+
+def library(model: AeroModel, stations, mach_nominal: float,
+            n_shots: int = 1) -> list[Candidate]:
+    """Every candidate for a fit of ``n_shots`` shots with ``model`` over ``stations``. A held
+    parameter that is the same term as an aero candidate is offered once, as that candidate
+    (its description names the held parameter)."""
+    aero = aero_candidates(model, mach_nominal)
+    held = []
+    for h in held_candidates(model):
+        twin = next((a for a in aero if len(a.params) == 1
+                     and same_term(model, h, a, mach_nominal)), None)
+        if twin is None:
+            held.append(h)
+        else:
+            i = aero.index(twin)
+            aero[i] = replace(twin, description=twin.description
+                              + f" (the model holds this term: {h.params[0]})")
+    return dynamics_candidates(n_shots) + aero + held + measurement_candidates(stations)

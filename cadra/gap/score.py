@@ -34,17 +34,27 @@ from scipy import stats
 from cadra.aero import AeroModel
 from cadra.channels import POSITION
 from cadra.fitting.data import ShotData
-from cadra.fitting.extras import Extra, station_columns
+from cadra.fitting.extras import station_columns
 from cadra.fitting.problem import result_problem
-from cadra.fitting.profile import profile_parameter
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import (
     Integration,
     predict_with_jacobian,
 )
 from cadra.fitting.solver import FitOptions
-from cadra.gap.candidates import Candidate, augmented_model, library
-from cadra.gap.where import by_group
+from cadra.gap import verdict as vd
+from cadra.gap.candidates import Candidate, augmented_model, form_counterpart, library
+from cadra.gap.refit import (
+    PROFILE_MAX_PARAMS,
+    candidate_extras,
+    continue_fit,
+    fresh_fit,
+    param_names,
+    profiles,
+    refit_extras,
+    refit_with,
+)
+from cadra.gap.verdict import size_text
 from cadra.numfmt import pm
 
 
@@ -63,6 +73,11 @@ class GapDiagnosis:
     where: pd.DataFrame              # per shot, station, channel: normalized residual after
     verdict: str
     fit_after: FitResult | None = None   # the fit with the added effects (the last refit)
+    evidence: pd.DataFrame | None = None  # every test of the final residual (verdict.evidence)
+    set_aside: tuple = ()            # (station, channel) misfits set aside as unexplained
+    dropped: tuple = ()              # effects added first that left such a misfit standing
+    base_note: str = ""              # how the fit given was continued, if it had not converged
+    fit_given: FitResult | None = None   # the fit the diagnosis started from (continued)
 
 
 def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],
@@ -80,7 +95,7 @@ def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candi
     ids = list(problem.shot_ids)
     xv = np.array([e.value for e in problem.free_extras], dtype=float)
     phys_cands = [c for c in cands if c.kind == "dynamics"]
-    aero_cands = [c for c in cands if c.kind == "aero"]
+    aero_cands = [c for c in cands if c.kind in ("aero", "held")]
     meas_cands = [c for c in cands if c.kind == "measurement"]
     more = [np.concatenate([c.phys_dirs for c in phys_cands]) if phys_cands else None
             for _ in ids]
@@ -99,8 +114,8 @@ def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candi
         at = n_fit
         for c in phys_cands:
             k = c.phys_dirs.shape[0]
-            C = np.zeros(J.shape[:2] + (len(_param_names(c, ids)),))
-            j0 = 0 if len(ids) == 1 else k_shot * k
+            C = np.zeros(J.shape[:2] + (len(param_names(c, ids)),))
+            j0 = 0 if len(ids) == 1 or c.scope == "set" else k_shot * k
             C[:, :, j0:j0 + k] = J[:, :, at:at + k]
             cols[c.name] = C
             at += k
@@ -112,7 +127,7 @@ def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candi
                                           idx, integ)
             cols[c.name] = Ja
         for c in meas_cands:
-            cols[c.name] = station_columns(_extras(c, ids), sid, sd.stations, pred, states)
+            cols[c.name] = station_columns(candidate_extras(c, ids), sid, sd.stations, pred, states)
         mask = sd.mask
         w = 1.0 / sd.sigma[mask]
         r = ((sd.meas - pred)[mask]) * w
@@ -176,142 +191,16 @@ def score(Q, r, C, n_obs, n_free):
 #: refit chi^2 within this of the best: "the data cannot tell them apart" (both refitted, or
 #: with collinear columns); a likelihood ratio below e^2 ~ 7
 ALIAS_DCHI2 = 4.0
-#: how a refit that did not converge ended, for the verdict
-_HOW = {"stalled": "stalled", "max_iterations": "ran out of iterations", "linear": "was not run"}
 #: canonical correlation of the projected columns above which two candidates are aliases
 #: (when they were not both refitted)
 ALIAS_CORRELATION = 0.95
 #: a candidate is refitted nonlinearly only if its linear score's uncorrected p-value is below
 #: this (far above any significance level used: a pre-filter, not a test)
 REFIT_P = 0.05
-#: convergence control of the station candidates' refits (linear effects: they settle fast)
-REFIT_OPTIONS = FitOptions(max_iterations=25)
-#: a fit from scratch with a candidate that stays above the noise floor at this p-value is
-#: restarted once with the candidate's parameters at its values (:func:`fresh_fit`)
-FRESH_RESTART_P = 0.01
-#: an added effect whose refit did not converge gets a profile likelihood interval
-#: (:mod:`cadra.fitting.profile`) for each of its parameters when it has at most this many
-#: (each profile costs ~10-20 refits)
-PROFILE_MAX_PARAMS = 2
-
-
-def _profiles(rf: FitResult, shots: Sequence[ShotData], names) -> list:
-    """Two-sigma profile-likelihood intervals ``(lower, upper, settled)`` of ``names`` in
-    ``rf`` (``settled``: every held fit converged; None where a profile could not be run)."""
-    out = []
-    for n in names:
-        try:
-            p = profile_parameter(rf, shots, n)
-        except ValueError:
-            out.append(None)
-            continue
-        out.append((p.lower, p.upper, p.n_unsettled == 0))
-    return out
-
-
-def _param_names(c: Candidate, shot_ids: Sequence[str]) -> tuple[str, ...]:
-    """The candidate's parameter names in a fit of ``shot_ids``: a dynamics (body or
-    atmosphere) effect has its own parameters per shot (``name@shot`` when there are
-    several shots); aero and station effects are shared."""
-    if c.kind != "dynamics" or len(shot_ids) == 1:
-        return c.params
-    return tuple(f"{p}@{sid}" for sid in shot_ids for p in c.params)
-
-
-def _extras(c: Candidate, shot_ids: Sequence[str]) -> list[Extra]:
-    if c.kind == "dynamics":
-        out = []
-        for sid in shot_ids:
-            for p, d in zip(c.params, c.phys_dirs, strict=True):
-                out.append(Extra(p if len(shot_ids) == 1 else f"{p}@{sid}",
-                                 phys_direction=tuple(d), shots=(sid,)))
-        return out
-    if c.kind == "measurement":
-        return [Extra(c.params[0], station=c.station, measure=c.measure)]
-    return []
-
-
-def refit_with(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],
-               options=None) -> FitResult | None:
-    """``result``'s fit redone with the candidates' terms added (their parameters free,
-    started at 0; the fit's own extras kept, started at their values), from the fitted
-    states; None if the refit raises. The fit's free local unknowns stay as they are: a body
-    asymmetry is a pair that turns with the roll and spans every orientation about the axis
-    by itself (:mod:`cadra.gap.candidates`), so the roll of a body of revolution is not
-    freed with it (that would add a direction with a saddle where it has no gradient;
-    docs/gap.md)."""
-    from cadra.fitting.solver import fit
-
-    by_id = {s.shot_id: s for s in shots}
-    ids = [sf.shot_id for sf in result.shots]
-    model = result.model
-    extras: list[Extra] = result.extras_at_values()
-    for c in cands:
-        if c.kind == "aero":
-            model = augmented_model(model, c)
-        else:
-            extras += _extras(c, ids)
-    try:
-        return fit([by_id[i] for i in ids], model, [sf.state for sf in result.shots],
-                   options=options or REFIT_OPTIONS,
-                   local_free=[sf.local_free_indices for sf in result.shots],
-                   extras=extras)
-    except (ValueError, FloatingPointError):
-        return None
-
-
-def fresh_fit(result: FitResult, shots: Sequence[ShotData], cand: Candidate,
-              start: AeroModel | None = None) -> FitResult | None:
-    """``result``'s fit with ``cand`` added, redone from automatic starting values (not from
-    ``result``'s solution): its aero model and extras (started at 0) plus the candidate's
-    terms; None if it fails. ``start``: the model as first given to the fit; its values
-    are the automatic start's starting point (the linear-theory targets move only the
-    parameters they constrain: the rest would otherwise start where ``result`` left them).
-    The fit without an effect may sit in a basin (a ``max(...)`` branch, terms bent to
-    mimic the missing one) that a refit from there cannot leave.
-
-    The automatic start knows nothing of the candidate (its parameters start at 0), so a
-    large effect can still leave the aero terms in a wrong basin while the candidate's own
-    parameters come out right (a 0.27 mm cg offset on M2-2429: z to 0.03 %, chi^2/dof
-    1289); when the fit stays above the noise floor it is redone once more from automatic
-    starting values with the candidate's parameters started at that fit's values (there:
-    chi^2/dof 1.13), and the better of the two is returned."""
-    from cadra.fitting import fit_shots
-
-    by_id = {s.shot_id: s for s in shots}
-    ids = [sf.shot_id for sf in result.shots]
-    data = [by_id[i] for i in ids]
-    local_free = [sf.local_free_indices for sf in result.shots]
-    base = result.model
-    if start is not None:
-        base = base.with_values({n: start.parameter(n).value for n in start.names
-                                 if n in base.names})
-    model = augmented_model(base, cand) if cand.kind == "aero" else base
-    extras = [replace(e, value=0.0) for e in result.extras]
-    if cand.kind != "aero":
-        extras += _extras(cand, ids)
-
-    def run(model, extras):
-        try:
-            res, _ = fit_shots(data, model, local_free=local_free, extras=extras)
-        except (ValueError, FloatingPointError):
-            return None
-        return res if res.status != "failed" and math.isfinite(res.chi2) else None
-
-    res = run(model, extras)
-    if res is None or stats.chi2.sf(res.chi2, max(res.dof, 1)) >= FRESH_RESTART_P:
-        return res
-    names = _param_names(cand, ids)
-    if cand.kind == "aero":
-        again = run(model.with_values({n: res.value(n) for n in names}), extras)
-    else:
-        again = run(model, [replace(e, value=res.value(e.name)) if e.name in names else e
-                            for e in extras])
-    return again if again is not None and again.chi2 < res.chi2 else res
 
 
 def _sizes(fit_res: FitResult, c: Candidate, shot_ids) -> tuple[list, list, list]:
-    names = _param_names(c, shot_ids)
+    names = param_names(c, shot_ids)
     return (list(names), [fit_res.value(n) for n in names], [fit_res.sigma(n) for n in names])
 
 
@@ -352,35 +241,210 @@ def _take_refit(row: dict, rf: FitResult | None, chi2_base: float, k: int, n_obs
     row["_refit"] = rf
 
 
-def _fmt_interval(iv) -> str:
-    lo, hi = iv[:2]
-    return f"[{lo:.4g}, {hi:.4g}]".replace("inf", "open")
+def _held_effects(before: FitResult, after: FitResult, name: str) -> dict:
+    """What freeing a held parameter did: its held value, and the free aero parameters it
+    moved by more than their sigma in the fit that held it (their sigmas are not valid while
+    it is held), largest move first."""
+    moved = []
+    for n, v, s in zip(before.aero_names, before.aero_values, before.aero_sigma, strict=True):
+        if n == name or not (math.isfinite(s) and s > 0):
+            continue
+        shift = (after.value(n) - v) / s
+        if abs(shift) > 1.0:
+            moved.append((n, float(shift)))
+    moved.sort(key=lambda x: -abs(x[1]))
+    return {"held_value": float(before.model.parameter(name).value), "moved": moved}
 
 
-def size_text(a: dict) -> str:
-    """An added effect's sizes for the verdict: value ± sigma, or, where the refit did not
-    converge, the profile interval (or the warning that the sigma may be far too small)."""
-    ivs = a.get("interval_2sigma")
-    parts = []
-    for k, (n, v, s) in enumerate(zip(a["params"], a["size"], a["sigma"], strict=False)):
-        if ivs is not None and ivs[k] is not None:
-            parts.append(f"{n} = {v:.4g} (2-sigma profile interval {_fmt_interval(ivs[k])})")
-        else:
-            parts.append(f"{n} = {pm(v, s)}")
-    text = ", ".join(parts)
-    if a["refit_status"] != "converged":
-        how = _HOW.get(a["refit_status"], "failed")
-        ivs = [iv for iv in (ivs or []) if iv is not None]
-        if ivs and all(iv[2] for iv in ivs):
-            text += f" [the refit {how}: the size is poorly determined; the profile interval is"
-            text += " what the data allow]"
-        elif ivs:
-            text += (f" [size poorly determined: the refit {how}, and so did some of the "
-                     "profile's held fits: the interval may still be too narrow]")
-        else:
-            text += (f" [size poorly determined: the refit {how}; its sigma is a "
-                     "linearization and may be far too small]")
-    return text
+def _greedy(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
+            cands: Sequence[Candidate], *, alpha: float, threshold: dict, max_effects: int,
+            integ: Integration, refit_physics: int, refit_measurement: int, profile: bool,
+            bar, converged_only: bool = False):
+    """The rounds of the ranking (module doc; :func:`diagnose_gap`): returns the effects
+    added, the first round's ranking table and the last fit. ``converged_only``: the fit
+    given did not converge, so only refits that converge are ranked (every refit from a
+    point short of the minimum lowers chi^2)."""
+    ids = [sf.shot_id for sf in result.shots]
+    added: list[dict] = []
+    ranking = None
+    current = result
+    remaining = list(cands)
+    for round_ in range(max_effects):
+        per = _columns(current, shots, remaining, integ)
+        J, r = _stack(per, current.model.free_indices().size + len(current.extras))
+        n_obs, n_free = r.size, J.shape[1]
+        Q = _orth(J)
+        lin = {}
+        for c in remaining:
+            sc = score(Q, r, _cand_matrix(per, c.name), n_obs, n_free)
+            if sc is not None:
+                lin[c.name] = sc
+        if not lin:
+            break
+        # refitted: the refit_physics physics and refit_measurement measurement
+        # candidates with the largest linear chi^2 drop, if that drop is not plainly noise
+        # (uncorrected p < REFIT_P); a large nonlinear effect still makes its candidate's
+        # linear drop large, if not exact
+        to_refit = []
+        for kinds, n_refit in ((("dynamics",), refit_physics), (("aero",), refit_physics),
+                               (("held",), refit_physics),
+                               (("measurement",), refit_measurement)):
+            pool = [c for c in remaining if c.kind in kinds
+                    and c.name in lin and lin[c.name]["p"] < REFIT_P]
+            pool.sort(key=lambda c, lin=lin: -lin[c.name]["dchi2"])
+            to_refit += pool[:n_refit]
+        rows = []
+        scratch = set()         # candidates fitted from scratch this round
+        for c in remaining:
+            if c.name not in lin:
+                continue
+            sc = lin[c.name]
+            k = len(param_names(c, ids))
+            row = {"candidate": c.name, "kind": c.kind,
+                   "params": ", ".join(param_names(c, ids)),
+                   "dchi2_linear": sc["dchi2"], "_c": c, "_refit": None}
+            test = {"dchi2": sc["dchi2"], "F": sc["F"], "p": sc["p"], "dbic": sc["dbic"]}
+            size = [(n, d, e) for n, d, e in zip(param_names(c, ids), sc["delta"],
+                                                 sc["sigma"], strict=False)]
+            row.update({"_test": test, "_size": size})
+            if c in to_refit:
+                # physics refits get the full iteration budget: a large effect takes a
+                # while to settle, and a half-settled refit would lose the ranking
+                rf = refit_with(current, shots, [c], None if c.kind == "measurement"
+                                else FitOptions())
+                if c.kind in ("aero", "held"):
+                    # an aero term also gets a fit from scratch (linear-theory start):
+                    # a large one bends the fit without it far from its basin
+                    fresh = fresh_fit(current, shots, c, model)
+                    scratch.add(c.name)
+                    if fresh is not None and (rf is None or fresh.chi2 < rf.chi2):
+                        rf = fresh
+                if bar is not None:
+                    bar.update(1)
+                _take_refit(row, rf, current.chi2, k, n_obs, n_free, ids)
+            rows.append(row)
+        if not any(r["_refit"] is not None and stats.chi2.sf(
+                r["_refit"].chi2, max(r["_refit"].dof, 1)) >= alpha for r in rows):
+            # no refit reached the noise floor: the body and air effects get a fit from
+            # scratch too (a large one can leave the fit in a basin that a refit from
+            # there cannot leave; a 0.27 mm cg offset on M2-2429 lost to an aero term)
+            for row in rows:
+                c = row["_c"]
+                if c.kind == "dynamics" and c in to_refit:
+                    fresh = fresh_fit(current, shots, c, model)
+                    scratch.add(c.name)
+                    if bar is not None:
+                        bar.update(1)
+                    if fresh is not None and (row["_refit"] is None
+                                              or fresh.chi2 < row["_refit"].chi2):
+                        _take_refit(row, fresh, current.chi2, len(param_names(c, ids)),
+                                    n_obs, n_free, ids)
+        if converged_only and any(r["_refit"] is not None and r["_refit"].status == "converged"
+                                  for r in rows):
+            # from a point short of the minimum every refit lowers chi^2: rank only the
+            # candidates whose refit converged
+            for row in rows:
+                if row["_refit"] is None or row["_refit"].status != "converged":
+                    row["_test"] = dict(row["_test"], p=1.0, dbic=math.inf)
+        for row in rows:
+            test, size = row.pop("_test"), row["_size"]
+            row.update({"dchi2": test["dchi2"], "F": test["F"], "p_value": test["p"],
+                        "dbic": test["dbic"], "refit": row["_refit"] is not None,
+                        "size": "; ".join(f"{n} = {pm(v, e)}" for n, v, e in size)})
+        table = pd.DataFrame(rows)
+        # rank by the Bonferroni-adjusted p-value (p over its kind's level, times alpha),
+        # then by the BIC change: where two p-values are both ~0 the information criterion
+        # decides, which charges a per-shot form for its parameters against a shared one
+        table["p_adjusted"] = [min(1.0, p * alpha / threshold[
+            "measurement" if k == "measurement" else "physics"])
+            for p, k in zip(table["p_value"], table["kind"], strict=True)]
+        table = table.sort_values(["p_adjusted", "dbic"], ascending=[True, True],
+                                  kind="stable").reset_index(drop=True)
+        best = table.iloc[0]
+        # the two forms of a range-air effect (per shot / shared by the set), both
+        # significant: the information criterion chooses, charging the per-shot form for
+        # its parameters (the F test's p-values of large effects both underflow to 0)
+        other_form = form_counterpart(best["candidate"])
+        if other_form is not None:
+            o = table[table["candidate"] == other_form]
+            if len(o) and o["p_adjusted"].iloc[0] < alpha and o["dbic"].iloc[0] < best["dbic"]:
+                table = pd.concat([o, table[table["candidate"] != other_form]],
+                                  ignore_index=True)
+                best = table.iloc[0]
+                other_form = form_counterpart(best["candidate"])
+        # aliases: collinear with the best in this round's linear columns, and a refit
+        # chi^2 drop within ALIAS_DCHI2 of the best's; the other form (per shot / shared)
+        # of the same range-air effect is not an alias but the form not chosen
+        Cb = _cand_matrix(per, best["candidate"])
+        Cb = Cb - Q @ (Q.T @ Cb)
+        aliases = []
+        for _, row in table.iloc[1:].iterrows():
+            if row["dchi2"] < best["dchi2"] - ALIAS_DCHI2 or row["candidate"] == other_form:
+                continue
+            Cj = _cand_matrix(per, row["candidate"])
+            # both refitted: each refit's chi^2 is its own maximum likelihood, so a
+            # drop within ALIAS_DCHI2 is a likelihood ratio below e^2 whatever their
+            # linear columns (two large effects can reach the same chi^2 along different
+            # columns: an inertia asymmetry and products of inertia on a symmetric body
+            # that does not spin, 40044 and 40043.98 on one M1 trial)
+            both_refit = best["_refit"] is not None and row["_refit"] is not None
+            if both_refit or _canonical_corr(Cb, Cj - Q @ (Q.T @ Cj)) >= ALIAS_CORRELATION:
+                aliases.append(row["candidate"])
+        table["alias_of_best"] = table["candidate"].isin(aliases)
+        if ranking is None:
+            ranking = table.drop(columns=["_c", "_refit", "_size"])
+        if not (best["p_adjusted"] < alpha and best["dbic"] < 0):
+            break
+        c = best["_c"]
+        form = None
+        if other_form is not None and other_form in set(table["candidate"]):
+            o = table[table["candidate"] == other_form].iloc[0]
+            form = {"chosen": "shared by the set" if c.scope == "set" else "per shot",
+                    "other": other_form, "dbic_chosen": float(best["dbic"]),
+                    "dbic_other": float(o["dbic"]), "other_refit": bool(o["refit"])}
+        rf = best["_refit"]
+        if rf is not None and rf.status != "converged":
+            # the refits run a short iteration budget; the one added is finished properly
+            more = refit_with(rf, shots, [], FitOptions())
+            if more is not None and more.chi2 <= rf.chi2:
+                rf = more
+        if rf is not None and c.name not in scratch and stats.chi2.sf(
+                rf.chi2, max(rf.dof, 1)) < alpha:
+            # still above the noise floor: the fit may have stayed in the basin of the
+            # fit without the effect; one fit from scratch with it (unless it had one)
+            fresh = fresh_fit(current, shots, c, model)
+            if fresh is not None and fresh.chi2 < rf.chi2:
+                rf = fresh
+        if rf is not best["_refit"]:
+            t = _test(current.chi2, rf.chi2, len(param_names(c, ids)), n_obs, n_free)
+            best = best.copy()
+            best["dchi2"], best["p_value"] = t["dchi2"], t["p"]
+            best["_size"] = list(zip(*_sizes(rf, c, ids), strict=True))
+        names, vals, sigs = zip(*best["_size"], strict=True)
+        # a refit that did not converge: its sigma is a linearization at a point of a
+        # flat or curved valley; the profile likelihood is the honest interval
+        intervals = None
+        if (profile and rf is not None and rf.status != "converged"
+                and len(names) <= PROFILE_MAX_PARAMS):
+            intervals = profiles(rf, shots, names)
+            if bar is not None:
+                bar.update(1)
+        entry = {"effect": c.name, "kind": c.kind, "params": tuple(names),
+                 "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
+                 "covariance": _cov_block(rf, names) if rf is not None else None,
+                 "interval_2sigma": intervals,
+                 "p_value": float(best["p_value"]), "dchi2": float(best["dchi2"]),
+                 "round": round_ + 1, "refit": rf is not None,
+                 "refit_status": rf.status if rf is not None else "linear",
+                 "aliases": tuple(aliases), "form": form}
+        if c.kind == "held" and rf is not None:
+            entry.update(_held_effects(current, rf, c.params[0]))
+        added.append(entry)
+        remaining = [x for x in remaining if x.name != c.name and x.name != other_form]
+        if rf is None:
+            break       # a linear-only addition: no fit to go on from
+        current = rf
+    return added, ranking, current
 
 
 def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel | None = None,
@@ -388,231 +452,104 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                  max_effects: int = 3, integ: Integration | None = None,
                  refit_physics: int = 3, refit_measurement: int = 3,
                  profile: bool = True, progress: bool = False) -> GapDiagnosis:
-    """Rank the candidate effects for a fit and add the significant ones greedily.
+    """Rank the candidate effects for a fit, add the significant ones greedily, and give one
+    verdict from every test.
 
-    Each round: every candidate is scored linearly against the current fit (module doc);
-    then the ``refit_physics`` best dynamics and aero candidates (each kind: a large aero
-    term's linear score is easily outranked by a dynamics one's) and the ``refit_measurement``
-    best measurement candidates (by linear chi^2 drop, among those with an uncorrected linear
-    p-value below :data:`REFIT_P`) are refitted nonlinearly (:func:`refit_with`: the whole
-    fit redone with the candidate free); candidates are ranked by the refit's chi^2 drop where
-    there is one, else the linear one (F test, Bonferroni-adjusted p-value: half of ``alpha``
-    shared by the physics candidates, half by the station ones; BIC beside it). The best is
-    added when its adjusted p-value is below ``alpha`` and its BIC improves;
-    candidates the data cannot tell from it (chi^2 drop within :data:`ALIAS_DCHI2`, both
-    refitted or with collinear columns) are named beside it as aliases. What remains is
-    tested against the noise floor. An added effect whose refit did not converge (its sigma
-    a linearization at one point of a valley) gets, with ``profile``, a two-sigma
-    profile-likelihood interval per parameter (``interval_2sigma``; at most
-    :data:`PROFILE_MAX_PARAMS` parameters).
+    A fit short of convergence is first continued (:func:`cadra.gap.refit.continue_fit`);
+    if it still falls short, the diagnosis runs from its best point, says so, and ranks only
+    the candidates whose refits converge. Each round: every candidate is scored linearly
+    against the current fit (module doc); then the ``refit_physics`` best dynamics, aero and
+    held-parameter candidates (each kind) and the ``refit_measurement`` best measurement
+    candidates (by linear chi^2 drop, among those with an uncorrected linear p-value below
+    :data:`REFIT_P`) are refitted nonlinearly; candidates are ranked by the refit's chi^2
+    drop where there is one, else the linear one (F test, Bonferroni-adjusted p-value: half
+    of ``alpha`` shared by the physics candidates, half by the station ones; then the BIC
+    change). The best is added when its adjusted p-value is below ``alpha`` and its BIC
+    improves; candidates the data cannot tell from it are named beside it as aliases.
+
+    Then every test of the residual (:func:`cadra.gap.verdict.evidence`: global chi^2, per
+    channel, per station and channel, cross-shot repetition, runs of sign, content at the
+    motion frequencies; family-wise level ``alpha`` over them all). A misfit localized at a
+    few stations and channels that stands after the effects added is set aside as an
+    unexplained offset there and the ranking is redone with it: an effect that left it
+    standing and is not found again is not the explanation (``dropped``).
     ``model``: the model as given to the fit (default ``result.model``): the library is built
     for it, and fits from scratch start from its values (:func:`fresh_fit`)."""
     integ = integ or Integration()
     model = model or result.model
     shots = list(shots)
+    given = result
+    result = continue_fit(result, shots)
+    base_note = ""
+    if result.status != "converged":
+        base_note = (f"the fit did not converge ({given.status}; continued, still "
+                     f"{result.status}): the diagnosis runs from its best point (chi^2/dof "
+                     f"{result.reduced_chi2:.3g}) and ranks only effects whose refits converge")
+    elif given.status != "converged":
+        base_note = (f"the fit as given had not converged ({given.status}); it was continued "
+                     f"to convergence (chi^2/dof {given.reduced_chi2:.3g} -> "
+                     f"{result.reduced_chi2:.3g}) before the diagnosis")
     ids = [sf.shot_id for sf in result.shots]
     stations = sorted({int(st) for s in shots for st in s.stations})
     mach = float(np.mean([np.median(np.linalg.norm(np.diff(s.meas[:, POSITION], axis=0), axis=1)
                                     / np.diff(s.t_s)) / s.rigid.speed_of_sound_m_s
                           for s in shots]))
-    cands = list(candidates) if candidates is not None else library(model, stations, mach)
+    cands = (list(candidates) if candidates is not None
+             else library(model, stations, mach, n_shots=len(ids)))
     # weighted Bonferroni (family-wise error alpha): half of alpha for the physics
-    # candidates (dynamics, aero: few), half for the per-station measurement ones (many), so
-    # the many station candidates do not dilute the test of the few physical ones
+    # candidates (dynamics, aero, held: few), half for the per-station measurement ones
+    # (many), so the many station candidates do not dilute the test of the few physical ones
     n_phys = sum(c.kind != "measurement" for c in cands)
     n_meas = len(cands) - n_phys
     halves = 2 if n_phys and n_meas else 1
     threshold = {kind: alpha / halves / max(n, 1) for kind, n in
                  (("physics", n_phys), ("measurement", n_meas))}
-    added: list[dict] = []
-    ranking = None
-    current = result
-    remaining = list(cands)
+    opts = {"alpha": alpha, "threshold": threshold, "max_effects": max_effects,
+            "integ": integ, "refit_physics": refit_physics,
+            "refit_measurement": refit_measurement, "profile": profile,
+            "converged_only": result.status != "converged"}
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(desc="cadra2 diagnose", unit="refit", leave=False)
+    dropped: list[dict] = []
+    set_aside: tuple = ()
     try:
-        for round_ in range(max_effects):
-            per = _columns(current, shots, remaining, integ)
-            J, r = _stack(per, current.model.free_indices().size + len(current.extras))
-            n_obs, n_free = r.size, J.shape[1]
-            Q = _orth(J)
-            lin = {}
-            for c in remaining:
-                sc = score(Q, r, _cand_matrix(per, c.name), n_obs, n_free)
-                if sc is not None:
-                    lin[c.name] = sc
-            if not lin:
-                break
-            # refitted: the refit_physics physics and refit_measurement measurement
-            # candidates with the largest linear chi^2 drop, if that drop is not plainly noise
-            # (uncorrected p < REFIT_P); a large nonlinear effect still makes its candidate's
-            # linear drop large, if not exact
-            to_refit = []
-            for kinds, n_refit in ((("dynamics",), refit_physics), (("aero",), refit_physics),
-                                   (("measurement",), refit_measurement)):
-                pool = [c for c in remaining if c.kind in kinds
-                        and c.name in lin and lin[c.name]["p"] < REFIT_P]
-                pool.sort(key=lambda c, lin=lin: -lin[c.name]["dchi2"])
-                to_refit += pool[:n_refit]
-            rows = []
-            scratch = set()         # candidates fitted from scratch this round
-            for c in remaining:
-                if c.name not in lin:
-                    continue
-                sc = lin[c.name]
-                k = len(_param_names(c, ids))
-                row = {"candidate": c.name, "kind": c.kind,
-                       "params": ", ".join(_param_names(c, ids)),
-                       "dchi2_linear": sc["dchi2"], "_c": c, "_refit": None}
-                test = {"dchi2": sc["dchi2"], "F": sc["F"], "p": sc["p"], "dbic": sc["dbic"]}
-                size = [(n, d, e) for n, d, e in zip(_param_names(c, ids), sc["delta"],
-                                                     sc["sigma"], strict=False)]
-                row.update({"_test": test, "_size": size})
-                if c in to_refit:
-                    # physics refits get the full iteration budget: a large effect takes a
-                    # while to settle, and a half-settled refit would lose the ranking
-                    rf = refit_with(current, shots, [c], None if c.kind == "measurement"
-                                    else FitOptions())
-                    if c.kind == "aero":
-                        # an aero term also gets a fit from scratch (linear-theory start):
-                        # a large one bends the fit without it far from its basin
-                        fresh = fresh_fit(current, shots, c, model)
-                        scratch.add(c.name)
-                        if fresh is not None and (rf is None or fresh.chi2 < rf.chi2):
-                            rf = fresh
-                    if bar is not None:
-                        bar.update(1)
-                    _take_refit(row, rf, current.chi2, k, n_obs, n_free, ids)
-                rows.append(row)
-            if not any(r["_refit"] is not None and stats.chi2.sf(
-                    r["_refit"].chi2, max(r["_refit"].dof, 1)) >= alpha for r in rows):
-                # no refit reached the noise floor: the body and air effects get a fit from
-                # scratch too (a large one can leave the fit in a basin that a refit from
-                # there cannot leave; a 0.27 mm cg offset on M2-2429 lost to an aero term)
-                for row in rows:
-                    c = row["_c"]
-                    if c.kind == "dynamics" and c in to_refit:
-                        fresh = fresh_fit(current, shots, c, model)
-                        scratch.add(c.name)
-                        if bar is not None:
-                            bar.update(1)
-                        if fresh is not None and (row["_refit"] is None
-                                                  or fresh.chi2 < row["_refit"].chi2):
-                            _take_refit(row, fresh, current.chi2, len(_param_names(c, ids)),
-                                        n_obs, n_free, ids)
-            for row in rows:
-                test, size = row.pop("_test"), row["_size"]
-                row.update({"dchi2": test["dchi2"], "F": test["F"], "p_value": test["p"],
-                            "dbic": test["dbic"], "refit": row["_refit"] is not None,
-                            "size": "; ".join(f"{n} = {pm(v, e)}" for n, v, e in size)})
-            table = pd.DataFrame(rows)
-            # rank by the Bonferroni-adjusted p-value (p over its kind's level, times alpha)
-            table["p_adjusted"] = [min(1.0, p * alpha / threshold[
-                "measurement" if k == "measurement" else "physics"])
-                for p, k in zip(table["p_value"], table["kind"], strict=True)]
-            table = table.sort_values(["p_adjusted", "dchi2"], ascending=[True, False],
-                                      kind="stable").reset_index(drop=True)
-            best = table.iloc[0]
-            # aliases: collinear with the best in this round's linear columns, and a refit
-            # chi^2 drop within ALIAS_DCHI2 of the best's
-            Cb = _cand_matrix(per, best["candidate"])
-            Cb = Cb - Q @ (Q.T @ Cb)
-            aliases = []
-            for _, row in table.iloc[1:].iterrows():
-                if row["dchi2"] < best["dchi2"] - ALIAS_DCHI2:
-                    continue
-                Cj = _cand_matrix(per, row["candidate"])
-                # both refitted: each refit's chi^2 is its own maximum likelihood, so a
-                # drop within ALIAS_DCHI2 is a likelihood ratio below e^2 whatever their
-                # linear columns (two large effects can reach the same chi^2 along different
-                # columns: an inertia asymmetry and products of inertia on a symmetric body
-                # that does not spin, 40044 and 40043.98 on one M1 trial)
-                both_refit = best["_refit"] is not None and row["_refit"] is not None
-                if both_refit or _canonical_corr(Cb, Cj - Q @ (Q.T @ Cj)) >= ALIAS_CORRELATION:
-                    aliases.append(row["candidate"])
-            table["alias_of_best"] = table["candidate"].isin(aliases)
-            if ranking is None:
-                ranking = table.drop(columns=["_c", "_refit", "_size"])
-            if not (best["p_adjusted"] < alpha and best["dbic"] < 0):
-                break
-            c = best["_c"]
-            rf = best["_refit"]
-            if rf is not None and rf.status != "converged":
-                # the refits run a short iteration budget; the one added is finished properly
-                more = refit_with(rf, shots, [], FitOptions())
-                if more is not None and more.chi2 <= rf.chi2:
-                    rf = more
-            if rf is not None and c.name not in scratch and stats.chi2.sf(
-                    rf.chi2, max(rf.dof, 1)) < alpha:
-                # still above the noise floor: the fit may have stayed in the basin of the
-                # fit without the effect; one fit from scratch with it (unless it had one)
-                fresh = fresh_fit(current, shots, c, model)
-                if fresh is not None and fresh.chi2 < rf.chi2:
-                    rf = fresh
-            if rf is not best["_refit"]:
-                t = _test(current.chi2, rf.chi2, len(_param_names(c, ids)), n_obs, n_free)
-                best = best.copy()
-                best["dchi2"], best["p_value"] = t["dchi2"], t["p"]
-                best["_size"] = list(zip(*_sizes(rf, c, ids), strict=True))
-            names, vals, sigs = zip(*best["_size"], strict=True)
-            # a refit that did not converge: its sigma is a linearization at a point of a
-            # flat or curved valley; the profile likelihood is the honest interval
-            intervals = None
-            if (profile and rf is not None and rf.status != "converged"
-                    and len(names) <= PROFILE_MAX_PARAMS):
-                intervals = _profiles(rf, shots, names)
-                if bar is not None:
-                    bar.update(1)
-            added.append({"effect": c.name, "kind": c.kind, "params": tuple(names),
-                          "size": [float(v) for v in vals], "sigma": [float(v) for v in sigs],
-                          "covariance": _cov_block(rf, names) if rf is not None else None,
-                          "interval_2sigma": intervals,
-                          "p_value": float(best["p_value"]), "dchi2": float(best["dchi2"]),
-                          "round": round_ + 1, "refit": rf is not None,
-                          "refit_status": rf.status if rf is not None else "linear",
-                          "aliases": tuple(aliases)})
-            remaining = [x for x in remaining if x.name != c.name]
-            if rf is None:
-                break       # a linear-only addition: no fit to go on from
-            current = rf
+        added, ranking, current = _greedy(result, shots, model, cands, bar=bar, **opts)
+        ev = vd.evidence(current, shots, alpha)
+        cells = vd.localized_cells(ev)
+        if cells:
+            # a misfit at a few stations and channels that stands after the effects: set
+            # aside as unexplained offsets there (sized by the fit), and the ranking redone
+            # with them, without those stations' own candidates
+            aside = refit_extras(result, shots, vd.offset_extras(cells))
+            if aside is not None:
+                set_aside = tuple(cells)
+                if added:
+                    keep = [c for c in cands if not vd.covers(c, cells)]
+                    added2, _, current = _greedy(aside, shots, model, keep, bar=bar, **opts)
+                    kept = {a["effect"] for a in added2}
+                    dropped = [a for a in added if a["effect"] not in kept]
+                    added = added2
+                else:
+                    current = aside
+                ev = vd.evidence(current, shots, alpha)
     finally:
         if bar is not None:
             bar.close()
-    # residuals before / after, per channel, and the noise-floor test of what remains
-    rms_before = result.rms()
-    rms_after = current.rms()
-    rchi0, rchi1 = result.reduced_chi2, current.reduced_chi2
     rr = current.residuals
     where = pd.DataFrame({"shot_id": rr["shot_id"], "station": rr["station"],
                           "channel": rr["channel"], "normalized": rr["normalized"]})
-    p_floor = float(stats.chi2.sf(current.chi2, max(current.dof, 1)))
-    unexplained = p_floor < alpha
-    if unexplained:
-        worst = by_group(where, ["station", "channel"]).head(3)
-        top = ", ".join(f"station {r.station} {r.channel} ({r.rms_normalized:.1f} sigma rms)"
-                        for r in worst.itertuples())
-        verdict = (("after " + ", ".join(a["effect"] for a in added) + ": " if added else "")
-                   + f"unexplained: the residual stays above the noise floor (chi^2/dof = "
-                   f"{rchi1:.2f}, p = {p_floor:.1e}); it lies mostly at {top}")
-    elif added:
-        verdict = "; ".join(
-            f"{a['effect']}"
-            + (f" (or, indistinguishable on these data, {' / '.join(a['aliases'])})"
-               if a["aliases"] else "") + ": "
-            + size_text(a) for a in added)
-        verdict += f" (chi^2/dof {rchi0:.2f} -> {rchi1:.2f})"
-    else:
-        verdict = (f"no significant unmodelled effect (chi^2/dof = {rchi0:.2f}; best "
-                   f"candidate {ranking.iloc[0]['candidate'] if ranking is not None else '-'}"
-                   f", p = {ranking.iloc[0]['p_value'] if ranking is not None else 1:.2g})")
+    verdict, unexplained = vd.compose(added, dropped, set_aside, ev, current, base_note,
+                                      result.reduced_chi2, ranking)
     return GapDiagnosis(ranking=ranking if ranking is not None else pd.DataFrame(),
-                        added=tuple(added), rms_before=rms_before, rms_after=rms_after,
-                        reduced_chi2_before=rchi0, reduced_chi2_after=rchi1,
+                        added=tuple(added), rms_before=result.rms(), rms_after=current.rms(),
+                        reduced_chi2_before=result.reduced_chi2,
+                        reduced_chi2_after=current.reduced_chi2,
                         unexplained=bool(unexplained), where=where, verdict=verdict,
-                        fit_after=current)
+                        fit_after=current, evidence=ev, set_aside=set_aside,
+                        dropped=tuple(dropped), base_note=base_note, fit_given=result)
 
 
 __all__ = ["GapDiagnosis", "diagnose_gap", "fresh_fit", "refit_with", "score", "size_text"]
