@@ -25,6 +25,8 @@ Subcommands:
 * ``cadra2 diagnose TRAJECTORY [...] --model MODEL -o OUT_DIR`` — fit, then rank the library
   of unmodelled effects by score tests, add the significant ones, and say where any remaining
   gap lies (docs/gap.md).
+* ``cadra2 motion TRAJECTORY [...] -o OUT_DIR`` — epicyclic fit, linear-theory and K-B
+  coefficients, yaw card (:mod:`cadra.cli.motion`, docs/motion.md).
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 * ``cadra2 models`` — list the bundled aero models (name, case, angle plane, free parameters).
@@ -56,6 +58,7 @@ from cadra.cli._format import (
     join_number_lists,
     warn,
 )
+from cadra.cli.motion import add_parser as add_motion_parser
 from cadra.numfmt import pm
 
 #: the top-level help's description (plain text: the module doc is rST)
@@ -648,6 +651,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a station is flagged when its bias moved by more than this many "
                           "sigma")
     cal.add_argument("--note", default="", help="a note stored with the history entry")
+    add_motion_parser(sub)   # cadra2 motion: cadra/cli/motion.py, docs/motion.md
     sim = _subcommand(
         sub, "simulate", _simulate, "simulate and render a synthetic shot",
         "Fly a synthetic shot from a shot specification (6-DOF, the same code the fit uses), "
