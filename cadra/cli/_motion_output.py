@@ -275,7 +275,7 @@ def plot_sectional(results, path) -> None:
         a2.plot(grid * DEG, kb.Cmq_sum0 + kb.Cmq_sum2 * grid**2, "-", color=f"C{k}",
                 label=f"{r.shot_id} K-B")
     a1.set_ylabel("C_mα (per rad)")
-    a2.set_ylabel("C_mq + C_mα̇ (per rad; linear theory per section)")
+    a2.set_ylabel("C_mq + C_mα̇ (per rad)")
     for ax in (a1, a2):
         ax.set_xlabel("amplitude δ_e (deg)")
         ax.legend(fontsize=8)
