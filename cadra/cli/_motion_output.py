@@ -110,9 +110,10 @@ def shot_lines(r, verbose: bool = False) -> list[str]:
         lines += ["  " + t for t in fit_report(f).splitlines()]
     else:
         for name, a in _arms(r):
-            lines.append(f"  arm {name}: K {pm(a.K * DEG, a.K_sigma * DEG, 'deg')}, "
-                         f"lambda {pm(a.lam, a.lam_sigma if name != 'trim' else None, '1/' + u)}"
-                         f", omega {pm(a.omega, a.omega_sigma, 'rad/' + u)}")
+            rates = (f"lambda {pm(a.lam, a.lam_sigma, '1/' + u)}, omega "
+                     f"{pm(a.omega, a.omega_sigma, 'rad/' + u)}" if name != "trim" else
+                     f"rate p {pm(a.omega, None, 'rad/' + u)} (given)")
+            lines.append(f"  arm {name}: K {pm(a.K * DEG, a.K_sigma * DEG, 'deg')}, {rates}")
     lines.append(f"  NPR {r.npr.npr:.3f}")
     lc = r.coefficients
     if lc is not None:

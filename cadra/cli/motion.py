@@ -223,6 +223,9 @@ def _sectional(t, alpha, beta, sa, sb, fit, lc, cond, spin, window, step, notes)
                      f"{pm(spin_fit, lc.spin_from_fit_sigma, 'rad/s')} and none was given "
                      "(--spin)")
         return sec, None, False
+    if spin is None:
+        notes.append("Kryloff-Bogoliuboff reduction: no spin given, taken as 0 (the arms' "
+                     "frequencies are consistent with none)")
     try:
         kb = kb_reduction(sec, cond_t)
     except ValueError as exc:
