@@ -117,9 +117,11 @@ def test_the_range_airs_shared_gradient_is_one_parameter_and_wins_over_the_per_s
 
 
 def test_a_held_parameter_the_data_reject_is_flagged_with_the_parameters_it_moves():
-    """M2's held CL_A2 (a blank cell, 0) is -2 in the data: freeing it is the effect."""
-    base = load_bundled_model("m2_m070")
-    truth = base.with_values({"CL_A2": -2.0})
+    """A model that holds M2's CL_A2 at 1 where the data have -1: freeing it is the
+    effect (a parameter held at 0, a term left out, is not offered: the library's aero
+    terms ask that question)."""
+    base = load_bundled_model("m2_m070").with_values({"CL_A2": 1.0})
+    truth = base.with_values({"CL_A2": -1.0})
     import tempfile
     from pathlib import Path
 
@@ -134,9 +136,11 @@ def test_a_held_parameter_the_data_reject_is_flagged_with_the_parameters_it_move
     held = [a for a in dg.added if a["effect"] == "held CL_A2"]
     assert held, dg.verdict
     a = held[0]
-    assert abs(a["size"][0] - (-2.0)) <= 2 * a["sigma"][0]
-    assert a["held_value"] == 0.0
-    assert "held CL_A2 = 0 is inconsistent with these data" in dg.verdict
+    assert abs(a["size"][0] - (-1.0)) <= 2 * a["sigma"][0]
+    assert a["held_value"] == 1.0
+    assert "held CL_A2 = 1 is inconsistent with these data" in dg.verdict
+    names = [c.name for c in library(load_bundled_model("m2_m070"), [1], 0.7)]
+    assert "held Cmq_A3" in names and "held CL_A2" not in names
 
 
 def test_a_held_blank_cell_that_is_a_library_term_is_offered_once():
