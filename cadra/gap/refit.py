@@ -1,6 +1,7 @@
 """Refits of a fit with candidate effects: from its solution (:func:`refit_with`), from
 automatic starting values (:func:`fresh_fit`), continued with more budget
-(:func:`continue_fit`), with extra unknowns (:func:`refit_extras`), and profile intervals.
+(:func:`continue_fit`; extra unknowns: ``refit_with(..., extras=...)``), and profile
+intervals.
 
 Every refit is the solver's own fit (:func:`cadra.fitting.solver.fit`) with the candidate's
 terms added: the model's forms (aero), a freed held parameter (held), or extra unknowns
@@ -92,30 +93,30 @@ def candidate_extras(c: Candidate, shot_ids: Sequence[str]) -> list[Extra]:
 
 
 def refit_with(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],
-               options=None) -> FitResult | None:
-    """``result``'s fit redone with the candidates' terms added (their parameters free,
-    started at 0; the fit's own extras kept, started at their values), from the fitted
-    states; None if the refit raises. The fit's free local unknowns stay as they are: a body
-    asymmetry is a pair that turns with the roll and spans every orientation about the axis
-    by itself (:mod:`cadra.gap.candidates`), so the roll of a body of revolution is not
-    freed with it (that would add a direction with a saddle where it has no gradient;
-    docs/gap.md)."""
+               options=None, extras: Sequence[Extra] = ()) -> FitResult | None:
+    """``result``'s fit redone with the candidates' terms and ``extras`` added (their
+    parameters free, started at 0 / their values; the fit's own extras kept, started at
+    their values), from the fitted states; None if the refit raises. The fit's free local
+    unknowns stay as they are: a body asymmetry is a pair that turns with the roll and spans
+    every orientation about the axis by itself (:mod:`cadra.gap.candidates`), so the roll of
+    a body of revolution is not freed with it (that would add a direction with a saddle
+    where it has no gradient; docs/gap.md)."""
     from cadra.fitting.solver import fit
 
     by_id = {s.shot_id: s for s in shots}
     ids = [sf.shot_id for sf in result.shots]
     model = result.model
-    extras: list[Extra] = result.extras_at_values()
+    more: list[Extra] = result.extras_at_values() + list(extras)
     for c in cands:
         if c.kind in ("aero", "held"):
             model = augmented_model(model, c)
         else:
-            extras += candidate_extras(c, ids)
+            more += candidate_extras(c, ids)
     try:
         return fit([by_id[i] for i in ids], model, [sf.state for sf in result.shots],
                    options=options or REFIT_OPTIONS,
                    local_free=[sf.local_free_indices for sf in result.shots],
-                   extras=extras)
+                   extras=more)
     except (ValueError, FloatingPointError):
         return None
 
@@ -172,23 +173,6 @@ def fresh_fit(result: FitResult, shots: Sequence[ShotData], cand: Candidate,
     return again if again is not None and again.chi2 < res.chi2 else res
 
 
-def refit_extras(result: FitResult, shots: Sequence[ShotData], extras: Sequence[Extra],
-                 options=None) -> FitResult | None:
-    """``result``'s fit redone from its solution with ``extras`` added (free, from their
-    values); None if it raises."""
-    from cadra.fitting.solver import fit
-
-    by_id = {s.shot_id: s for s in shots}
-    ids = [sf.shot_id for sf in result.shots]
-    try:
-        return fit([by_id[i] for i in ids], result.model, [sf.state for sf in result.shots],
-                   options=options or FitOptions(),
-                   local_free=[sf.local_free_indices for sf in result.shots],
-                   extras=result.extras_at_values() + list(extras))
-    except (ValueError, FloatingPointError):
-        return None
-
-
 def continue_fit(result: FitResult, shots: Sequence[ShotData],
                  max_iterations: int = CONTINUE_ITERATIONS) -> FitResult:
     """A fit short of convergence continued from where it stopped with ``max_iterations``
@@ -208,4 +192,4 @@ def above_floor(fit_res: FitResult, p: float) -> bool:
 
 __all__ = ["CONTINUE_ITERATIONS", "FRESH_RESTART_P", "PROFILE_MAX_PARAMS", "REFIT_OPTIONS",
            "above_floor", "candidate_extras", "continue_fit", "fresh_fit", "param_names",
-           "profiles", "refit_extras", "refit_with"]
+           "profiles", "refit_with"]

@@ -51,7 +51,6 @@ from cadra.gap.refit import (
     fresh_fit,
     param_names,
     profiles,
-    refit_extras,
     refit_with,
 )
 from cadra.gap.verdict import size_text
@@ -523,7 +522,8 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
             # a misfit at a few stations and channels that stands after the effects: set
             # aside as unexplained offsets there (sized by the fit), and the ranking redone
             # with them, without those stations' own candidates
-            aside = refit_extras(result, shots, vd.offset_extras(cells))
+            aside = refit_with(result, shots, [], FitOptions(),
+                               extras=vd.offset_extras(cells))
             if aside is not None:
                 set_aside = tuple(cells)
                 if added:
