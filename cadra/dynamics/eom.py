@@ -29,6 +29,7 @@ from cadra.dynamics.layout import (
     P_WIND_GRAD,
     PLANE_SIGMA,
 )
+from cadra.dynamics.modes import constrain
 
 
 @njit(cache=True)
@@ -191,3 +192,6 @@ def derivative(y, phys, I, Iinv, ops, args, starts, params, plane, R, v_b, varia
     dy[7] = 0.5 * (qw * p + qy * r - qz * q)
     dy[8] = 0.5 * (qw * q + qz * p - qx * r)
     dy[9] = 0.5 * (qw * r + qx * q - qy * p)
+    # a wind-tunnel mount replaces the rotational and translational equations
+    # (cadra.dynamics.modes); free flight: unchanged
+    constrain(y, phys, R, F_b, M_b, dy)

@@ -29,6 +29,8 @@ index    meaning
 19-21    d(wind)/dx along the range, 1/s                                     [effect]
 22       relative density gradient along the range (1/rho) d rho/dx, 1/m     [effect]
 23-25    cg offset from the aerodynamic moment reference point, body axes, m [effect]
+26       test mode code (``MODE_*`` below; :mod:`cadra.dynamics.modes`)
+27-29    pivot (gimbal centre, pivot or bearing axis point) minus the nominal cg, body axes, m
 =======  ===================================================================================
 
 The aerodynamic model's moment coefficients are about the moment reference point, which is the
@@ -56,8 +58,18 @@ P_WIND = 16
 P_WIND_GRAD = 19
 P_RHO_GRAD = 22
 P_CG_OFFSET = 23
-N_PHYS = 26
+P_MODE = 26
+P_PIVOT = 27
+N_PHYS = 30
 
 #: angle-plane codes of an aerodynamic model (see docs/conventions.md)
 PLANE_ALPHA_BETA = 0
 PLANE_SIGMA = 1
+
+#: test-mode codes (docs/dynamics.md, "Test modes"): free flight (a range, or a wind tunnel's
+#: stream), a 3-DOF angular gimbal about a fixed point, a 1-DOF pitch pivot about body y, a
+#: 1-DOF roll bearing about body x
+MODE_FREE = 0
+MODE_GIMBAL = 1
+MODE_PITCH = 2
+MODE_ROLL = 3
