@@ -24,7 +24,7 @@ from cadra.body import body_from_spec
 from cadra.dynamics.effects import Effects
 from cadra.dynamics.eom import air_data, derivative, rotation_fb
 from cadra.dynamics.integrate import inverse3
-from cadra.dynamics.layout import P_INERTIA, P_WIND, P_WIND_GRAD
+from cadra.dynamics.layout import P_CG_OFFSET, P_INERTIA, P_WIND, P_WIND_GRAD
 from cadra.dynamics.setup import plane_code
 from cadra.fitting.baseline import baseline_fit, derivative_python, trajectory_ivp
 from cadra.fitting.data import FILM_SIGMAS, rigid_body_from_shot, shot_data_from_truth
@@ -127,7 +127,7 @@ def test_python_rhs_matches_compiled_derivative(request, shot_dir, model_name):
                       density_gradient_per_m=1e-4, wind_facility_m_s=(1.5, -2.0, 0.7),
                       wind_gradient_facility_per_s=(2e-3, -1e-3, 5e-4))
     phys = rigid_body_from_shot(shot).with_effects(effects).phys()
-    assert np.all(phys[P_WIND:] != 0)                # wind, gradients, cg offset all on
+    assert np.all(phys[P_WIND:P_CG_OFFSET + 3] != 0)  # wind, gradients, cg offset all on
     rng = np.random.default_rng(8)
     params = model.values() * rng.uniform(0.9, 1.1, model.values().size)
     states = []

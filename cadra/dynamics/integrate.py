@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from cadra.dynamics.eom import derivative
+from cadra.dynamics.eom import derivative, rotation_fb
 from cadra.dynamics.layout import N_STATE, P_INERTIA
+from cadra.dynamics.modes import mount
 
 
 @njit(cache=True)
@@ -57,6 +58,16 @@ def _rk4_span(y, h, n, phys, I, Iinv, ops, args, starts, params, plane, scratch,
                    F_b, M_b, coef, stack, k4)
         for i in range(N_STATE):
             y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+
+
+@njit(cache=True)
+def _start(y0, phys, R, y):
+    """Copy ``y0`` into ``y``, made consistent with the test mode's mount (a wind-tunnel
+    mount's allowed rates and cg velocity; free flight: unchanged)."""
+    for i in range(N_STATE):
+        y[i] = y0[i]
+    rotation_fb(y, R)
+    mount(y, phys, R)
 
 
 @njit(cache=True)
@@ -107,8 +118,7 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
     while split < n_out and t_out[split] < t0:
         split += 1
     # forward
-    for i in range(N_STATE):
-        y[i] = y0[i]
+    _start(y0, phys, scratch[0], y)
     t = t0
     for j in range(split, n_out):
         span = t_out[j] - t
@@ -120,8 +130,7 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
         for i in range(N_STATE):
             out[j, i] = y[i]
     # backward
-    for i in range(N_STATE):
-        y[i] = y0[i]
+    _start(y0, phys, scratch[0], y)
     t = t0
     for j in range(split - 1, -1, -1):
         span = t_out[j] - t
@@ -190,8 +199,7 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
     while split < n_out and t_out[split] < t0:
         split += 1
     for direction in (1, -1):
-        for i in range(N_STATE):
-            y[i] = y0[i]
+        _start(y0, phys, scratch[0], y)
         t = t0
         h = h_max * direction
         if direction == 1:

@@ -30,8 +30,9 @@ translational equations by those of a body turning about the pivot:
   a_cg = R_FB (w' x d + w x (w x d)), so the air sees the cg's own velocity (a pivot ahead of
   the cg adds the plunging the body really has).
 
-A state of a constrained mode must start consistent with its mount (:func:`mount_state`); the
-integration then keeps the pivot fixed to rounding (a test checks it).
+Every integration first makes its starting state consistent with the mount (:func:`mount`:
+the allowed rates, the cg velocity), and then keeps the pivot fixed to rounding (a test checks
+it).
 """
 
 from __future__ import annotations
@@ -134,26 +135,32 @@ class TestMode:
         return out
 
 
-def mount_state(y: np.ndarray, phys: np.ndarray) -> np.ndarray:
-    """``y`` (13,) made consistent with the mount of ``phys``: the cg velocity the body's
-    rotation about the pivot gives it, and the rates the mount allows (p = r = 0 on a pitch
-    pivot, q = r = 0 on a roll bearing). The position is kept: it sets where the pivot is.
-    Free flight: ``y`` unchanged."""
-    from cadra.conventions import body_to_facility_matrix
-
-    y = np.array(y)
-    code = int(np.real(phys[P_MODE]))
+@njit(cache=True)
+def mount(y, phys, R):
+    """Make the state ``y`` (13,) consistent with the mount coded in ``phys``, in place: the
+    rates the mount allows (p = r = 0 on a pitch pivot, q = r = 0 on a roll bearing) and the
+    cg velocity the body's rotation about the pivot gives it, v = R_FB (w x d). The position
+    is kept (it says where the pivot is). Free flight: nothing to do. Every integration
+    starts here, so a fit's corrections to the attitude and rates, a cg-offset extra or a
+    complex-step perturbation move the cg velocity with them."""
+    code = int(phys[P_MODE].real)
     if code == MODE_FREE:
-        return y
+        return
     if code == MODE_PITCH:
-        y[10] = y[12] = 0.0
+        y[10] = 0.0 * y[10]
+        y[12] = 0.0 * y[12]
     elif code == MODE_ROLL:
-        y[11] = y[12] = 0.0
-    d = np.asarray(phys[P_CG_OFFSET:P_CG_OFFSET + 3]) - np.asarray(phys[P_PIVOT:P_PIVOT + 3])
-    q = np.real(y[6:10])
-    R = body_to_facility_matrix(q / np.linalg.norm(q))
-    y[3:6] = R @ np.cross(y[10:13], d)
-    return y
+        y[11] = 0.0 * y[11]
+        y[12] = 0.0 * y[12]
+    dx = phys[P_CG_OFFSET] - phys[P_PIVOT]
+    dyy = phys[P_CG_OFFSET + 1] - phys[P_PIVOT + 1]
+    dz = phys[P_CG_OFFSET + 2] - phys[P_PIVOT + 2]
+    p, q, r = y[10], y[11], y[12]
+    vx = q * dz - r * dyy
+    vy = r * dx - p * dz
+    vz = p * dyy - q * dx
+    for i in range(3):
+        y[3 + i] = R[i, 0] * vx + R[i, 1] * vy + R[i, 2] * vz
 
 
 @njit(cache=True)
@@ -228,4 +235,4 @@ def constrain(y, phys, R, F_b, M_b, dy):
         dy[3 + i] = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
 
 
-__all__ = ["KINDS", "MOUNTED", "TestMode", "constrain", "mount_state"]
+__all__ = ["KINDS", "MOUNTED", "TestMode", "constrain", "mount"]

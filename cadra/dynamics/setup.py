@@ -23,7 +23,9 @@ from cadra.dynamics.layout import (
     P_G,
     P_INERTIA,
     P_MASS,
+    P_MODE,
     P_MU,
+    P_PIVOT,
     P_RHO,
     P_RHO_GRAD,
     P_S,
@@ -33,6 +35,7 @@ from cadra.dynamics.layout import (
     PLANE_ALPHA_BETA,
     PLANE_SIGMA,
 )
+from cadra.dynamics.modes import TestMode
 
 #: default largest RK4 step, s. For smooth coefficient forms at the fastest pitch rates of seed
 #: 004's shots (omega ~ 200 rad/s) the error over a 16-station shot is < 0.01 um and 4e-6 deg;
@@ -67,6 +70,8 @@ class RigidBody:
     density_kg_m3, speed_of_sound_m_s, viscosity_pa_s : the range air.
     gravity_m_s2 : g (acts along -z of the facility frame).
     effects : optional unmodelled physics (:class:`cadra.dynamics.effects.Effects`).
+    mode : how the model is tested (:class:`cadra.dynamics.modes.TestMode`): free flight in a
+        range (default) or a tunnel's stream, or on a gimbal, pitch pivot or roll bearing.
     """
 
     mass_kg: float
@@ -78,6 +83,7 @@ class RigidBody:
     viscosity_pa_s: float
     gravity_m_s2: float = G0
     effects: Effects = field(default_factory=Effects)
+    mode: TestMode = field(default_factory=TestMode)
 
     def __post_init__(self):
         I = np.asarray(self.inertia_body_kg_m2, dtype=float)
@@ -101,6 +107,10 @@ class RigidBody:
         """The same body and air with other effects switched on."""
         return RigidBody(**{**self.__dict__, "effects": effects})
 
+    def with_mode(self, mode: TestMode) -> RigidBody:
+        """The same body and air in another test mode."""
+        return RigidBody(**{**self.__dict__, "mode": mode})
+
     def phys(self) -> np.ndarray:
         """The physical-constants vector of :mod:`cadra.dynamics.layout`."""
         e = self.effects
@@ -114,10 +124,12 @@ class RigidBody:
         p[P_SOUND] = self.speed_of_sound_m_s
         p[P_MU] = self.viscosity_pa_s
         p[P_G] = self.gravity_m_s2
-        p[P_WIND:P_WIND + 3] = e.wind_facility_m_s
+        p[P_WIND:P_WIND + 3] = np.asarray(e.wind_facility_m_s) + self.mode.stream_facility_m_s
         p[P_WIND_GRAD:P_WIND_GRAD + 3] = e.wind_gradient_facility_per_s
         p[P_RHO_GRAD] = e.density_gradient_per_m
         p[P_CG_OFFSET:P_CG_OFFSET + 3] = e.cg_offset_body_m
+        p[P_MODE] = self.mode.code
+        p[P_PIVOT:P_PIVOT + 3] = self.mode.pivot_from_cg_body_m
         return p
 
     def ref_from_cg_body_m(self) -> np.ndarray:
@@ -126,7 +138,8 @@ class RigidBody:
 
 
 def rigid_body_from_mass(mass_kg: float, cg_model_m, inertia_model_kg_m2, d_m: float,
-                         atmosphere, effects: Effects | None = None) -> RigidBody:
+                         atmosphere, effects: Effects | None = None,
+                         mode: TestMode | None = None) -> RigidBody:
     """A :class:`RigidBody` from mass properties in MODEL axes (as shot files and specs give
     them; docs/conventions.md) and a :class:`cadra.atmosphere.Atmosphere`."""
     from cadra.conventions import model_to_body_inertia, model_to_body_vector
@@ -138,6 +151,7 @@ def rigid_body_from_mass(mass_kg: float, cg_model_m, inertia_model_kg_m2, d_m: f
         cg_from_ref_body_m=model_to_body_vector(np.asarray(cg_model_m, dtype=float)),
         density_kg_m3=atmosphere.density, speed_of_sound_m_s=atmosphere.speed_of_sound,
         viscosity_pa_s=atmosphere.viscosity, effects=effects or Effects(),
+        mode=mode or TestMode(),
     )
 
 

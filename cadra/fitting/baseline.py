@@ -174,10 +174,14 @@ def python_rhs(phys: np.ndarray, model: AeroModel, params: np.ndarray):
     The equations of :func:`cadra.dynamics.eom.derivative` on Python floats (``math``), with
     the 9 coefficients from ``model``'s expression trees by
     :func:`cadra.aero.expr.evaluate_tree` (``params``, (n_params,) SI/rad in ``model.names``
-    order, give the values). ``phys`` is the (26,) constants vector of
-    :mod:`cadra.dynamics.layout`; the inertia inverse is numpy's. No compiled code is called.
+    order, give the values). ``phys`` is the constants vector of :mod:`cadra.dynamics.layout`;
+    the inertia inverse is numpy's. No compiled code is called. Free flight only: a
+    wind-tunnel mount (:mod:`cadra.dynamics.modes`) is refused, not silently flown free.
     """
     ph = [float(v) for v in phys]
+    if int(ph[L.P_MODE]) != L.MODE_FREE:
+        raise ValueError("python_rhs: free flight only; a wind-tunnel mount "
+                         "(cadra.dynamics.modes) has no plain-Python counterpart")
     I = np.asarray(phys[L.P_INERTIA:L.P_INERTIA + 9], dtype=float).reshape(3, 3)
     Ii = np.linalg.inv(I).tolist()
     I = I.tolist()

@@ -62,16 +62,36 @@ def default_local_free(data: ShotData, model: AeroModel | None = None) -> np.nda
     All 12, except what the data cannot see: a shot with no angle measurements (a sphere)
     fits position and velocity only; a symmetric body (total-angle model, transverse inertia
     equal within 1e-3, no products of inertia) does not fit its roll angle about the axis --
-    turning such a body about its axis changes no measurement.
+    turning such a body about its axis changes no measurement. A wind-tunnel mount
+    (:mod:`cadra.dynamics.modes`) fits only the rotations it allows: a gimbal the attitude and
+    rates, a pitch pivot theta and q, a roll bearing the roll angle and p.
     """
     if not data.has_angles:
         return np.arange(6)
-    if model is not None and model.angle_plane == "sigma":
-        I = data.rigid.phys()[1:10].reshape(3, 3)
-        off = np.abs(I - np.diag(np.diag(I))).max()
-        if abs(I[1, 1] - I[2, 2]) <= 1e-3 * I[1, 1] and off <= 1e-3 * I[1, 1]:
-            return np.array([k for k in range(N_LOCAL) if LOCAL_NAMES[k] != "rot_x_rad"])
+    mode = data.rigid.mode
+    if mode.mounted:
+        # a mount leaves only its rotations free: the pivot holds the position and the
+        # rotation sets the cg velocity (cadra.dynamics.modes)
+        names = {"gimbal": ("rot_x_rad", "rot_y_rad", "rot_z_rad", "p_rad_s", "q_rad_s",
+                            "r_rad_s"),
+                 "pitch_pivot": ("rot_y_rad", "q_rad_s"),
+                 "roll_bearing": ("rot_x_rad", "p_rad_s")}[mode.kind]
+        if mode.kind == "gimbal" and _axisymmetric(data, model):
+            names = names[1:]
+        return np.array([LOCAL_NAMES.index(n) for n in names])
+    if _axisymmetric(data, model):
+        return np.array([k for k in range(N_LOCAL) if LOCAL_NAMES[k] != "rot_x_rad"])
     return np.arange(N_LOCAL)
+
+
+def _axisymmetric(data: ShotData, model: AeroModel | None) -> bool:
+    """A total-angle model on a body whose transverse inertias agree within 1e-3 and that
+    has no products of inertia: turning it about its axis changes no measurement."""
+    if model is None or model.angle_plane != "sigma":
+        return False
+    I = data.rigid.phys()[1:10].reshape(3, 3)
+    off = np.abs(I - np.diag(np.diag(I))).max()
+    return bool(abs(I[1, 1] - I[2, 2]) <= 1e-3 * I[1, 1] and off <= 1e-3 * I[1, 1])
 
 
 @dataclass(frozen=True, eq=False)
