@@ -50,9 +50,9 @@ MOMENT_REFERENCES = ("cg",)
 #: file units of parameter values -> factor to SI (entries of :data:`cadra.units.UNITS`,
 #: through which values are converted)
 UNITS = {name: _units.UNITS[name].si_per_unit for name in ("", "deg")}
-#: coefficients a total-angle (sigma) model may not define (conventions: C_C and C_n are not
-#: used; C_mq damps both transverse rates, so C_nr would be ignored)
-SIGMA_UNUSED = ("CC", "Cn", "Cnr")
+#: coefficients a total-angle (sigma) model may not define (conventions: C_mq damps both
+#: transverse rates, so C_nr would be ignored; C_C and C_n are the Magnus force and moment)
+SIGMA_UNUSED = ("Cnr",)
 #: the ``format`` key written by :func:`save_model`
 FILE_FORMAT = "cadra.aero/1"
 #: directory of the bundled model files
@@ -241,8 +241,8 @@ class AeroModel:
                 if k in forms:
                     raise ValueError(
                         f"coefficients.{k}: not used by total-angle (sigma) models "
-                        "(docs/conventions.md: C_C and C_n are not used, C_mq damps both "
-                        "transverse rates); use angle_plane = \"alpha_beta\"")
+                        "(docs/conventions.md: C_mq damps both transverse rates); use "
+                        "angle_plane = \"alpha_beta\"")
         object.__setattr__(self, "coefficients", forms)
         trees = {k: parse_expression(t, seen, context=f"coefficients.{k}")
                  for k, t in forms.items()}

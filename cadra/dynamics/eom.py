@@ -120,18 +120,23 @@ def aero_force_moment(v_b, V, rho, phys, coef, plane, F_b, M_b):
         if s_perp.real > 1e-12 * V.real:
             sin_s = s_perp / V
             cos_s = u / V
-            # e_N = (x_b - cos(sigma) e_V) / sin(sigma); e_M = (e_V x x_b) / sin(sigma)
+            # e_N = (x_b - cos(sigma) e_V) / sin(sigma); e_M = (e_V x x_b) / sin(sigma);
+            # e_P = (0, v, w) / s_perp, the part of e_V normal to x_b (in the sigma plane)
             enx, eny, enz = sin_s, -cos_s * v / s_perp, -cos_s * w / s_perp
             emy, emz = w / s_perp, -v / s_perp
+            epy, epz = v / s_perp, w / s_perp
         else:
             enx, eny, enz = 0.0 * V, 0.0 * V, 0.0 * V
             emy, emz = 0.0 * V, 0.0 * V
-        F_b[0] = qS * (-CD * evx + CL * enx + CC * ecx)
-        F_b[1] = qS * (-CD * evy + CL * eny + CC * ecy)
-        F_b[2] = qS * (-CD * evz + CL * enz + CC * ecz)
+            epy, epz = 0.0 * V, 0.0 * V
+        # Magnus (docs/conventions.md): C_C along -e_M = (x_b x e_V) / sin(sigma) (McCoy's
+        # x x V, out of the sigma plane); C_n about e_P (McCoy's x x (V x x), in the plane)
+        F_b[0] = qS * (-CD * evx + CL * enx)
+        F_b[1] = qS * (-CD * evy + CL * eny - CC * emy)
+        F_b[2] = qS * (-CD * evz + CL * enz - CC * emz)
         M_b[0] = qSd * Cl
-        M_b[1] = qSd * Cm * emy
-        M_b[2] = qSd * (Cm * emz - Cn)
+        M_b[1] = qSd * (Cm * emy + Cn * epy)
+        M_b[2] = qSd * (Cm * emz + Cn * epz)
         # Cmq damps both transverse rates of a symmetric body
         return Clp, Cmq, Cmq
     F_b[0] = qS * (-CD * evx + CL * elx + CC * ecx)
