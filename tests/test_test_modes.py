@@ -156,8 +156,9 @@ def test_roll_bearing_spins_up_exponentially():
 
 
 def test_fit_of_a_pitch_pivot_record_recovers_the_moment_slope_and_damping():
-    """Angles only, 0.01 deg noise, 200 frames: the fit frees theta and q at the epoch (the
-    mount's unknowns) and C_m's slope and C_mq; both come back within 3 sigma."""
+    """Angles only, 0.01 deg noise, 200 frames: the fit frees the attitude (with the pivot
+    axis's direction) and q at the epoch, and C_m's slope and C_mq; both come back within
+    3 sigma, and chi^2/nu is 1 within its scatter."""
     l = 0.006
     mode = TestMode(kind="pitch_pivot", stream_m_s=U, pivot_from_cg_body_m=(l, 0.0, 0.0))
     body = RigidBody(**M1, mode=mode)
@@ -173,7 +174,7 @@ def test_fit_of_a_pitch_pivot_record_recovers_the_moment_slope_and_damping():
     sig = np.where(np.isfinite(meas), s, np.nan)
     shot = ShotData("tunnel-1", body, "capsule", np.arange(1, t.size + 1), t, meas, sig)
     lf = default_local_free(shot, truth)
-    assert [LOCAL_NAMES[k] for k in lf] == ["rot_y_rad", "q_rad_s"]
+    assert [LOCAL_NAMES[k] for k in lf] == ["rot_x_rad", "rot_y_rad", "rot_z_rad", "q_rad_s"]
     start = truth.with_values({"Cma": -0.08, "Cmq0": 0.0}).with_vary(
         {"CD0": False, "CLa": False})
     y_epoch = states[shot.epoch_index].copy()
@@ -195,3 +196,66 @@ def test_plain_python_baseline_refuses_a_mount():
     body = RigidBody(**M1, mode=TestMode(kind="gimbal", stream_m_s=U))
     with pytest.raises(ValueError, match="free flight only"):
         python_rhs(body.phys(), m, m.values())
+
+
+def test_pitch_pivot_record_from_files_through_cadra2_fit(tmp_path):
+    """A tunnel record as files -- a shot file with its [test_mode] table (frames as
+    stations, no images) and an angles-only trajectory file -- fitted by `cadra2 fit` with
+    its automatic start: C_m's slope and C_mq within 3 sigma of the truth."""
+    import json
+
+    import pandas as pd
+
+    from cadra.aero import save_model
+    from cadra.cli.cadra2 import main
+    from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, load_shot, save_shot
+    from cadra.io.trajectory import COLUMNS, write_trajectory
+    from cadra.units import torr_to_pa
+
+    mode = TestMode(kind="pitch_pivot", stream_m_s=U, pivot_from_cg_body_m=(0.006, 0.0, 0.0))
+    t = np.linspace(0.0, 0.2, 120)
+    shot = ShotFile(
+        shot_id="T-1", model={"kind": "capsule", "preset": "M1", "d_cm": 3.556},
+        mass=MassProperties(0.096563, [0.0044, 0.0, 0.0],
+                            np.diag([104.208, 81.024, 81.024]) * 1e-7),
+        pressure_pa=torr_to_pa(760.0), temperature_k=295.0, facility="hffaf",
+        stations=tuple(StationRecord(i + 1, float(tk)) for i, tk in enumerate(t)),
+        test_mode=mode)
+    save_shot(shot, tmp_path / "shot.toml")
+    back = load_shot(tmp_path / "shot.toml")
+    assert back.test_mode == mode
+    assert "[test_mode]" in (tmp_path / "shot.toml").read_text()
+
+    from cadra.fitting.data import rigid_body_from_shot
+
+    body = rigid_body_from_shot(back)
+    truth = model(CD=1.0, CLa=1.5, Cma=-0.117, Cmq=-2.0)
+    states = run(body, truth, Launch(speed_m_s=0.0, theta_rad=np.radians(4.0)), t)
+    obs = observe(states, body.ref_from_cg_body_m())
+    rng = np.random.default_rng(3)
+    sa = 0.01
+    n = t.size
+    table = pd.DataFrame({
+        "station": np.arange(1, n + 1), "t_s": t, "status": "ok",
+        "x_m": np.nan, "y_m": np.nan, "z_m": np.nan,
+        "theta_deg": np.degrees(obs["theta_rad"]) + rng.normal(0, sa, n),
+        "psi_deg": np.degrees(obs["psi_rad"]) + rng.normal(0, sa, n),
+        "sigma_x_m": np.nan, "sigma_y_m": np.nan, "sigma_z_m": np.nan,
+        "sigma_theta_deg": sa, "sigma_psi_deg": sa, "x_top_minus_side_m": np.nan,
+        "x_consistency": np.nan, "reason": "", "warnings": ""})
+    traj = tmp_path / "trajectory.csv"
+    write_trajectory(traj, table.loc[:, list(COLUMNS)],
+                     {"shot_id": "T-1", "shot_file": str(tmp_path / "shot.toml")})
+    start = truth.with_values({"Cma": -0.05, "Cmq0": 0.0}).with_vary(
+        {"CD0": False, "CLa": False, "Cl0": False, "Clp0": False})
+    save_model(start, tmp_path / "model.toml")
+    out = tmp_path / "fit"
+    assert main(["fit", str(traj), "--model", str(tmp_path / "model.toml"), "-o", str(out),
+                 "--no-plots", "-q"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["converged"]
+    # 236 degrees of freedom: chi^2/nu = 1 +- 0.09
+    assert abs(res["reduced_chi2"] - 1.0) < 0.3
+    par = res["parameters"]
+    for name, true in (("Cma", -0.117), ("Cmq0", -2.0)):
+        assert abs(par[name]["value"] - true) < 3 * par[name]["sigma"], name

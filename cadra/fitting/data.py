@@ -124,12 +124,13 @@ def floor_sigmas(shot: ShotData, floor: dict) -> ShotData:
 
 
 def rigid_body_from_shot(shot, effects: Effects | None = None) -> RigidBody:
-    """The dynamics' view of a :class:`cadra.io.shotfile.ShotFile` (mass properties, air)."""
+    """The dynamics' view of a :class:`cadra.io.shotfile.ShotFile` (mass properties, air,
+    test mode)."""
     body = body_from_spec(shot.model)
     return rigid_body_from_mass(shot.mass.mass_kg, shot.mass.cg_model_m,
                                 shot.mass.inertia_model_kg_m2, body.diameter_m,
                                 Atmosphere.from_pt(shot.pressure_pa, shot.temperature_k),
-                                effects)
+                                effects, shot.test_mode)
 
 
 def _fold_timing(t_s, meas, sigma, sigma_t_s):
@@ -183,7 +184,14 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
     table = table.sort_values("t_s")
     positions = np.isfinite(table[[c.si_column for c in channel_registry.OBSERVED
                                    if c.name in ("x", "y", "z")]].to_numpy(float)).all(axis=1)
-    if positions.sum() < MIN_STATIONS:
+    mounted = shot.test_mode.mounted
+    angles = np.isfinite(table[[c.si_column for c in channel_registry.OBSERVED
+                                if c.name in ("theta", "psi")]].to_numpy(float)).all(axis=1)
+    if mounted and angles.sum() < MIN_STATIONS:
+        raise FitDataError(f"{trajectory_path}: {int(angles.sum())} measured frame(s) with "
+                           f"both angles (theta, psi); a {shot.test_mode.kind} record needs "
+                           f"at least {MIN_STATIONS}")
+    if not mounted and positions.sum() < MIN_STATIONS:
         raise FitDataError(f"{trajectory_path}: {int(positions.sum())} measured station(s) with "
                            f"a position (x_m, y_m, z_m); stage two needs at least "
                            f"{MIN_STATIONS}")

@@ -142,6 +142,8 @@ def _damped_sine(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
 def estimate_motion(shot: ShotData) -> MotionEstimate:
     """Linear-theory estimates of one shot (see module doc)."""
     rig = shot.rigid
+    if rig.mode.kind != "range":
+        return _estimate_in_stream(shot)
     k, V0 = _drag_k(shot)
     pos, vel = _kinematics(shot)
     V = float(np.linalg.norm(vel))
@@ -172,6 +174,29 @@ def estimate_motion(shot: ShotData) -> MotionEstimate:
                           wy, ly, sig_mean, sig_rms)
 
 
+def _estimate_in_stream(shot: ShotData) -> MotionEstimate:
+    """:func:`estimate_motion` of a wind-tunnel record (cadra.dynamics.modes): the speed is
+    the stream's, the drag is not estimated (a mounted model shows none; a released one
+    drifts a little), the total angle is between the axis and the stream (+x)."""
+    rig = shot.rigid
+    V = rig.mode.stream_m_s
+    qdyn = 0.5 * rig.density_kg_m3 * V * V
+    wp = lp = wy = ly = math.nan
+    sig_mean = sig_rms = 0.0
+    if shot.has_angles:
+        t = shot.t_s
+        wp, lp, _ = _damped_sine(t, shot.meas[:, _THETA])
+        wy, ly, _ = _damped_sine(t, shot.meas[:, _PSI])
+        ok = np.isfinite(shot.meas[:, _THETA]) & np.isfinite(shot.meas[:, _PSI])
+        sig = np.array([math.acos(np.clip(axis_from_inclinations(th, ps)[0], -1, 1))
+                        for th, ps in shot.meas[ok][:, [_THETA, _PSI]]])
+        if sig.size:
+            sig_mean = float(sig.mean())
+            sig_rms = float(np.sqrt(np.mean(sig**2)))
+    return MotionEstimate(shot.shot_id, V, V / rig.speed_of_sound_m_s, qdyn, math.nan, wp, lp,
+                          wy, ly, sig_mean, sig_rms)
+
+
 def _slope(model: AeroModel, coef: str, var: str, point: dict, params: np.ndarray) -> float:
     """d coef / d var at ``point`` by complex step (var: alpha, beta or sigma)."""
     h = 1e-20
@@ -198,6 +223,11 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
     rig = shots[0].rigid
     I_yy = float(rig.inertia_body_kg_m2[1, 1])
     I_zz = float(rig.inertia_body_kg_m2[2, 2])
+    # a mount turns the body about its pivot: the inertia about it, and the lift's arm
+    # (cadra.dynamics.modes); free flight: l = 0
+    l_pivot = float(rig.mode.pivot_from_cg_body_m[0]) if rig.mode.mounted else 0.0
+    I_yy += rig.mass_kg * l_pivot**2
+    I_zz += rig.mass_kg * l_pivot**2
     S, d, rho = rig.area_m2, rig.d_m, rig.density_kg_m3
     V = float(np.mean([e.speed_m_s for e in est]))
     qdyn = 0.5 * rho * V * V
@@ -209,7 +239,8 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
     point = {"alpha": angle, "beta": 0.0, "sigma": angle, "mach": mach}
     targets = []   # (function of params, target value, tolerance)
     cd = float(np.mean([e.cd for e in est]))
-    targets.append((lambda p: float(model.evaluate(**point, params=p)["CD"]), cd, 0.02))
+    if np.isfinite(cd):
+        targets.append((lambda p: float(model.evaluate(**point, params=p)["CD"]), cd, 0.02))
 
     def mean_finite(vals):
         vals = [v for v in vals if np.isfinite(v)]
@@ -224,6 +255,10 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
     var = "sigma" if sigma_plane else "alpha"
     if "Cm" in model.coefficients and np.isfinite(wp):
         cma = -wp * wp * I_yy / (qdyn * S * d)
+        if l_pivot and "CL" in model.coefficients:
+            # about a pivot l ahead of the cg the lift adds -l/d C_L_alpha to the slope
+            cla = _slope(model, "CL", var, point, p0)
+            cma += l_pivot / d * cla
         if sigma_plane:
             # effective (secant) slope over the motion: Cm(sigma) / sigma at the rms angle
             targets.append((lambda p: float(model.evaluate(**point, params=p)["Cm"]) / angle,
@@ -288,8 +323,18 @@ def _axis_and_rate(shot: ShotData):
 
 
 def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG) -> list[np.ndarray]:
-    """Starting states at the epoch for each roll angle of the grid (one if no angles)."""
-    pos, vel = _kinematics(shot)
+    """Starting states at the epoch for each roll angle of the grid (one if no angles).
+
+    A mounted wind-tunnel record (cadra.dynamics.modes) may have no positions: the pivot is
+    then put at the facility origin (nothing observed depends on where it is), and the
+    velocity is the mount's (the integration sets it from the rates)."""
+    mode = shot.rigid.mode
+    if mode.mounted and np.isfinite(shot.meas[:, 0]).sum() < 3:
+        pos, vel = np.zeros(3), np.zeros(3)
+    else:
+        pos, vel = _kinematics(shot)
+    if mode.mounted:
+        vel = np.zeros(3)
     ref = shot.rigid.ref_from_cg_body_m()
     if not shot.has_angles:
         a = vel / np.linalg.norm(vel)
@@ -297,12 +342,31 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG) -> list[np.nda
         return [state_from_reference(pos, vel, q, np.zeros(3), ref)]
     a, adot = _axis_and_rate(shot)
     w_F = np.cross(a, adot)                # transverse angular velocity, facility frame
+    if mode.kind == "pitch_pivot":
+        roll_grid_deg = _pivot_rolls(shot, a)
     out = []
     for roll in roll_grid_deg:
         q = quat_from_axis_roll(a, math.radians(roll))
         R = body_to_facility_matrix(q)
         out.append(state_from_reference(pos, vel, q, R.T @ w_F, ref))
     return out
+
+
+def _pivot_rolls(shot: ShotData, a: np.ndarray) -> tuple[float, float]:
+    """The two roll angles (deg) that put a pitch pivot's axis (body y) normal to the plane
+    the measured nose axis swings in: the mount turns the body about body y only, so the
+    roll grid's other angles are motions it cannot make."""
+    ok = np.isfinite(shot.meas[:, _THETA]) & np.isfinite(shot.meas[:, _PSI])
+    axes = np.array([axis_from_inclinations(th, ps)
+                     for th, ps in shot.meas[ok][:, [_THETA, _PSI]]])
+    swing = np.linalg.svd(axes - axes.mean(axis=0), full_matrices=False)[2][0]
+    n = np.cross(a, swing)
+    n /= np.linalg.norm(n)
+    R0 = body_to_facility_matrix(quat_from_axis_roll(a, 0.0))
+    phi = math.degrees(math.atan2(n @ R0[:, 2], n @ R0[:, 1]))
+    if body_to_facility_matrix(quat_from_axis_roll(a, math.radians(phi)))[:, 1] @ n < 0:
+        phi = -phi
+    return (phi, phi + 180.0)
 
 
 def initial_state(shot: ShotData, model: AeroModel,

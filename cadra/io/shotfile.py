@@ -25,6 +25,8 @@ import numpy as np
 
 from cadra import units
 from cadra.atmosphere import Atmosphere
+from cadra.conventions import model_to_body_vector
+from cadra.dynamics.modes import TestMode
 from cadra.facility.reference import VIEW_AXES
 from cadra.fields import frozen_array
 from cadra.io.atomic import atomic_write_text
@@ -54,7 +56,9 @@ DENSITY_G_CM3_RANGE = (0.1, 25.0)
 MODEL_SIZE_KEYS = ("d", "diameter", "h", "length", "l")
 
 _TOP_KEYS = ("schema_version", "shot_id", "facility", "notes", "nominal_velocity_m_s",
-             "model", "mass", "range", "stations")
+             "model", "mass", "range", "test_mode", "stations")
+#: keys of the optional ``[test_mode]`` table (file units; the pivot in model axes)
+TEST_MODE_KEYS = ("kind", "stream_m_s", "pivot_from_cg_cm")
 _INERTIA_COMPONENT_KEYS = {
     "Ixx_g_cm2": (0, 0), "Iyy_g_cm2": (1, 1), "Izz_g_cm2": (2, 2),
     "Ixy_g_cm2": (0, 1), "Ixz_g_cm2": (0, 2), "Iyz_g_cm2": (1, 2),
@@ -127,6 +131,8 @@ class ShotFile:
     notes : free text.
     source_path : the file this was read from (None if built in memory).
     nominal_velocity_m_s : optional nominal speed, m/s.
+    test_mode : how the model was tested (:class:`cadra.dynamics.modes.TestMode`; default free
+        flight in the range). A wind-tunnel record's "stations" are its camera frames.
     """
 
     shot_id: str
@@ -139,6 +145,7 @@ class ShotFile:
     notes: str = ""
     source_path: str | None = None
     nominal_velocity_m_s: float | None = None
+    test_mode: TestMode = field(default_factory=TestMode)
 
     def __post_init__(self):
         object.__setattr__(self, "stations", tuple(self.stations))
@@ -389,11 +396,34 @@ def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) 
                           *VELOCITY_M_S_RANGE, "a model speed in m/s")
     stations = _stations_from_list(_require(data, "stations"))
     _check_density(model, mass)
+    test_mode = _test_mode_from_dict(data.get("test_mode"))
     return ShotFile(shot_id=shot_id, model=model, mass=mass,
                     pressure_pa=units.torr_to_pa(p_torr), temperature_k=t_k,
                     facility=facility, stations=stations, notes=notes,
                     source_path=str(source_path) if source_path is not None else None,
-                    nominal_velocity_m_s=v_nom)
+                    nominal_velocity_m_s=v_nom, test_mode=test_mode)
+
+
+def _test_mode_from_dict(table) -> TestMode:
+    """The ``[test_mode]`` table (absent: free flight in the range)."""
+    if table is None:
+        return TestMode()
+    if not isinstance(table, Mapping):
+        raise ShotFileError("test_mode: expected a table")
+    _check_unknown(table, set(TEST_MODE_KEYS), "test_mode.")
+    kind = _require(table, "kind", "test_mode.")
+    stream = _number(table.get("stream_m_s", 0.0), "test_mode.stream_m_s")
+    _in_range(stream, "test_mode.stream_m_s", *VELOCITY_M_S_RANGE, "a stream speed in m/s")
+    pivot = units.cm_to_m(_vector3(table.get("pivot_from_cg_cm", [0.0, 0.0, 0.0]),
+                                   "test_mode.pivot_from_cg_cm"))
+    if np.max(np.abs(pivot)) >= CG_CM_MAX / 100:
+        raise ShotFileError(f"test_mode.pivot_from_cg_cm: {units.m_to_cm(pivot).tolist()} cm "
+                            "is not a pivot on the model (|component| < 100 cm)")
+    try:
+        return TestMode(kind=str(kind), stream_m_s=stream,
+                        pivot_from_cg_body_m=tuple(model_to_body_vector(pivot)))
+    except ValueError as exc:
+        raise ShotFileError(str(exc)) from None
 
 
 def _plain(value):
@@ -439,6 +469,12 @@ def shot_to_dict(shot: ShotFile) -> dict:
     out["model"] = _plain(dict(shot.model))
     out["mass"] = mass_d
     out["range"] = {"pressure_torr": p_torr, "temperature_k": _plain(shot.temperature_k)}
+    mode = shot.test_mode
+    if mode.kind != "range":
+        out["test_mode"] = {"kind": mode.kind, "stream_m_s": c(mode.stream_m_s)}
+        if mode.mounted:
+            pivot = units.m_to_cm(model_to_body_vector(np.array(mode.pivot_from_cg_body_m)))
+            out["test_mode"]["pivot_from_cg_cm"] = [c(float(v)) for v in pivot]
     out["stations"] = [{"station": _plain(r.station), "time_s": _plain(r.time_s),
                         "images": {str(k): str(v) for k, v in r.images.items()}}
                        for r in shot.stations]
@@ -487,7 +523,9 @@ def dumps_shot(shot: ShotFile) -> str:
     for k in ("schema_version", "shot_id", "facility", "notes", "nominal_velocity_m_s"):
         if k in data:
             lines.append(f"{k} = {_toml_value(data[k])}")
-    for section in ("model", "mass", "range"):
+    for section in ("model", "mass", "range", "test_mode"):
+        if section not in data:
+            continue
         lines.append("")
         lines.append(f"[{section}]")
         for k, v in data[section].items():
