@@ -108,8 +108,19 @@ def _compiled_derivative(y, phys, model, params):
     return dy
 
 
+def _with_magnus(model):
+    """``model`` (a total-angle one) with Magnus force and moment terms (CC, Cn)."""
+    from cadra.aero import AeroModel, Parameter
+
+    return AeroModel(model.name, model.angle_plane,
+                     {**model.coefficients, "CC": "CNpa*p_hat*sin(sigma)",
+                      "Cn": "CMpa*p_hat*sin(sigma)"},
+                     model.parameters + (Parameter("CNpa", 0.6), Parameter("CMpa", -0.3)))
+
+
 @pytest.mark.parametrize(("shot_dir", "model_name"), [("sample_shots/m2_2429", "m2_m070"),
-                                                      ("sample_shots/m1_2366", "m1_m110")])
+                                                      ("sample_shots/m1_2366", "m1_m110"),
+                                                      ("sample_shots/m1_2366", "m1_m110+magnus")])
 def test_python_rhs_matches_compiled_derivative(request, shot_dir, model_name):
     """Plain-Python RHS == numba derivative to 1e-12 relative, every component, with the cg
     offset, wind, wind gradient, density gradient and inertia effects on, at six states of
@@ -120,7 +131,9 @@ def test_python_rhs_matches_compiled_derivative(request, shot_dir, model_name):
     root = request.config.rootpath
     shot = load_shot(root / shot_dir / "shot.toml")
     truth = pd.read_csv(root / shot_dir / "truth.csv")
-    model = load_bundled_model(model_name)
+    model = load_bundled_model(model_name.split("+")[0])
+    if model_name.endswith("+magnus"):
+        model = _with_magnus(model)
     effects = Effects(cg_offset_body_m=(2e-4, -3e-4, 1.5e-4),
                       inertia_delta_body_kg_m2=((1e-8, 2e-9, 0.0), (2e-9, -1e-8, 0.0),
                                                 (0.0, 0.0, 5e-9)),

@@ -156,11 +156,13 @@ def aero_force_moment_python(v_b, V, rho, phys, coef, sigma_plane: bool
             sin_s, cos_s = s_perp / V, u / V
             enx, eny, enz = sin_s, -cos_s * v / s_perp, -cos_s * w / s_perp
             emy, emz = w / s_perp, -v / s_perp
+            epy, epz = v / s_perp, w / s_perp
         else:
-            enx = eny = enz = emy = emz = 0.0
-        F = [qS * (-CD * evx + CL * enx + CC * ecx), qS * (-CD * evy + CL * eny + CC * ecy),
-             qS * (-CD * evz + CL * enz + CC * ecz)]
-        M = [qSd * Cl, qSd * Cm * emy, qSd * (Cm * emz - Cn)]
+            enx = eny = enz = emy = emz = epy = epz = 0.0
+        # Magnus: C_C along -e_M, C_n about e_P (docs/conventions.md)
+        F = [qS * (-CD * evx + CL * enx), qS * (-CD * evy + CL * eny - CC * emy),
+             qS * (-CD * evz + CL * enz - CC * emz)]
+        M = [qSd * Cl, qSd * (Cm * emy + Cn * epy), qSd * (Cm * emz + Cn * epz)]
         return F, M, (Clp, Cmq, Cmq)
     F = [qS * (-CD * evx + CL * elx + CC * ecx), qS * (-CD * evy + CC * ecy),
          qS * (-CD * evz + CL * elz + CC * ecz)]
