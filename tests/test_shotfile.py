@@ -304,3 +304,44 @@ def test_atomic_output_dir(tmp_path):
         (tmp / "y.txt").write_text("y")
     assert _dir_listing(out) == ["y.txt"]
     assert _dir_listing(tmp_path) == ["run"]  # no temporaries left
+
+
+@pytest.mark.parametrize(("table", "message"), [
+    ({"kind": "sting", "stream_m_s": 50.0}, "not a test mode"),
+    ({"stream_m_s": 50.0}, "test_mode.kind"),
+    ({"kind": "gimbal", "stream_m_s": 50.0, "pivot_cm": [0, 0, 0]}, "test_mode.pivot_cm"),
+    ({"kind": "gimbal"}, "needs a stream"),
+    ({"kind": "tunnel", "stream_m_s": 50.0, "pivot_from_cg_cm": [1.0, 0, 0]}, "has no pivot"),
+    ({"kind": "pitch_pivot", "stream_m_s": 50.0, "pivot_from_cg_cm": [150.0, 0, 0]},
+     "not a pivot on the model"),
+    ({"kind": "range", "stream_m_s": -3.0}, "test_mode.stream_m_s"),
+])
+def test_test_mode_table_refused_naming_the_key(tmp_path, table, message):
+    data = shot_to_dict(_shot())
+    data["test_mode"] = table
+    path = _write_dict(tmp_path, data)
+    with pytest.raises(ShotFileError, match=message):
+        load_shot(path)
+
+
+def test_test_mode_round_trip_pivot_in_model_axes(tmp_path):
+    """The pivot is written in model axes (y port, z up) and held in body axes (y stbd,
+    z down): a pivot 1 cm ahead and 0.5 cm up of the cg is (0.01, 0, -0.005) m in body axes,
+    and the file reads back identically."""
+    from cadra.dynamics.modes import TestMode
+
+    data = shot_to_dict(_shot())
+    data["test_mode"] = {"kind": "gimbal", "stream_m_s": 40.0,
+                         "pivot_from_cg_cm": [1.0, 0.0, 0.5]}
+    shot = load_shot(_write_dict(tmp_path, data))
+    assert shot.test_mode == TestMode(kind="gimbal", stream_m_s=40.0,
+                                      pivot_from_cg_body_m=(0.01, 0.0, -0.005))
+    save_shot(shot, tmp_path / "again.toml")
+    assert load_shot(tmp_path / "again.toml").test_mode == shot.test_mode
+    assert shot_to_dict(shot)["test_mode"] == data["test_mode"]
+
+
+def test_test_mode_range_without_stream_loads(tmp_path):
+    data = shot_to_dict(_shot())
+    data["test_mode"] = {"kind": "range"}
+    assert load_shot(_write_dict(tmp_path, data)).test_mode.kind == "range"

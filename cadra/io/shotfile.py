@@ -413,7 +413,9 @@ def _test_mode_from_dict(table) -> TestMode:
     _check_unknown(table, set(TEST_MODE_KEYS), "test_mode.")
     kind = _require(table, "kind", "test_mode.")
     stream = _number(table.get("stream_m_s", 0.0), "test_mode.stream_m_s")
-    _in_range(stream, "test_mode.stream_m_s", *VELOCITY_M_S_RANGE, "a stream speed in m/s")
+    if stream != 0.0:         # 0: still air (a range); TestMode says which kinds need one
+        _in_range(stream, "test_mode.stream_m_s", *VELOCITY_M_S_RANGE,
+                  "a stream speed in m/s")
     pivot = units.cm_to_m(_vector3(table.get("pivot_from_cg_cm", [0.0, 0.0, 0.0]),
                                    "test_mode.pivot_from_cg_cm"))
     if np.max(np.abs(pivot)) >= CG_CM_MAX / 100:
