@@ -190,6 +190,18 @@ def aero_angles(v_body: np.ndarray) -> tuple[float, float, float]:
     )
 
 
+def aero_roll_angle(v_body: np.ndarray) -> float:
+    """phi, rad in (-pi, pi]: the aerodynamic roll angle, from body z toward body y to the
+    cross-flow (v, w) -- the angle between the body's x-z plane (a fin plane of a cruciform
+    body) and the plane of the total angle of attack. 0 at pure positive alpha, +pi/2 at pure
+    positive beta; rolling the body by +gamma about x_b raises it by gamma (p = phi'). 0 where the
+    cross-flow vanishes (sigma = 0)."""
+    _, v, w = (float(c) for c in v_body)
+    if v == 0.0 and w == 0.0:
+        return 0.0
+    return float(np.arctan2(v, w))
+
+
 def velocity_from_aero_angles(V: float, alpha: float, beta: float) -> np.ndarray:
     """Body-axis air-relative velocity (u, v, w) of speed V at angles (alpha, beta), rad."""
     return V * np.array([np.cos(alpha) * np.cos(beta), np.sin(beta), np.sin(alpha) * np.cos(beta)])

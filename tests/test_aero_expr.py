@@ -156,6 +156,7 @@ EXPRESSIONS = [
     "mach**B + (mach + 1)**1.5 + 2**alpha",
     "(alpha <= alpha_ref) - (alpha > A) + (beta < 0)*p_hat + q_hat*r_hat*reynolds",
     "piecewise(sigma < 0.1, A, sigma < 0.3, B*sigma, C*sigma**2)",
+    "A*sin(4*phi) + B*cos(2*phi)*sin(sigma) + C*(phi - pi/4)**2*p_hat",
     "-(A - (B - (C - (alpha - (beta - (sigma - (mach - M_ref)))))))",
     "A/alpha + B/sin(alpha) + alpha/B + 3/alpha + alpha/3",
 ]
@@ -168,7 +169,8 @@ def random_points(n, dtype=np.float64):
     V[:, 2] = RNG.uniform(0.0, 0.9, n)
     V[:, 3] = RNG.uniform(0.5, 1.5, n)
     V[:, 4] = RNG.uniform(1e5, 1e6, n)
-    V[:, 5:] = RNG.normal(0, 0.01, (n, 3))
+    V[:, 5:8] = RNG.normal(0, 0.01, (n, 3))
+    V[:, 8] = RNG.uniform(-np.pi, np.pi, n)        # phi, the aerodynamic roll angle
     return V
 
 

@@ -109,13 +109,17 @@ def _compiled_derivative(y, phys, model, params):
 
 
 def _with_magnus(model):
-    """``model`` (a total-angle one) with Magnus force and moment terms (CC, Cn)."""
+    """``model`` (a total-angle one) with Magnus force and moment terms (CC, Cn) and a roll
+    moment in the aerodynamic roll angle phi (its every quadrant: the states are turned)."""
     from cadra.aero import AeroModel, Parameter
 
+    cl = model.coefficients.get("Cl", "0")
     return AeroModel(model.name, model.angle_plane,
                      {**model.coefficients, "CC": "CNpa*p_hat*sin(sigma)",
-                      "Cn": "CMpa*p_hat*sin(sigma)"},
-                     model.parameters + (Parameter("CNpa", 0.6), Parameter("CMpa", -0.3)))
+                      "Cn": "CMpa*p_hat*sin(sigma)",
+                      "Cl": f"{cl} + Cl4*sin(4*phi)*sin(sigma) + Cl1*phi"},
+                     model.parameters + (Parameter("CNpa", 0.6), Parameter("CMpa", -0.3),
+                                         Parameter("Cl4", 0.05), Parameter("Cl1", 0.01)))
 
 
 @pytest.mark.parametrize(("shot_dir", "model_name"), [("sample_shots/m2_2429", "m2_m070"),

@@ -6,7 +6,7 @@ Expressions are parsed with ``ast.parse(text, mode="eval")`` and a whitelist vis
 the user's text is ever executed. The language (docs/aero_models.md):
 
 - numbers; the constant ``pi``; the variables of :data:`cadra.aero.program.VARIABLES`
-  (``alpha, beta, sigma, mach, reynolds, p_hat, q_hat, r_hat``; angles in radians);
+  (``alpha, beta, sigma, mach, reynolds, p_hat, q_hat, r_hat, phi``; angles in radians);
   parameters (any other name the model declares);
 - ``+ - * / **``, unary ``-`` and ``+``, parentheses;
 - functions ``sin cos tan asin acos atan atan2 sqrt abs exp log``, ``min``/``max``

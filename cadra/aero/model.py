@@ -351,7 +351,8 @@ class AeroModel:
         a, b, m, r = np.meshgrid(CHECK_ALPHA, CHECK_BETA, mach, (0.0, 0.01), indexing="ij")
         a, b, m, r = a.ravel(), b.ravel(), m.ravel(), r.ravel()
         return {"alpha": a, "beta": b, "sigma": np.arccos(np.cos(a) * np.cos(b)), "mach": m,
-                "reynolds": np.full_like(a, 1e6), "p_hat": r, "q_hat": r, "r_hat": r}
+                "reynolds": np.full_like(a, 1e6), "p_hat": r, "q_hat": r, "r_hat": r,
+                "phi": np.arctan2(np.sin(b), np.sin(a) * np.cos(b))}
 
     def check_finite(self) -> None:
         """Refuse a form with a constant term that is not finite (``1/0``, ``exp(1000)``) or
@@ -402,18 +403,19 @@ class AeroModel:
         return prog
 
     def evaluate(self, alpha, beta, sigma, mach, reynolds=0.0, p_hat=0.0, q_hat=0.0,
-                 r_hat=0.0, *, params=None) -> dict:
+                 r_hat=0.0, phi=0.0, *, params=None) -> dict:
         """The 9 coefficients at (arrays of) points, with the compiled numba program.
 
         Inputs broadcast against each other; angles in radians. ``sigma=None`` computes
-        ``arccos(cos(alpha) cos(beta))``. ``params`` overrides :meth:`values`. Any complex
+        ``arccos(cos(alpha) cos(beta))``; ``phi`` is the aerodynamic roll angle
+        (docs/conventions.md; 0 by default). ``params`` overrides :meth:`values`. Any complex
         input gives complex results (complex step). Returns ``{name: array}`` in the order of
         :data:`cadra.aero.program.COEFFICIENTS` (numpy scalars for scalar inputs).
         """
         if sigma is None:
             sigma = np.arccos(np.cos(alpha) * np.cos(beta))
         arrays = [np.asarray(a) for a in (alpha, beta, sigma, mach, reynolds, p_hat, q_hat,
-                                          r_hat)]
+                                          r_hat, phi)]
         p = self.values() if params is None else np.asarray(params)
         if p.shape != (len(self.parameters),):
             raise ValueError(f"params must have shape ({len(self.parameters)},), "

@@ -42,7 +42,7 @@ from numba import njit
 #: output order of :func:`eval_coefficients`
 COEFFICIENTS = ("CD", "CL", "CC", "Cl", "Cm", "Cn", "Clp", "Cmq", "Cnr")
 #: input order of the ``variables`` vector; angles in radians
-VARIABLES = ("alpha", "beta", "sigma", "mach", "reynolds", "p_hat", "q_hat", "r_hat")
+VARIABLES = ("alpha", "beta", "sigma", "mach", "reynolds", "p_hat", "q_hat", "r_hat", "phi")
 N_COEFFICIENTS = len(COEFFICIENTS)
 N_VARIABLES = len(VARIABLES)
 
@@ -252,7 +252,7 @@ def eval_coefficients(ops, args, starts, variables, params, out, stack) -> None:
     ops : (n,) int64 opcodes of an :class:`AeroProgram`.
     args : (n,) float64 operands.
     starts : (10,) int64 section starts.
-    variables : (8,) float64 or complex128, in the order of :data:`VARIABLES` (angles rad).
+    variables : (9,) float64 or complex128, in the order of :data:`VARIABLES` (angles rad).
     params : (n_params,) parameter values (SI, radians), same dtype as ``out``.
     out : (9,) written with the coefficients in the order of :data:`COEFFICIENTS`.
     stack : scratch of ``out``'s dtype, length >= ``AeroProgram.stack_size``.

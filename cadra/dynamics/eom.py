@@ -58,7 +58,8 @@ def air_data(y, phys, R, v_b, variables):
 
     Fills ``v_b`` (u, v, w) and ``variables`` in the order of
     :data:`cadra.aero.program.VARIABLES` (alpha, beta, sigma, mach, reynolds, p_hat, q_hat,
-    r_hat). Returns (V, rho).
+    r_hat, phi -- the aerodynamic roll angle atan2(v, w), docs/conventions.md). Returns
+    (V, rho).
     """
     x = y[0]
     # air velocity in F: uniform wind plus a linear variation along the range
@@ -86,6 +87,15 @@ def air_data(y, phys, R, v_b, variables):
     variables[5] = y[10] * k
     variables[6] = y[11] * k
     variables[7] = y[12] * k
+    # aerodynamic roll angle atan2(v, w) by half angles (complex-step safe); 0 at sigma = 0
+    if s_perp.real <= 1e-300:
+        variables[8] = 0.0 * v
+    elif w.real >= 0.0:
+        variables[8] = 2.0 * np.arctan(v / (s_perp + w))
+    elif v.real >= 0.0:
+        variables[8] = np.pi - 2.0 * np.arctan(v / (s_perp - w))
+    else:
+        variables[8] = -np.pi - 2.0 * np.arctan(v / (s_perp - w))
     return V, rho
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from cadra.aero.program import N_VARIABLES
 from cadra.dynamics.eom import derivative, rotation_fb
 from cadra.dynamics.layout import N_STATE, P_INERTIA
 from cadra.dynamics.modes import mount
@@ -82,7 +83,7 @@ def _workspace(y0, phys, stack_size):
     Iinv = np.empty((3, 3), dtype=y0.dtype)
     inverse3(I, Iinv)
     scratch = (np.empty((3, 3), dtype=y0.dtype), np.empty(3, dtype=y0.dtype),
-               np.empty(8, dtype=y0.dtype), np.empty(3, dtype=y0.dtype),
+               np.empty(N_VARIABLES, dtype=y0.dtype), np.empty(3, dtype=y0.dtype),
                np.empty(3, dtype=y0.dtype))
     coef = np.empty(9, dtype=y0.dtype)
     stack = np.empty(max(stack_size, 1), dtype=y0.dtype)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cadra.conventions import aero_angles
+from cadra.conventions import aero_angles, aero_roll_angle
 from cadra.dynamics.layout import P_D, P_SOUND, P_WIND, P_WIND_GRAD, S_POS, S_QUAT
 
 
@@ -62,38 +62,37 @@ def air_angles(states: np.ndarray, rigid, phys: np.ndarray | None = None
                ) -> dict[str, np.ndarray]:
     """Aerodynamic angles, Mach number and non-dimensional rates along (n, 13) states, as the
     dynamics computes them (air velocity: cg velocity minus the wind and its x gradient of
-    ``rigid.effects``; angles by :func:`cadra.conventions.aero_angles`).
+    ``rigid.effects`` and a tunnel's stream; angles by :func:`cadra.conventions.aero_angles`).
 
     ``phys``: the ``phys`` vector the states were integrated with
     (:mod:`cadra.dynamics.layout`; a fit's, with its wind extras on), whose wind, wind
     gradient, reference length and speed of sound then replace ``rigid``'s.
 
     Returns a dict of (n,) arrays ``alpha_rad``, ``beta_rad``, ``sigma_rad`` (classical: 0 =
-    nose into the wind; docs/conventions.md), ``airspeed_m_s``, ``mach``, ``p_hat``,
+    nose into the wind; docs/conventions.md), ``phi_rad`` (the aerodynamic roll angle),
+    ``airspeed_m_s``, ``mach``, ``p_hat``,
     ``q_hat``, ``r_hat`` (rate d / 2V) and ``air_dir_F`` (n, 3), the unit air-relative
     velocity in F.
     """
     states = np.atleast_2d(np.asarray(states, dtype=float))
-    if phys is None:
-        e = rigid.effects
-        w0, dw = e.wind_facility_m_s, e.wind_gradient_facility_per_s
-        d_m, sound = rigid.d_m, rigid.speed_of_sound_m_s
-    else:
-        phys = np.asarray(phys, dtype=float)
-        w0, dw = phys[P_WIND:P_WIND + 3], phys[P_WIND_GRAD:P_WIND_GRAD + 3]
-        d_m, sound = float(phys[P_D]), float(phys[P_SOUND])
+    # the body's own phys: its effects' wind and a tunnel's stream (cadra.dynamics.modes)
+    phys = np.asarray(rigid.phys() if phys is None else phys, dtype=float)
+    w0, dw = phys[P_WIND:P_WIND + 3], phys[P_WIND_GRAD:P_WIND_GRAD + 3]
+    d_m, sound = float(phys[P_D]), float(phys[P_SOUND])
     wind = (np.asarray(w0, dtype=float)[None, :]
             + states[:, 0:1] * np.asarray(dw, dtype=float)[None, :])
     v_air = states[:, 3:6] - wind
     R = rotation_fb_batch(states[:, S_QUAT])
     v_b = np.einsum("nji,nj->ni", R, v_air)          # R^T v
     n = len(states)
-    alpha, beta, sigma = (np.empty(n) for _ in range(3))
+    alpha, beta, sigma, phi = (np.empty(n) for _ in range(4))
     for i in range(n):
         alpha[i], beta[i], sigma[i] = aero_angles(v_b[i])
+        phi[i] = aero_roll_angle(v_b[i])
     V = np.linalg.norm(v_air, axis=1)
     k = d_m / (2.0 * V)
-    return {"alpha_rad": alpha, "beta_rad": beta, "sigma_rad": sigma, "airspeed_m_s": V,
+    return {"alpha_rad": alpha, "beta_rad": beta, "sigma_rad": sigma, "phi_rad": phi,
+            "airspeed_m_s": V,
             "mach": V / sound, "p_hat": states[:, 10] * k,
             "q_hat": states[:, 11] * k, "r_hat": states[:, 12] * k,
             "air_dir_F": v_air / V[:, None]}

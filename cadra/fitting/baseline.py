@@ -125,8 +125,9 @@ def air_data_python(y, phys, R) -> tuple[tuple[float, float, float], float, floa
     s_perp = math.sqrt(v * v + w * w)
     alpha = 2.0 * math.atan(w / (s_xz + u)) if s_xz + u > 0.0 else math.pi
     k = phys[L.P_D] / (2.0 * V)
+    phi = math.atan2(v, w) if s_perp > 0.0 else 0.0
     values = (alpha, math.asin(v / V), 2.0 * math.atan(s_perp / (V + u)), V / phys[L.P_SOUND],
-              rho * V * phys[L.P_D] / phys[L.P_MU], y[10] * k, y[11] * k, y[12] * k)
+              rho * V * phys[L.P_D] / phys[L.P_MU], y[10] * k, y[11] * k, y[12] * k, phi)
     return (u, v, w), V, rho, dict(zip(VARIABLES, values, strict=True))
 
 
@@ -288,7 +289,7 @@ def _compiled_rhs(phys: np.ndarray, program, params: np.ndarray):
     I = phys[L.P_INERTIA:L.P_INERTIA + 9].reshape(3, 3).copy()
     Iinv = np.empty((3, 3))
     inverse3(I, Iinv)
-    R, v_b, variables = np.empty((3, 3)), np.empty(3), np.empty(8)
+    R, v_b, variables = np.empty((3, 3)), np.empty(3), np.empty(len(VARIABLES))
     F_b, M_b, coef = np.empty(3), np.empty(3), np.empty(9)
     stack = np.empty(max(int(program.stack_size), 1))
     dy = np.empty(L.N_STATE)
