@@ -1,15 +1,18 @@
 """Model geometry: bodies of revolution with exact silhouettes (docs/bodies.md).
 
-Bodies: :func:`sphere`, :func:`capsule` (seed 004 Fig. 6 / Table 1, presets M1, M2, M3) and
-:func:`cone`. Each is a :class:`Body` whose meridian ``s_m, r_m`` is measured from a documented
+Bodies: :func:`sphere`, :func:`capsule` (seed 004 Fig. 6 / Table 1, presets M1, M2, M3),
+:func:`cone` and :func:`bullet` (ogive, cylinder, boattail; preset M80, BRL MR 1833's 7.62 mm
+M-80 ball). Each is a :class:`Body` whose meridian ``s_m, r_m`` is measured from a documented
 **reference point** on the axis (the point stage one measures; the cg is offset from it and
 comes from the shot file): sphere = centre, capsule = centre of the maximum-diameter circle,
-cone = centre of the base plane. Body axes: x nose, y starboard, z down (docs/conventions.md).
+cone and bullet = centre of the base plane. Body axes: x nose, y starboard, z down
+(docs/conventions.md).
 
 :func:`silhouette` gives the exact outline under parallel projection as a polygon whose
 vertices lie on the outline; :func:`silhouette_area_m2` its area in closed form.
 """
 
+from cadra.body.bullet import M80_IN, M80_MASS_G, bullet, bullet_preset, tangent_ogive_radius_m
 from cadra.body.capsule import (
     PRESETS,
     TABLE1_CM,
@@ -21,7 +24,6 @@ from cadra.body.capsule import (
 )
 from cadra.body.mass import SolidProperties, solid_properties
 from cadra.body.model import (
-    KINDS,
     Body,
     axial_offset_from_base,
     cg_offset_from_table2,
@@ -29,10 +31,12 @@ from cadra.body.model import (
 )
 from cadra.body.outline import silhouette, silhouette_area_m2, surface_points
 from cadra.body.shapes import cone, sphere
-from cadra.body.spec import body_from_spec
+from cadra.body.spec import KINDS, body_from_spec
 
 __all__ = [
     "KINDS",
+    "M80_IN",
+    "M80_MASS_G",
     "PRESETS",
     "TABLE1_CM",
     "Body",
@@ -41,6 +45,8 @@ __all__ = [
     "axial_offset_from_base",
     "axial_offset_from_virtual_apex",
     "body_from_spec",
+    "bullet",
+    "bullet_preset",
     "capsule",
     "cg_offset_from_table2",
     "cone",
@@ -52,4 +58,5 @@ __all__ = [
     "solve_capsule_oml",
     "sphere",
     "surface_points",
+    "tangent_ogive_radius_m",
 ]

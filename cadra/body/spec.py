@@ -8,6 +8,9 @@ Examples::
      "l1_cm": 1.008}
     {"kind": "sphere", "d_cm": 2.0}
     {"kind": "cone", "d_cm": 2.0, "half_angle_deg": 10.0, "nose_radius_mm": 0.1}
+    {"kind": "bullet", "preset": "M80"}                 # BRL MR 1833's 7.62 mm M-80 ball
+    {"kind": "bullet", "d_cm": 0.782, "length_cm": 2.814, "ogive_length_cm": 1.407,
+     "boattail_length_cm": 0.439, "boattail_angle_deg": 9.0, "meplat_mm": 0.3}
 
 Lengths take one of the suffixes ``_m``, ``_cm``, ``_mm``; angles ``_deg`` or ``_rad``. An
 optional ``name`` names the body. Unknown or missing keys raise ValueError naming the key.
@@ -17,8 +20,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from cadra.body.bullet import KIND as _BULLET
+from cadra.body.bullet import PRESETS as _BULLET_PRESETS
+from cadra.body.bullet import bullet, bullet_preset
 from cadra.body.capsule import PRESETS, capsule
-from cadra.body.model import KINDS, Body
+from cadra.body.model import KINDS as _MODEL_KINDS
+from cadra.body.model import Body
 from cadra.body.shapes import cone, sphere
 from cadra.fields import Fields
 from cadra.units import units_of
@@ -33,7 +40,13 @@ _SCHEMA = {
     "sphere": (("d",), (), ()),
     "capsule": (("d", "h", "R1", "R2", "l1"), (), ("preset",)),
     "cone": (("d", "nose_radius"), ("half_angle",), ()),
+    _BULLET: (("d", "length", "ogive_length", "boattail_length", "ogive_radius", "meplat"),
+              ("boattail_angle",), ("preset",)),
 }
+#: Kinds ``body_from_spec`` builds: :data:`cadra.body.model.KINDS` and the bullet.
+KINDS = (*_MODEL_KINDS, *(k for k in _SCHEMA if k not in _MODEL_KINDS))
+#: lengths that may be 0 (0: no blunting, no boattail, a pointed nose)
+_MAY_BE_ZERO = ("nose_radius", "boattail_length", "meplat")
 
 
 def _quantity(spec: Mapping, base: str, quantity: str) -> tuple[float | None, str]:
@@ -59,7 +72,7 @@ def body_from_spec(spec: Mapping) -> Body:
     if not isinstance(spec, Mapping):
         raise ValueError(f"body spec: expected a mapping, got {type(spec).__name__}")
     if "kind" not in spec:
-        raise ValueError("kind: missing from the body spec (one of sphere, capsule, cone)")
+        raise ValueError(f"kind: missing from the body spec (one of {', '.join(KINDS)})")
     kind = spec["kind"]
     if kind not in KINDS:
         raise ValueError(f"kind: {kind!r} is not one of {list(KINDS)}")
@@ -77,8 +90,9 @@ def body_from_spec(spec: Mapping) -> Body:
     for q in lengths + angles:
         val[q], where[q] = _quantity(spec, q, _LENGTH if q in lengths else _ANGLE)
     for q in lengths:
-        if val[q] is not None and not (val[q] > 0 or (q == "nose_radius" and val[q] == 0)):
-            raise ValueError(f"{where[q]}: must be a positive length, got {spec[where[q]]!r}")
+        if val[q] is not None and not (val[q] > 0 or (q in _MAY_BE_ZERO and val[q] == 0)):
+            what = "a non-negative" if q in _MAY_BE_ZERO else "a positive"
+            raise ValueError(f"{where[q]}: must be {what} length, got {spec[where[q]]!r}")
     try:
         return _build(kind, spec, val, name)
     except ValueError as exc:  # constructors name SI arguments ("h_m: ..."): use the spec key
@@ -105,6 +119,8 @@ def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body:
                              "(give half_angle_deg or half_angle_rad)")
         return cone(val["d"], val["half_angle"], nose_radius_m=val["nose_radius"] or 0.0,
                     name=name or "cone")
+    if kind == _BULLET:
+        return _bullet_from_spec(spec, val, name)
     preset = spec.get("preset")
     if preset is not None and preset not in PRESETS:
         raise ValueError(f"preset: {preset!r} is not one of {list(PRESETS)}")
@@ -116,4 +132,23 @@ def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body:
                    l1_m=val["l1"], name=name)
 
 
-__all__ = ["body_from_spec"]
+def _bullet_from_spec(spec: Mapping, val: dict, name: str | None) -> Body:
+    kw = {"d_m": val["d"], "length_m": val["length"], "ogive_length_m": val["ogive_length"],
+          "boattail_length_m": val["boattail_length"],
+          "boattail_angle_rad": val["boattail_angle"], "ogive_radius_m": val["ogive_radius"],
+          "meplat_m": val["meplat"]}
+    preset = spec.get("preset")
+    if preset is not None:
+        if preset not in _BULLET_PRESETS:
+            raise ValueError(f"preset: {preset!r} is not one of {list(_BULLET_PRESETS)}")
+        return bullet_preset(preset, name=name, **kw)
+    for q in ("d", "length", "ogive_length"):
+        if val[q] is None:
+            raise _missing(_BULLET, q, " when no preset is given")
+    if val["boattail_length"] and val["boattail_angle"] is None:
+        raise ValueError("boattail_angle_deg: missing from the bullet spec with a boattail "
+                         "(give boattail_angle_deg or boattail_angle_rad)")
+    return bullet(**{k: v for k, v in kw.items() if v is not None}, name=name or _BULLET)
+
+
+__all__ = ["KINDS", "body_from_spec"]

@@ -35,7 +35,7 @@ from cadra.io.toml_file import Fields, prefixed_by, read_toml
 #: Current shot-file schema version.
 SCHEMA_VERSION = 1
 #: Model kinds ``cadra.body.body_from_spec`` builds.
-MODEL_KINDS = ("sphere", "capsule", "cone")
+MODEL_KINDS = ("sphere", "capsule", "cone", "bullet")
 
 # Plausibility bounds: a value outside them is a unit error, not a range condition.
 PRESSURE_TORR_RANGE = (0.01, 7600.0)      # 1.3 Pa .. 10 atm
