@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: Body kinds built by :mod:`cadra.body`.
-KINDS = ("sphere", "capsule", "cone")
+KINDS = ("sphere", "capsule", "cone", "bullet")
 
 #: Number of points in ``Body.s_m`` / ``Body.r_m``.
 PROFILE_POINTS = 2001
