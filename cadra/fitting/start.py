@@ -149,29 +149,40 @@ def estimate_motion(shot: ShotData) -> MotionEstimate:
     V = float(np.linalg.norm(vel))
     qdyn = 0.5 * rig.density_kg_m3 * V * V
     cd = 2 * rig.mass_kg * k / (rig.density_kg_m3 * rig.area_m2)
-    wp = lp = wy = ly = math.nan
-    sig_mean = sig_rms = 0.0
-    if shot.has_angles:
-        t = shot.t_s
-        wp, lp, _ = _damped_sine(t, shot.meas[:, _THETA])
-        wy, ly, _ = _damped_sine(t, shot.meas[:, _PSI])
-        # total angle: between the measured axis and the local flight direction
-        sig = []
-        tt = t - t[shot.epoch_index]
-        dpos = [np.polyder(_polyfit(tt, shot.meas[:, j], 2)) for j in range(3)]
-        for i in range(len(t)):
-            th, ps = shot.meas[i, _THETA], shot.meas[i, _PSI]
-            if not (np.isfinite(th) and np.isfinite(ps)):
-                continue
-            a = axis_from_inclinations(th, ps)
-            v = np.array([np.polyval(d, tt[i]) for d in dpos])
-            sig.append(math.acos(np.clip(a @ v / np.linalg.norm(v), -1, 1)))
-        sig = np.array(sig)
-        if sig.size:
-            sig_mean = float(sig.mean())
-            sig_rms = float(np.sqrt(np.mean(sig**2)))
+    # total angle: between the measured axis and the local flight direction
+    tt = shot.t_s - shot.t_s[shot.epoch_index]
+    dpos = [np.polyder(_polyfit(tt, shot.meas[:, j], 2)) for j in range(3)]
+    wp, lp, wy, ly, sig_mean, sig_rms = _angle_motion(
+        shot, lambda i: np.array([np.polyval(d, tt[i]) for d in dpos]))
     return MotionEstimate(shot.shot_id, V, V / rig.speed_of_sound_m_s, qdyn, float(cd), wp, lp,
                           wy, ly, sig_mean, sig_rms)
+
+
+def _angle_motion(shot: ShotData, direction):
+    """Pitch and yaw frequencies and damping rates (damped sines of theta and psi), and the
+    mean and rms total angle between the measured axis and ``direction(i)`` (the air's
+    direction relative to the model at station i, any length). NaN rates and zero angles
+    for a shot without angles."""
+    wp = lp = wy = ly = math.nan
+    sig_mean = sig_rms = 0.0
+    if not shot.has_angles:
+        return wp, lp, wy, ly, sig_mean, sig_rms
+    t = shot.t_s
+    wp, lp, _ = _damped_sine(t, shot.meas[:, _THETA])
+    wy, ly, _ = _damped_sine(t, shot.meas[:, _PSI])
+    sig = []
+    for i in range(len(t)):
+        th, ps = shot.meas[i, _THETA], shot.meas[i, _PSI]
+        if not (np.isfinite(th) and np.isfinite(ps)):
+            continue
+        a = axis_from_inclinations(th, ps)
+        v = direction(i)
+        sig.append(math.acos(np.clip(a @ v / np.linalg.norm(v), -1, 1)))
+    if sig:
+        sig = np.array(sig)
+        sig_mean = float(sig.mean())
+        sig_rms = float(np.sqrt(np.mean(sig**2)))
+    return wp, lp, wy, ly, sig_mean, sig_rms
 
 
 def _estimate_in_stream(shot: ShotData) -> MotionEstimate:
@@ -181,18 +192,8 @@ def _estimate_in_stream(shot: ShotData) -> MotionEstimate:
     rig = shot.rigid
     V = rig.mode.stream_m_s
     qdyn = 0.5 * rig.density_kg_m3 * V * V
-    wp = lp = wy = ly = math.nan
-    sig_mean = sig_rms = 0.0
-    if shot.has_angles:
-        t = shot.t_s
-        wp, lp, _ = _damped_sine(t, shot.meas[:, _THETA])
-        wy, ly, _ = _damped_sine(t, shot.meas[:, _PSI])
-        ok = np.isfinite(shot.meas[:, _THETA]) & np.isfinite(shot.meas[:, _PSI])
-        sig = np.array([math.acos(np.clip(axis_from_inclinations(th, ps)[0], -1, 1))
-                        for th, ps in shot.meas[ok][:, [_THETA, _PSI]]])
-        if sig.size:
-            sig_mean = float(sig.mean())
-            sig_rms = float(np.sqrt(np.mean(sig**2)))
+    stream = np.array([1.0, 0.0, 0.0])
+    wp, lp, wy, ly, sig_mean, sig_rms = _angle_motion(shot, lambda i: stream)
     return MotionEstimate(shot.shot_id, V, V / rig.speed_of_sound_m_s, qdyn, math.nan, wp, lp,
                           wy, ly, sig_mean, sig_rms)
 
