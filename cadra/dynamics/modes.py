@@ -116,24 +116,6 @@ class TestMode:
         """The stream as an air velocity in F."""
         return np.array([-self.stream_m_s, 0.0, 0.0])
 
-    @classmethod
-    def from_dict(cls, data: dict | None) -> TestMode:
-        """From a ``[test_mode]`` table; unknown keys refused by name."""
-        data = dict(data or {})
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f"test_mode: unknown key(s) {unknown}; known: {sorted(known)}")
-        return cls(**data)
-
-    def to_dict(self) -> dict:
-        out = {"kind": self.kind}
-        if self.stream_m_s:
-            out["stream_m_s"] = self.stream_m_s
-        if any(self.pivot_from_cg_body_m):
-            out["pivot_from_cg_body_m"] = list(self.pivot_from_cg_body_m)
-        return out
-
 
 @njit(cache=True)
 def mount(y, phys, R):
