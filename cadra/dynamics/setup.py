@@ -107,10 +107,6 @@ class RigidBody:
         """The same body and air with other effects switched on."""
         return RigidBody(**{**self.__dict__, "effects": effects})
 
-    def with_mode(self, mode: TestMode) -> RigidBody:
-        """The same body and air in another test mode."""
-        return RigidBody(**{**self.__dict__, "mode": mode})
-
     def phys(self) -> np.ndarray:
         """The physical-constants vector of :mod:`cadra.dynamics.layout`."""
         e = self.effects
