@@ -42,7 +42,8 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
               initial: Sequence | None = None,
               continuation: dict | None = FILM_SIGMAS, local_free=None,
               extras: Sequence = (),
-              variance_components: bool = False) -> tuple[FitResult, AeroModel]:
+              variance_components: bool = False,
+              estimates: Sequence | None = None) -> tuple[FitResult, AeroModel]:
     """Fit ``model`` to ``shots`` from automatic starting values.
 
     With ``auto_start`` the free parameters first move to the linear-theory targets
@@ -64,11 +65,15 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
     the factors are in ``result.options["variance_components"]``, the rescaled shots in
     ``result.problem.shots``).
 
+    ``estimates``: each shot's :class:`~cadra.fitting.start.MotionEstimate` for the
+    starting values, in place of :func:`~cadra.fitting.start.estimate_motion`'s (e.g. the
+    epicyclic fit's, ``cadra.cli.motion.epicyclic_estimates``).
+
     Returns the result and the starting model (for the report's "initial value" column).
     """
     result, start = _fit_shots(shots, model, options=options, auto_start=auto_start,
                                initial=initial, continuation=continuation,
-                               local_free=local_free, extras=extras)
+                               local_free=local_free, extras=extras, estimates=estimates)
     if variance_components and result.converged:
         from cadra.fitting.variance import fit_variance_components
 
@@ -78,7 +83,7 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
 
 
 def _fit_shots(shots, model, *, options, auto_start, initial, continuation, local_free,
-               extras):
+               extras, estimates=None):
     """:func:`fit_shots` without the variance components."""
     options = options or FitOptions()
     shots = list(shots)
@@ -88,9 +93,9 @@ def _fit_shots(shots, model, *, options, auto_start, initial, continuation, loca
         for s in shots)
     # starting values (and the roll grid's chi^2) under the weights of the first stage
     first_shots = [floor_sigmas(s, continuation) for s in shots] if staged else shots
-    start = starting_model(first_shots, model) if auto_start else model
+    start = starting_model(first_shots, model, estimates) if auto_start else model
     states = list(initial) if initial is not None else initial_states(
-        first_shots, start, options.integration)
+        first_shots, start, options.integration, estimates)
     extras = list(extras)
     if staged:
         first = fit(first_shots, start, states, local_free=local_free, extras=extras,

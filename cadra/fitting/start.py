@@ -56,6 +56,16 @@ class MotionEstimate:
     lambda_yaw_1_s: float
     sigma_mean_rad: float         # mean angle between the measured axis and the velocity
     sigma_rms_rad: float
+    #: linear-theory moment coefficients found another way (per rad; NaN: none), used by
+    #: :func:`starting_model` before the frequency and damping above: the epicyclic fit's
+    #: arms give them for a spinning body, whose pitch frequency alone does not
+    #: (``cadra.cli.motion.epicyclic_estimates``)
+    cm_alpha: float = math.nan
+    cmq_sum: float = math.nan     # C_mq + C_m_alpha_dot
+    #: the spin about the axis (rad/s; NaN: not known), which the images do not show; the
+    #: epicyclic arms give it as (omega_1 + omega_2) I / I_x. The starting state spins at it
+    #: (a gyroscopically stable body started without spin tumbles)
+    spin_rad_s: float = math.nan
 
 
 def _polyfit(t, v, deg, w=None):
@@ -254,9 +264,11 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
     lp = mean_finite([e.lambda_pitch_1_s for e in est] + (
         [e.lambda_yaw_1_s for e in est] if sigma_plane else []))
     var = "sigma" if sigma_plane else "alpha"
-    if "Cm" in model.coefficients and np.isfinite(wp):
-        cma = -wp * wp * I_yy / (qdyn * S * d)
-        if l_pivot and "CL" in model.coefficients:
+    cma_given = mean_finite([e.cm_alpha for e in est])
+    cmq_given = mean_finite([e.cmq_sum for e in est])
+    if "Cm" in model.coefficients and (np.isfinite(wp) or np.isfinite(cma_given)):
+        cma = cma_given if np.isfinite(cma_given) else -wp * wp * I_yy / (qdyn * S * d)
+        if l_pivot and not np.isfinite(cma_given) and "CL" in model.coefficients:
             # about a pivot l ahead of the cg the lift adds -l/d C_L_alpha to the slope
             cla = _slope(model, "CL", var, point, p0)
             cma += l_pivot / d * cla
@@ -269,8 +281,9 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
                             0.2 * abs(cma) + 1e-3))
             targets.append((lambda p: float(model.evaluate(**point, params=p)["Cm"]), 0.0,
                             0.05 * abs(cma) + 1e-4))
-    if "Cmq" in model.coefficients and np.isfinite(lp):
-        cmq = float(np.clip(8 * I_yy * lp / (rho * V * S * d * d), -20, 20))
+    if "Cmq" in model.coefficients and (np.isfinite(lp) or np.isfinite(cmq_given)):
+        cmq = float(np.clip(cmq_given if np.isfinite(cmq_given)
+                            else 8 * I_yy * lp / (rho * V * S * d * d), -20, 20))
         targets.append((lambda p: float(model.evaluate(**point, params=p)["Cmq"]), cmq,
                         0.5 * abs(cmq) + 0.5))
     if not sigma_plane and "Cn" in model.coefficients:
@@ -291,8 +304,12 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
                                                                           strict=True)])
     hi = np.array([(model.parameters[i].max - p0[i]) / s for i, s in zip(free, scale,
                                                                           strict=True)])
+    # a start on a bound (a C_D_0 >= 0 started at 0) stalls the bounded solver's scaled
+    # step at x = 0 for every parameter: start just inside
+    x0 = np.clip(np.zeros(free.size), np.where(np.isfinite(lo), lo + 1e-3, -np.inf),
+                 np.where(np.isfinite(hi), hi - 1e-3, np.inf))
     try:
-        sol = least_squares(residuals, np.zeros(free.size), bounds=(lo, hi), max_nfev=200)
+        sol = least_squares(residuals, x0, bounds=(lo, hi), max_nfev=200)
         x = sol.x
     except (ValueError, FloatingPointError):
         return model
@@ -323,8 +340,11 @@ def _axis_and_rate(shot: ShotData):
     return a, adot
 
 
-def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG) -> list[np.ndarray]:
-    """Starting states at the epoch for each roll angle of the grid (one if no angles).
+def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
+                     spin_rad_s: float = 0.0) -> list[np.ndarray]:
+    """Starting states at the epoch for each roll angle of the grid (one if no angles),
+    spinning at ``spin_rad_s`` about the measured axis (stage one does not see roll: 0 unless
+    an estimate gives it, :class:`MotionEstimate`).
 
     A mounted wind-tunnel record (cadra.dynamics.modes) may have no positions: the pivot is
     then put at the facility origin (nothing observed depends on where it is), and the
@@ -343,6 +363,8 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG) -> list[np.nda
         return [state_from_reference(pos, vel, q, np.zeros(3), ref)]
     a, adot = _axis_and_rate(shot)
     w_F = np.cross(a, adot)                # transverse angular velocity, facility frame
+    if np.isfinite(spin_rad_s) and not mode.mounted:
+        w_F = w_F + spin_rad_s * a
     if mode.kind == "pitch_pivot":
         roll_grid_deg = _pivot_rolls(shot, a)
     out = []
@@ -371,11 +393,11 @@ def _pivot_rolls(shot: ShotData, a: np.ndarray) -> tuple[float, float]:
 
 
 def initial_state(shot: ShotData, model: AeroModel,
-                  integ: Integration | None = None) -> np.ndarray:
+                  integ: Integration | None = None, spin_rad_s: float = 0.0) -> np.ndarray:
     """The best starting state of ``shot`` under ``model``: the roll-grid candidate whose
     predicted trajectory is closest to the measurements (chi^2)."""
     integ = integ or Integration()
-    cands = state_candidates(shot)
+    cands = state_candidates(shot, spin_rad_s=spin_rad_s)
     if len(cands) == 1:
         return cands[0]
     # the fit's forward model (cadra.fitting.problem), as the solver will predict
@@ -393,9 +415,12 @@ def initial_state(shot: ShotData, model: AeroModel,
 
 
 def initial_states(shots: Sequence[ShotData], model: AeroModel,
-                   integ: Integration | None = None) -> list[np.ndarray]:
-    """:func:`initial_state` of every shot."""
-    return [initial_state(s, model, integ) for s in shots]
+                   integ: Integration | None = None,
+                   estimates: Sequence[MotionEstimate] | None = None) -> list[np.ndarray]:
+    """:func:`initial_state` of every shot, spinning at its estimate's spin where given."""
+    spins = [0.0 if e is None or not np.isfinite(e.spin_rad_s) else e.spin_rad_s
+             for e in (estimates if estimates is not None else [None] * len(shots))]
+    return [initial_state(s, model, integ, p) for s, p in zip(shots, spins, strict=True)]
 
 
 __all__ = ["MotionEstimate", "estimate_motion", "initial_state", "initial_states",
