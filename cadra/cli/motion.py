@@ -28,7 +28,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -184,6 +184,61 @@ def analyse_shot(shot, *, variable: str = "distance", spin: float | None = None,
     return ShotMotion(shot.shot_id, variable, shot.stations[keep], t, x, alpha, beta, sa, sb,
                       gamma, chi, fit, cond, npr, lc, sw, sections, kb, corrected,
                       tuple(notes))
+
+
+def epicyclic_estimates(shots) -> list:
+    """Each shot's :class:`cadra.fitting.start.MotionEstimate` for ``cadra2 fit``'s starting
+    values, with C_mα and C_mq + C_mα̇ from the epicyclic fit's arms (:func:`analyse_shot`:
+    linear theory with the swerve's lift, docs/motion.md) where that fit converges and
+    determines them (C_mα at least 3σ from zero), and the spin (ω_1 + ω_2) I/I_x where it
+    is 3σ from zero (the starting state spins at it). The damped sines of θ and ψ that the
+    starting values otherwise use see one frequency; a spinning body has two, and a
+    gyroscopically stable one (C_mα > 0) has no pitch frequency that gives the sign.
+    A shot the fit cannot reduce (a mounted record, too few stations) keeps the plain
+    estimate; pure function of the shots (a campaign's scheduler can ship it)."""
+    from cadra.fitting.start import estimate_motion
+    from cadra.motion import MotionFitError
+
+    out = []
+    for shot in shots:
+        est = estimate_motion(shot)
+        if shot.rigid.mode.kind == "range" and shot.has_angles:
+            try:
+                lc = analyse_shot(shot, window=None).coefficients
+            except (ValueError, MotionFitError, np.linalg.LinAlgError, FloatingPointError):
+                lc = None
+            if (lc is not None and np.isfinite(lc.Cm_alpha)
+                    and abs(lc.Cm_alpha) > 3.0 * lc.Cm_alpha_sigma):
+                spin = lc.spin_from_fit
+                est = replace(est, cm_alpha=float(lc.Cm_alpha),
+                              cmq_sum=float(lc.Cmq_sum) if np.isfinite(lc.Cmq_sum)
+                              else math.nan,
+                              spin_rad_s=float(spin) if abs(spin) > 3.0 * lc.spin_from_fit_sigma
+                              else math.nan)
+        out.append(est)
+    return out
+
+
+def start_estimates(shots, how: str = "auto"):
+    """The estimates behind ``cadra2 fit --start HOW`` (None: the fitter's own).
+
+    ``linear``: the damped sines of θ and ψ (:func:`cadra.fitting.start.estimate_motion`);
+    ``epicyclic``: :func:`epicyclic_estimates` for every shot; ``auto`` (default): the
+    epicyclic estimate for a shot whose arms show a spin (3σ), the damped sines otherwise.
+    Measured by ``tools/bench_starts.py`` (docs/fitting.md, "Starting values"): on a
+    gyroscopically stable body the epicyclic start has the right sign of C_mα and the spin,
+    and converges in half the iterations; on a non-spinning one the two starts agree."""
+    if how == "linear":
+        return None
+    epi = epicyclic_estimates(shots)
+    if how == "epicyclic":
+        return epi
+    if how != "auto":
+        raise ValueError(f"--start {how!r}: expected auto, linear or epicyclic")
+    from cadra.fitting.start import estimate_motion
+
+    return [e if np.isfinite(e.spin_rad_s) else estimate_motion(s)
+            for s, e in zip(shots, epi, strict=True)]
 
 
 def _sectional(t, alpha, beta, sa, sb, fit, lc, cond, spin, window, step, notes):

@@ -1,0 +1,94 @@
+"""cadra2 fit's starting values: from an all-zero model, and from the epicyclic fit's arms for a
+spinning body (cadra.fitting.start, cadra.cli.motion.start_estimates; issue 19 deliverable 5).
+
+Truth: the simulator's CONE-1 (10 deg cone, bundled ``cone_linear``) with its spin and C_m_alpha
+changed, flown by the same dynamics, measured as truth + Gaussian noise (20 um, 0.05 deg)."""
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cadra.cli.motion import epicyclic_estimates, start_estimates
+from cadra.fitting import fit_shots, shot_data_from_truth, starting_model
+from cadra.fitting.sensitivity import Integration
+from cadra.fitting.solver import FitOptions
+from cadra.fitting.start import estimate_motion
+from cadra.synthetic.simulate import load_shot_spec, simulate_shot
+
+SPEC = Path(__file__).resolve().parents[1] / "sample_shots" / "specs" / "cone_1.toml"
+OPTS = FitOptions(integration=Integration(threads=1))
+
+
+def _shot(p_rad_s=None, cm_a=None, seed=3):
+    spec = load_shot_spec(SPEC)
+    if p_rad_s is not None:
+        spec = replace(spec, launch=replace(spec.launch, p_rad_s=p_rad_s))
+    if cm_a is not None:
+        spec = replace(spec, aero_values={**spec.aero_values, "Cm_a": cm_a})
+    sim = simulate_shot(spec)
+    shot = shot_data_from_truth(sim.truth, sim.rigid, sim.spec.shot_id, sim.body.kind,
+                                sigma_position_m=20e-6, sigma_angle_rad=math.radians(0.05),
+                                rng=np.random.default_rng(seed))
+    return sim, shot
+
+
+@pytest.fixture(scope="module")
+def gyro():
+    """Statically unstable (C_m_alpha +0.30), spun at 3800 rad/s: gyroscopic stability
+    factor ~2 (a rifle bullet's range)."""
+    return _shot(p_rad_s=3800.0, cm_a=0.30)
+
+
+def _zero(model):
+    return model.with_values({n: 0.0 for n in model.free_names()})
+
+
+def test_start_from_all_zero_model_moves_to_the_targets():
+    """A C_D_0 >= 0 started at 0 sat on its bound, and the bounded solver then moved no
+    parameter at all: the 'starting values' were the zeros."""
+    sim, shot = _shot()
+    start = starting_model([shot], _zero(sim.model))
+    est = estimate_motion(shot)
+    cd = float(start.evaluate(sigma=est.sigma_rms_rad, alpha=est.sigma_rms_rad, beta=0.0,
+                              mach=est.mach)["CD"])
+    assert cd == pytest.approx(est.cd, rel=0.05)
+    assert est.cd == pytest.approx(0.28 + 1.85 * math.sin(est.sigma_rms_rad) ** 2, rel=0.1)
+    assert start.parameter("Cm_a").value == pytest.approx(-0.49, rel=0.1)
+
+
+def test_epicyclic_estimates_give_sign_and_spin_of_a_gyroscopically_stable_body(gyro):
+    sim, shot = gyro
+    plain = estimate_motion(shot)
+    epi = epicyclic_estimates([shot])[0]
+    assert epi.cm_alpha == pytest.approx(0.30, rel=0.02)
+    assert epi.spin_rad_s == pytest.approx(float(sim.states[0, 10]), rel=0.02)
+    assert epi.cmq_sum == pytest.approx(-4.0, abs=1.5)
+    # the damped sine's frequency cannot give a positive C_m_alpha
+    start_plain = starting_model([shot], _zero(sim.model), [plain])
+    start_epi = starting_model([shot], _zero(sim.model), [epi])
+    assert start_plain.parameter("Cm_a").value <= 0.0
+    assert start_epi.parameter("Cm_a").value == pytest.approx(0.30, rel=0.05)
+
+
+def test_epicyclic_start_converges_to_the_truth_in_fewer_iterations(gyro):
+    sim, shot = gyro
+    ref, _ = fit_shots([shot], sim.model, options=OPTS, auto_start=False)
+    res, _ = fit_shots([shot], _zero(sim.model), options=OPTS,
+                       estimates=start_estimates([shot], "auto"))
+    assert res.status == "converged"
+    assert res.chi2 <= ref.chi2 * (1 + 3 * math.sqrt(2 / ref.dof))
+    assert res.model.parameter("Cm_a").value == pytest.approx(0.30, rel=0.01)
+    plain, _ = fit_shots([shot], _zero(sim.model), options=OPTS)
+    assert res.iterations < plain.iterations
+
+
+def test_auto_keeps_the_plain_estimate_without_spin():
+    sim, shot = _shot(p_rad_s=0.0)
+    est = start_estimates([shot], "auto")[0]
+    assert est == estimate_motion(shot)
+    assert start_estimates([shot], "linear") is None
+    with pytest.raises(ValueError, match="auto, linear or epicyclic"):
+        start_estimates([shot], "guess")
