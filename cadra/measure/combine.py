@@ -43,6 +43,9 @@ class ViewPose:
     sigma_b_m: float
     sigma_angle_rad: float
     projection: Projection | None = None
+    #: d(a_m, b_m, angle_rad) / d(tilt) of the view's fit (ViewFit.tilt_sensitivity): the
+    #: tilt its template used comes from the other view's angle, whose error moves this pose
+    tilt_sensitivity: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,37 @@ def axis_from_views(projections, plane_points, angles) -> np.ndarray:
     return -a if a[0] < 0 else a
 
 
+def view_tilts(theta_p: float, psi_p: float) -> tuple[float, float]:
+    """The axis' tilts out of the top and side view planes, (asin a_z, asin a_y), from the
+    side-view and top-view projected angles: the tilts stage one builds each view's outline
+    template at (cadra.measure.station)."""
+    a = axis_from_projected_angles(theta_p, psi_p)
+    return math.asin(a[2]), math.asin(a[1])
+
+
+def _tilt_propagated(top: ViewPose, side: ViewPose):
+    """Each view's (a, b) covariance and angle sigma with the error of the tilt its template
+    used: the tilt comes from the angles of both views (:func:`view_tilts`), and a tilt error
+    e moves the view's pose by ``tilt_sensitivity * e`` (the outline's foreshortening moves
+    the reference point along the projected axis; at 30 deg tilt ~7 mm per rad, about the
+    pose's own sigma for the side view's 0.0015 deg angle error: docs/stage1.md, step 5).
+    First order; the cross-covariances this makes (a view's position with the other view's
+    angle) are left out of the per-channel sigmas."""
+    h = 1e-7
+    J = np.empty((2, 2))     # d(tilt_top, tilt_side) / d(theta_p, psi_p)
+    for j, (dt, dp) in enumerate(((h, 0.0), (0.0, h))):
+        plus = view_tilts(side.angle_rad + dt, top.angle_rad + dp)
+        minus = view_tilts(side.angle_rad - dt, top.angle_rad - dp)
+        J[:, j] = (np.array(plus) - np.array(minus)) / (2 * h)
+    var_tilt = (J**2) @ np.array([side.sigma_angle_rad**2, top.sigma_angle_rad**2])
+    covs, sig_angle = [], []
+    for v, vt in zip((top, side), var_tilt, strict=True):
+        s = np.asarray(v.tilt_sensitivity, dtype=float)
+        covs.append(np.diag([v.sigma_a_m**2, v.sigma_b_m**2]) + np.outer(s[:2], s[:2]) * vt)
+        sig_angle.append(math.sqrt(v.sigma_angle_rad**2 + s[2]**2 * vt))
+    return covs, sig_angle
+
+
 def combine_views(top: ViewPose, side: ViewPose) -> StationPose:
     """3-D pose from the two views: the position by the rays' weighted least-squares
     intersection (module docstring), the axis from the two views' planes through it
@@ -99,8 +133,8 @@ def combine_views(top: ViewPose, side: ViewPose) -> StationPose:
     views = (top, side)
     projections = [v.projection if v.projection is not None else _DEFAULT_PROJECTIONS[name]
                    for v, name in zip(views, ("top", "side"), strict=True)]
-    hit = intersect_rays(projections, [(v.a_m, v.b_m) for v in views],
-                         [np.diag([v.sigma_a_m**2, v.sigma_b_m**2]) for v in views])
+    covs, sig_angle = _tilt_propagated(top, side)
+    hit = intersect_rays(projections, [(v.a_m, v.b_m) for v in views], covs)
     sig = np.sqrt(np.diag(hit.cov))
     dx = hit.closest[0, 0] - hit.closest[1, 0]
     points = [(v.a_m, v.b_m) for v in views]
@@ -116,7 +150,7 @@ def combine_views(top: ViewPose, side: ViewPose) -> StationPose:
         plus = inclinations(side.angle_rad + dtp, top.angle_rad + dpp)
         minus = inclinations(side.angle_rad - dtp, top.angle_rad - dpp)
         J[:, j] = (np.array(plus) - np.array(minus)) / (2 * h)
-    C = J @ np.diag([side.sigma_angle_rad**2, top.sigma_angle_rad**2]) @ J.T
+    C = J @ np.diag([sig_angle[1]**2, sig_angle[0]**2]) @ J.T
     return StationPose(
         x_m=float(hit.r_F[0]), y_m=float(hit.r_F[1]), z_m=float(hit.r_F[2]),
         theta_rad=float(theta), psi_rad=float(psi),

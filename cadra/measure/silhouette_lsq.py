@@ -137,6 +137,11 @@ class ViewFit:
     warnings: tuple[str, ...] = ()
     noise_coef: np.ndarray | None = None
     edge_profile: tuple[float, float, float, float] | None = None  # (s0, a0, s4, a4)
+    #: d(a_m, b_m, phi_rad) / d(tilt): how the pose moves when the template's out-of-plane
+    #: tilt changes (m/rad, m/rad, rad/rad); zeros unless fit_silhouette was given a
+    #: ``tilt_step``. The tilt comes from the other view's angle, so its error moves this
+    #: view's pose; cadra.measure.combine propagates it (docs/stage1.md, step 5)
+    tilt_sensitivity: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
@@ -144,7 +149,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
                    settings: FitSettings | None = None, edge_sigma0: float = 0.9,
                    noise_coef: np.ndarray | None = None,
                    edge_profile0: tuple[float, float, float, float] | None = None,
-                   centroid: bool = True) -> ViewFit:
+                   centroid: bool = True,
+                   tilt_step: tuple[Template, float] | None = None) -> ViewFit:
     """Least-squares silhouette fit (method a) from ``pose0``; see the module docstring.
 
     ``img`` float (H, W) in [0, 1]; ``projection`` the view's optics (for a parallel view
@@ -153,8 +159,9 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     clutter known in advance); ``edge_sigma0`` (or the whole edge profile ``edge_profile0``,
     :attr:`ViewFit.edge_profile`) and ``noise_coef`` (the image's noise model,
     :attr:`ViewFit.noise_coef`) warm-start a refit; ``centroid=False`` skips method (b)
-    (an intermediate fit). Never raises for bad data: ``ok`` False
-    with a reason.
+    (an intermediate fit). ``tilt_step = (template at tilt + h, h)`` gives
+    :attr:`ViewFit.tilt_sensitivity` (:func:`_tilt_sensitivity`). Never raises for bad
+    data: ``ok`` False with a reason.
     """
     settings = FitSettings() if settings is None else settings
     Jrot = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -273,6 +280,10 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     nan2 = (math.nan, math.nan)
     cen = (centroid_pose(img, template, projection, pose, seg, exclude) if centroid
            else (nan2, math.nan, (math.nan,) * 3))
+    tilt_sens = (0.0, 0.0, 0.0)
+    if tilt_step is not None and fit_phi:
+        tilt_sens = _tilt_sensitivity(tilt_step, template, pose, projection, seg, X, wts, keep,
+                                      fit_phi, c_bias if fit_c else 0.0, settings)
     warnings = []
     if diverged:
         warnings.append(f"silhouette fit: a late step of > {MAX_LATE_STEP_PX} px was rejected "
@@ -291,7 +302,59 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         n_rejected=n_rej, iterations=it, converged=converged, outline_outside_frac=outside,
         centroid_ref_px=cen[0], centroid_axis_px_rad=cen[1], centroid_pose=cen[2],
         warnings=tuple(warnings), noise_coef=seg.noise_coef,
-        edge_profile=tuple(float(x) for x in seg.profile))
+        edge_profile=tuple(float(x) for x in seg.profile), tilt_sensitivity=tilt_sens)
+
+
+def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
+                  reach_px: float = 3.0) -> np.ndarray:
+    """Signed distance t (px) from each foot along its normal to the closed polyline ``poly``
+    (the crossing nearest the foot within ``reach_px``; NaN if none)."""
+    P0 = poly
+    E = np.roll(poly, -1, axis=0) - poly                  # edges P_i -> P_i+1
+    # p + t n = P0 + s E:  t = cross(P0 - p, E) / cross(n, E), s = cross(P0 - p, n) / cross(n, E)
+    d = P0[None, :, :] - feet[:, None, :]
+    den = normals[:, None, 0] * E[None, :, 1] - normals[:, None, 1] * E[None, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (d[..., 0] * E[None, :, 1] - d[..., 1] * E[None, :, 0]) / den
+        sp = (d[..., 0] * normals[:, None, 1] - d[..., 1] * normals[:, None, 0]) / den
+    ok = (np.abs(den) > 1e-12) & (sp >= 0.0) & (sp <= 1.0) & (np.abs(t) <= reach_px)
+    t = np.where(ok, t, np.inf)
+    best = np.argmin(np.abs(t), axis=1)
+    out = t[np.arange(len(feet)), best]
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+def _curvature_at(feet: np.ndarray, poly: np.ndarray, corner_clear_px: float) -> np.ndarray:
+    """The outline's vertex curvature (1/px) at the vertex nearest each foot."""
+    geo = outline_geometry(poly, corner_clear_px)
+    d2 = ((feet[:, None, :] - geo.p0[None, :, :]) ** 2).sum(axis=2)
+    return geo.kv[np.argmin(d2, axis=1)]
+
+
+def _tilt_sensitivity(tilt_step, template, pose, projection, seg, X, wts, keep, fit_phi,
+                      c_bias, settings):
+    """d(pose)/d(tilt) from the segments' own weighted least squares. The outline of the
+    template at tilt + h moves each segment's foot by D_k along its normal and changes its
+    curvature by dk_k, so the fitted offsets would be delta_k - D_k against a curvature
+    column -(kappa_k + dk_k): to first order the solution moves by the weighted
+    least-squares solution for -D_k + c dk_k (the same design: position, angle and curvature
+    bias c)."""
+    template_h, h = tilt_step
+    poly_h = outline_px(template_h, pose, projection)
+    poly_0 = outline_px(template, pose, projection)
+    D = (_along_normal(seg.foot_px, seg.normal, poly_h)
+         - _along_normal(seg.foot_px, seg.normal, poly_0))
+    rhs = -D
+    if c_bias:
+        rhs = rhs + c_bias * (_curvature_at(seg.foot_px, poly_h, settings.corner_clear_px)
+                              - _curvature_at(seg.foot_px, poly_0, settings.corner_clear_px))
+    use = keep & np.isfinite(rhs)
+    if use.sum() < X.shape[1] + 5:
+        return (0.0, 0.0, 0.0)
+    sw = np.sqrt(wts[use])
+    beta, *_ = np.linalg.lstsq(X[use] * sw[:, None], rhs[use] * sw, rcond=None)
+    d = beta / h
+    return (float(d[0]), float(d[1]), float(d[2]) if fit_phi else 0.0)
 
 
 def _failed(reason: str, pose, outside: float) -> ViewFit:

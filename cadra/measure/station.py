@@ -41,6 +41,9 @@ VIEWS = ("top", "side")
 
 #: Half-width (px) of the pixel mask about each found wire that the silhouette fit ignores.
 WIRE_MASK_HALF_WIDTH_PX = 4.0
+#: tilt step (rad) of the outline template that gives a view's pose sensitivity to the tilt
+#: (ViewFit.tilt_sensitivity; linear within 3 % up to 1 deg)
+TILT_STEP_RAD = math.radians(0.3)
 
 
 @dataclass(frozen=True)
@@ -111,7 +114,8 @@ def _view_pose(fit: ViewFit, wires) -> ViewPose:
     return ViewPose(a_m=fit.pose[0], b_m=fit.pose[1], angle_rad=fit.pose[2] if finite else 0.0,
                     sigma_a_m=math.hypot(math.sqrt(fit.cov[0, 0]), s_aff[0]),
                     sigma_b_m=math.hypot(math.sqrt(fit.cov[1, 1]), s_aff[1]),
-                    sigma_angle_rad=s_ang if finite else 0.0, projection=wires.projection)
+                    sigma_angle_rad=s_ang if finite else 0.0, projection=wires.projection,
+                    tilt_sensitivity=fit.tilt_sensitivity)
 
 
 def _wire_crossings(fit: ViewFit, template, projection, wires) -> list[str]:
@@ -173,7 +177,9 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
                          edge_sigma0=prev.fit.edge_sigma_px if prev is not None else 0.9,
                          noise_coef=prev.fit.noise_coef if prev is not None else None,
                          edge_profile0=prev.fit.edge_profile if prev is not None else None,
-                         centroid=final)
+                         centroid=final,
+                         tilt_step=((_template(body, view.name, tilt + TILT_STEP_RAD),
+                                     TILT_STEP_RAD) if final else None))
     if not fit.ok:
         return fit, fit.reason, wires, affine, ()
     warn = list(fit.warnings)
