@@ -21,7 +21,8 @@ The seed omits the cubic C_m, C_N alpha, C_D, C_mq, the mass (its printed value 
 the initial conditions: the choices are the constants below, each with its reason
 (docs/motion.md, "Seed 002 Table 2").
 
-Usage: python tools/validate_tricyclic.py [--no-diagnose] [--noise-deg 0.1]
+Usage: python tools/validate_tricyclic.py [--no-diagnose] [--no-sensitivity] [--noise-deg 0.1]
+[--paper-noise] [--cli] [--seed 1]   (about 4 min on one core; --paper-noise --cli: about 8)
 Last line: a JSON object (seed002_ordering_matches, seed002_nr_lowers_rms_frac,
 seed002_cubic_12nr_over_10_ratio, seed002_diagnose_named, seconds and the per-case figures).
 """
@@ -99,8 +100,9 @@ CMA0 = -CD0 * (0.0024 / 1.5) / np.radians(0.67)
 #: that K_3 = 0.67 deg (the 12+NR fit of the cubic + cg case), the table's "0.67 deg trim"
 CG_OFFSET_M = 0.0024 * 0.0254 * 0.67 / 0.4792
 #: damping: the models were built "to amplify any change in the angle-of-attack envelope"; with
-#: C_mq = -0.8 (and the lift and drag terms) the arms decay to ~35 % over the flight, which is
-#: what turns a cubic moment into the frequency drift the 12-constant program takes (eq. 11)
+#: C_mq = -0.8 (and the lift and drag terms) the fast arm decays to 48 %, the slow one to 74 %
+#: over the flight, which turns a cubic moment into the frequency drift of eq. 11 (the
+#: 12-constant program's phi'')
 CMQ0 = -0.8
 #: the cubic term (Fig. 7's value is not printed): C_m alpha,eff = C_ma0 + C_ma2 delta_e^2 grows
 #: by 40 % at delta_e = 15 deg (Fig. 5: "a large increase ... at large delta^2")
