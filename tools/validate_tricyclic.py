@@ -45,12 +45,15 @@ import numpy as np
 from scipy.integrate import cumulative_trapezoid
 
 from cadra.aero import model_from_dict
+from cadra.body import cone
 from cadra.dynamics.effects import Effects
 from cadra.dynamics.layout import P_RHO
 from cadra.dynamics.modes import TestMode
 from cadra.dynamics.observe import air_angles, observe
 from cadra.dynamics.setup import RigidBody, propagate_states
 from cadra.dynamics.trajectory import Launch
+from cadra.fitting.data import rigid_body_from_shot
+from cadra.io.shotfile import MassProperties, ShotFile, StationRecord
 from cadra.motion import fit_epicyclic, fixed_plane_angles
 
 FT, SLUG, LBF = 0.3048, 14.593903, 4.4482216
@@ -120,7 +123,6 @@ K1_DEG, K2_DEG = 4.0, 15.0
 #: density variation: the printed "+-0.02 %" is garbled ([G]: +-0.015 in Mach at M 3.97 is
 #: +-1.43 % isentropically); read as +-0.02 (2 %); period: the no-spin pitch period
 DENSITY_AMPLITUDE = 0.02
-DENSITY_FROM_MACH = 2.5 * 0.4 * MACH * 0.015 / (1 + 0.2 * MACH**2)   # 0.0143, for the docs
 
 
 @dataclass(frozen=True)
@@ -209,18 +211,14 @@ def effects(case: Case) -> Effects:
 def cg_from_base_m() -> float:
     """Nominal cg minus the cone's reference point (the centre of the base), along the nose
     axis: the cone's length less xcg from the nose (docs/bodies.md)."""
-    from cadra.body import cone
-
     body = cone(D_M, np.radians(HALF_ANGLE_DEG), nose_radius_m=NOSE_RADIUS_M)
     return body.length_m - XCG_FROM_NOSE_M
 
 
 def tunnel_shot(n_frames: int = N_FRAMES, shot_id: str = "RUN21-SIM"):
     """Run 21 as a CADRA shot file: the 60 deg blunt cone, its mass properties (model axes:
-    x nose, y port, z up), the tunnel's static air (P, T from M and q) and the ``tunnel`` test
+    x nose, y port, z up), air of the stream's density (T_K, P_PA) and the ``tunnel`` test
     mode; the movie's frames are its stations (docs/shot_file.md)."""
-    from cadra.io.shotfile import MassProperties, ShotFile, StationRecord
-
     t = np.arange(n_frames) / FPS
     return ShotFile(
         shot_id=shot_id,
@@ -236,8 +234,6 @@ def tunnel_shot(n_frames: int = N_FRAMES, shot_id: str = "RUN21-SIM"):
 def rigid_body(case: Case | None = None, n_frames: int = N_FRAMES) -> RigidBody:
     """The dynamics' view of :func:`tunnel_shot` (as ``cadra2`` builds it: gravity on), with
     the case's body perturbations switched on."""
-    from cadra.fitting.data import rigid_body_from_shot
-
     return rigid_body_from_shot(tunnel_shot(n_frames),
                                 effects(case) if case is not None else Effects())
 
@@ -271,8 +267,6 @@ class Record:
     x: np.ndarray            # air distance, m (integral of V dt)
     alpha_f: np.ndarray      # fixed-plane angles, rad (seed 002 eqs. 6-7)
     beta_f: np.ndarray
-    theta: np.ndarray        # CADRA's inclinations (trajectory file), rad
-    psi: np.ndarray
     speed: np.ndarray        # air speed, m/s
     spin: np.ndarray         # roll rate p, rad/s
 
@@ -310,22 +304,26 @@ def simulate(case: Case, n_frames: int = N_FRAMES, ch: Choices = CHOICES) -> Rec
     a_f, b_f = fixed_plane_angles(theta_v, theta_h)
     V = air_angles(states, body)["airspeed_m_s"]
     x = cumulative_trapezoid(V, t, initial=0.0)
-    return Record(t, states, body, x, a_f, b_f, obs["theta_rad"], obs["psi_rad"], V,
-                  states[:, 10].copy())
+    return Record(t, states, body, x, a_f, b_f, V, states[:, 10].copy())
 
 
 PROGRAMS = (("10", False, False), ("10+NR", False, True), ("12", True, False),
             ("12+NR", True, True))
 
 
-def tricyclic_fits(rec: Record) -> dict:
+def tricyclic_fits(rec: Record, trim: str = "measured") -> dict:
     """The four programs' rms angle-of-attack deviations (deg), fitted in air distance with
-    the trim arm at the measured spin over the mean speed (p/V, rad/m)."""
-    p_per_m = float(np.mean(rec.spin) / np.mean(rec.speed))
+    the trim arm at the measured spin over the mean speed (p/V, rad/m); ``trim="arms"``: at
+    the rate the paper's nomenclature ties to the arms, p = (I_y/I_x)(phi_1' + phi_2') (at
+    mid-record), iterated from the measured one (four fits)."""
     out = {}
     for name, curvature, nr in PROGRAMS:
-        f = fit_epicyclic(rec.x, rec.alpha_f, rec.beta_f, trim_rate=p_per_m,
-                          curvature=curvature, nonrolling=nr, variable="distance")
+        p = float(np.mean(rec.spin) / np.mean(rec.speed))
+        for _ in range(4 if trim == "arms" else 1):
+            f = fit_epicyclic(rec.x, rec.alpha_f, rec.beta_f, trim_rate=p,
+                              curvature=curvature, nonrolling=nr, variable="distance")
+            xm = 0.5 * (rec.x[0] + rec.x[-1]) - f.s_ref
+            p = I_Y / I_X * sum(f.arm(j).omega + f.arm(j).omega_dot * xm for j in (1, 2))
         out[name] = float(np.degrees(f.rms))
     return out
 
@@ -414,7 +412,6 @@ def diagnose(case: Case, sigma_angle_deg: float, seed: int, folder: Path,
     import io
 
     import pandas as pd
-
     rec = simulate(case, n_frames)
     traj, model_path = write_case_files(case, rec, folder, sigma_angle_deg,
                                         np.random.default_rng(seed))
@@ -480,11 +477,11 @@ SINGLES = (
 #: the cases diagnosed (Table 2's mass and flow columns, then the one-effect twins)
 DIAGNOSED = ("cubic_cg", "cubic_cg_iyz", "cubic_cg_iyz_prod", "cubic_cg_density",
              "cubic_iyz", "cubic_prod", "cubic_density")
-#: the paper's statements checked: (case, more, less) within a case, NR and 12 constants
-#: lowering the rms wherever the paper gives both cells
 
 
 def _within_checks(ours: dict) -> list[dict]:
+    """The paper's statements within a case: NR and 12 constants lower the rms wherever the
+    paper gives both cells."""
     rows = []
     for case in CASES:
         pap = dict(zip(("10", "10+NR", "12", "12+NR"), case.paper, strict=True))
@@ -514,9 +511,9 @@ def _column_pairs(ours: dict) -> tuple[list, list]:
     return good, bad
 
 
-def table2(ch: Choices = CHOICES) -> dict:
+def table2(ch: Choices = CHOICES, trim: str = "measured") -> dict:
     """Our Table 2: case -> program -> rms (deg)."""
-    return {case.key: tricyclic_fits(simulate(case, ch=ch)) for case in CASES}
+    return {case.key: tricyclic_fits(simulate(case, ch=ch), trim) for case in CASES}
 
 
 def compare(ours: dict) -> dict:
@@ -570,10 +567,6 @@ def sensitivity() -> list[dict]:
     return rows
 
 
-def _cell(x):
-    return "-" if x is None else f"{x:.4f}"
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--no-diagnose", action="store_true", help="the tricyclic table only")
@@ -598,7 +591,7 @@ def main(argv=None) -> None:
     print("|---|---|---|---|---|")
     ours = table2()
     for case in CASES:
-        cells = [f"{_cell(p)} / {ours[case.key][k]:.4f}"
+        cells = [("-" if p is None else f"{p:.4f}") + f" / {ours[case.key][k]:.4f}"
                  for p, k in zip(case.paper, ("10", "10+NR", "12", "12+NR"), strict=True)]
         print(f"| {case.label} | " + " | ".join(cells) + " |")
     rec = simulate(CASES[0])
@@ -634,6 +627,15 @@ def main(argv=None) -> None:
     out["seed002_cubic_12nr_over_10_ratio"] = round(cmp_["cubic_ratio"], 2)
     out["seed002_cubic_12nr_over_10nr_ratio"] = round(cmp_["cubic_ratio_nr"], 2)
     out["seed002_effect_rise_12nr_deg"] = cmp_["rise"]
+    tied = compare(table2(trim="arms"))
+    print("trim rate tied to the arms, p = (I_y/I_x)(phi_1' + phi_2'): 12 + NR rank "
+          f"{'same' if tied['rank_matches'] else tied['our_rank']}; within-case "
+          f"{sum(r['holds'] for r in tied['within'])}/{len(within)}; rises " + ", ".join(
+              f"{k}: {v['ours']:+.3f}" for k, v in tied["rise"].items()))
+    out["seed002_trim_tied_to_arms"] = {
+        "rank_12nr_matches": tied["rank_matches"], "rank_12nr": tied["our_rank"],
+        "within_hold": sum(r["holds"] for r in tied["within"]),
+        "rise_12nr_deg": {k: v["ours"] for k, v in tied["rise"].items()}}
     if not args.no_sensitivity:
         sens = sensitivity()
         print(f"\nsensitivity to the unstated choices ({len(sens)} variants, one change each):")
