@@ -22,7 +22,7 @@ the initial conditions: the choices are the constants below, each with its reaso
 (docs/motion.md, "Seed 002 Table 2").
 
 Usage: python tools/validate_tricyclic.py [--no-diagnose] [--no-sensitivity] [--noise-deg 0.1]
-[--paper-noise] [--cli] [--seed 1]   (about 4 min on one core; --paper-noise --cli: about 8)
+[--paper-noise] [--cli] [--seed 1]   (about 5 min on one core; --paper-noise --cli: about 8)
 Last line: a JSON object (seed002_ordering_matches, seed002_nr_lowers_rms_frac,
 seed002_cubic_12nr_over_10_ratio, seed002_diagnose_named, seconds and the per-case figures).
 """
