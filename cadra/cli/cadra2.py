@@ -59,6 +59,7 @@ from cadra.cli._format import (
     warn,
 )
 from cadra.cli.motion import add_parser as add_motion_parser
+from cadra.cli.motion import start_estimates
 from cadra.numfmt import pm
 
 #: the top-level help's description (plain text: the module doc is rST)
@@ -224,11 +225,7 @@ def _fit(args) -> int:
             from cadra.fitting.reference import load_reference
 
             reference = load_reference(args.reference)   # before the fit: fail early
-        estimates = None
-        if not args.no_auto_start and args.start != "linear":
-            from cadra.cli.motion import start_estimates
-
-            estimates = start_estimates(shots, args.start)
+        estimates = None if args.no_auto_start else start_estimates(shots, args.start)
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start,
                                   variance_components=args.variance_components,
@@ -590,10 +587,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--no-auto-start", action="store_true",
                      help="start from the model file's values, not linear-theory estimates")
     fit.add_argument("--start", choices=("auto", "linear", "epicyclic"), default="auto",
-                     help="where the linear-theory starting values come from: damped sines of "
-                          "theta and psi (linear), the epicyclic fit's arms with the spin they "
-                          "imply (epicyclic), or the arms for a shot that spins and the sines "
-                          "otherwise (auto; docs/fitting.md) (default: auto)")
+                     help="starting values: theta, psi damped sines (linear), epicyclic arms "
+                          "and spin (epicyclic), arms if it spins (auto) (default: auto)")
     fit.add_argument("--no-plots", action="store_true", help="tables and report only")
     fit.add_argument("--bias-table", default=None, metavar="current|FILE",
                      help="correct the measurements by a station bias table: 'current' (the "
