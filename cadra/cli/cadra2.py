@@ -14,14 +14,9 @@ Subcommands:
   — seed 004 Fig. 15: hold one parameter at each value (model file's unit), refit the rest
   on all shots; table of rms and the other parameters, and a plot.
 * ``cadra2 calibrate TRAJECTORY [...] -o OUT_DIR`` — sphere calibration shots: per-station
-  position and timing biases with sigmas, compared with the facility's station history
-  (``stations/<facility>/`` under ``--stations-root``, default ``$CADRA_STATIONS_ROOT`` or
-  the repository root, never the working folder unless given), to which the new estimate is
-  appended under the history's lock before the report is written (docs/calibration.md).
-  ``cadra2 fit --bias-table current|FILE`` applies a table. Exit status 3 (calibrate only):
-  the outputs are written but the estimate is not in the station history (the append failed:
-  full disk, lock timeout, a history changed into one it refuses; the report and a one-line
-  message say why), or writing the outputs failed after the append (the message says so).
+  position and timing biases with sigmas, compared with the facility's station history, to
+  which the new estimate is appended under its lock (docs/calibration.md: where the history
+  lives, exit status 3); ``cadra2 fit --bias-table current|FILE`` applies a table.
 * ``cadra2 diagnose TRAJECTORY [...] --model MODEL -o OUT_DIR`` — fit, then rank the library
   of unmodelled effects by score tests, add the significant ones, and say where any remaining
   gap lies (docs/gap.md).
@@ -460,6 +455,12 @@ def _calibrate(args) -> int:
     return 0
 
 
+def _add_start_option(parser) -> None:
+    parser.add_argument("--start", choices=("auto", "linear", "epicyclic"), default="auto",
+                        help="starting values: theta, psi damped sines (linear), epicyclic "
+                             "arms and spin (epicyclic), arms if it spins (auto) (default: auto)")
+
+
 def _diagnose(args) -> int:
     from cadra.fitting import FitOptions, fit_shots
     from cadra.gap.report import write_diagnosis
@@ -473,7 +474,7 @@ def _diagnose(args) -> int:
         shots, trajs = _shots(args)
         # a fit short of convergence is still diagnosed: diagnose_gap continues it with more
         # budget and, if it still falls short, runs from its best point and says so
-        result, _ = fit_shots(shots, model,
+        result, _ = fit_shots(shots, model, estimates=start_estimates(shots, args.start),
                               options=FitOptions(max_iterations=args.max_iterations))
         dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=not _quiet(args))
         stage_one = {}
@@ -586,9 +587,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "file (docs/aero_models.md)")
     fit.add_argument("--no-auto-start", action="store_true",
                      help="start from the model file's values, not linear-theory estimates")
-    fit.add_argument("--start", choices=("auto", "linear", "epicyclic"), default="auto",
-                     help="starting values: theta, psi damped sines (linear), epicyclic arms "
-                          "and spin (epicyclic), arms if it spins (auto) (default: auto)")
+    _add_start_option(fit)
     fit.add_argument("--no-plots", action="store_true", help="tables and report only")
     fit.add_argument("--bias-table", default=None, metavar="current|FILE",
                      help="correct the measurements by a station bias table: 'current' (the "
@@ -640,6 +639,7 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--model", required=True, help="aero model (bundled name or file)")
     diag.add_argument("--alpha", type=float, default=0.01,
                       help="family-wise significance of adding an effect")
+    _add_start_option(diag)
     cal = _subcommand(
         sub, "calibrate", _calibrate, "station biases from sphere calibration shots",
         "Sphere calibration: per-station position and timing biases with sigmas, compared "
