@@ -11,6 +11,10 @@ Examples::
     {"kind": "bullet", "preset": "M80"}                 # BRL MR 1833's 7.62 mm M-80 ball
     {"kind": "bullet", "d_cm": 0.782, "length_cm": 2.814, "ogive_length_cm": 1.407,
      "boattail_length_cm": 0.439, "boattail_angle_deg": 9.0, "meplat_mm": 0.3}
+    {"kind": "finner", "preset": "basic_finner"}        # seed 001's Basic Finner (d = 3 cm)
+    {"kind": "finner", "preset": "basic_finner", "d_cm": 2.0}   # the same in calibres, d = 2 cm
+    {"kind": "finner", "d_cm": 3.0, "length_cm": 30.0, "half_angle_deg": 10.0,
+     "fin_chord_cm": 3.0, "fin_span_cm": 3.0, "fin_thickness_mm": 2.4}
 
 Lengths take one of the suffixes ``_m``, ``_cm``, ``_mm``; angles ``_deg`` or ``_rad``. An
 optional ``name`` names the body. Unknown or missing keys raise ValueError naming the key.
@@ -24,6 +28,9 @@ from cadra.body.bullet import KIND as _BULLET
 from cadra.body.bullet import PRESETS as _BULLET_PRESETS
 from cadra.body.bullet import bullet, bullet_preset
 from cadra.body.capsule import PRESETS, capsule
+from cadra.body.finner import KIND as _FINNER
+from cadra.body.finner import PRESETS as _FINNER_PRESETS
+from cadra.body.finner import FinnedBody, finner, finner_preset
 from cadra.body.model import KINDS as _MODEL_KINDS
 from cadra.body.model import Body
 from cadra.body.shapes import cone, sphere
@@ -42,8 +49,10 @@ _SCHEMA = {
     "cone": (("d", "nose_radius"), ("half_angle",), ()),
     _BULLET: (("d", "length", "ogive_length", "boattail_length", "ogive_radius", "meplat"),
               ("boattail_angle",), ("preset",)),
+    _FINNER: (("d", "length", "fin_chord", "fin_span", "fin_thickness"), ("half_angle",),
+              ("preset",)),
 }
-#: Kinds ``body_from_spec`` builds: :data:`cadra.body.model.KINDS` and the bullet.
+#: Kinds ``body_from_spec`` builds: :data:`cadra.body.model.KINDS`, the bullet and the finner.
 KINDS = (*_MODEL_KINDS, *(k for k in _SCHEMA if k not in _MODEL_KINDS))
 #: lengths that may be 0 (0: no blunting, no boattail, a pointed nose)
 _MAY_BE_ZERO = ("nose_radius", "boattail_length", "meplat")
@@ -60,8 +69,9 @@ def _missing(kind: str, base: str, why: str = "") -> ValueError:
     return ValueError(f"{base}_cm: missing from the {kind} spec (give one of {alts}){why}")
 
 
-def body_from_spec(spec: Mapping) -> Body:
-    """Build a :class:`~cadra.body.model.Body` from a plain-data spec (module docstring).
+def body_from_spec(spec: Mapping) -> Body | FinnedBody:
+    """Build a :class:`~cadra.body.model.Body` from a plain-data spec (module docstring); a
+    ``"finner"`` spec gives a :class:`~cadra.body.finner.FinnedBody`.
 
     Raises
     ------
@@ -104,7 +114,7 @@ def body_from_spec(spec: Mapping) -> Body:
         raise
 
 
-def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body:
+def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body | FinnedBody:
     lengths = _SCHEMA[kind][0]
 
     if kind == "sphere":
@@ -121,6 +131,8 @@ def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body:
                     name=name or "cone")
     if kind == _BULLET:
         return _bullet_from_spec(spec, val, name)
+    if kind == _FINNER:
+        return _finner_from_spec(spec, val, name)
     preset = spec.get("preset")
     if preset is not None and preset not in PRESETS:
         raise ValueError(f"preset: {preset!r} is not one of {list(PRESETS)}")
@@ -149,6 +161,25 @@ def _bullet_from_spec(spec: Mapping, val: dict, name: str | None) -> Body:
         raise ValueError("boattail_angle_deg: missing from the bullet spec with a boattail "
                          "(give boattail_angle_deg or boattail_angle_rad)")
     return bullet(**{k: v for k, v in kw.items() if v is not None}, name=name or _BULLET)
+
+
+def _finner_from_spec(spec: Mapping, val: dict, name: str | None) -> FinnedBody:
+    """A preset scales its calibre dimensions by the given d; other keys override (SI)."""
+    kw = {"length_m": val["length"], "half_angle_rad": val["half_angle"],
+          "fin_chord_m": val["fin_chord"], "fin_span_m": val["fin_span"],
+          "fin_thickness_m": val["fin_thickness"]}
+    preset = spec.get("preset")
+    if preset is not None:
+        if preset not in _FINNER_PRESETS:
+            raise ValueError(f"preset: {preset!r} is not one of {list(_FINNER_PRESETS)}")
+        return finner_preset(preset, name=name, d_m=val["d"], **kw)
+    for q in ("d", "length", "fin_chord", "fin_span"):
+        if val[q] is None:
+            raise _missing(_FINNER, q, " when no preset is given")
+    if val["half_angle"] is None:
+        raise ValueError("half_angle_deg: missing from the finner spec "
+                         "(give half_angle_deg or half_angle_rad)")
+    return finner(val["d"], **kw, name=name or _FINNER)
 
 
 __all__ = ["KINDS", "body_from_spec"]
