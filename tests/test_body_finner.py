@@ -109,6 +109,22 @@ def test_outline_at_zero_incidence_matches_hand_area_and_span(view, roll_deg):
     assert poly[:, 0].max() == pytest.approx(L, rel=1e-14)
 
 
+@pytest.mark.parametrize("roll_deg", [0.0, 20.0, 45.0])
+def test_end_on_view_is_a_circle_and_a_cross(roll_deg):
+    """Looking along the axis: the base disc plus four t-wide fin strips from the circle to
+    r = a + b, i.e. pi a^2 + 4 [t (a + b) - the strip |w| <= t/2 of the half disc], whatever
+    the roll; the strips' edges run along the fin directions."""
+    end = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    w = 0.5 * T
+    strip_in_disc = w * np.sqrt(A**2 - w**2) + A**2 * np.arcsin(w / A)
+    exact = np.pi * A**2 + 4 * (T * (A + B) - strip_in_disc)
+    area = finner_silhouette_area_m2(FB, attitude(roll_deg=roll_deg), end)
+    # the disc's polygon is inscribed: short by ~ (2 pi / n)^2 / 6 = 4e-7 at n = 4096 vertices
+    assert exact * (1 - 1e-6) < area < exact
+    poly = finner_silhouette(FB, attitude(roll_deg=roll_deg), np.zeros(3), end)
+    assert np.hypot(*poly.T).max() == pytest.approx(np.hypot(A + B, w), rel=1e-14)
+
+
 def test_roll_0_and_45_figures():
     """The two cases written out: roll 0 shows two fins at full span (+ 2 c b), roll 45 all
     four at cos 45 (the near and far fins of each side coincide in projection)."""
