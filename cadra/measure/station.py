@@ -179,6 +179,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
                          edge_profile0=prev.fit.edge_profile if prev is not None else None,
                          centroid=final,
                          tilt_step=((_template(body, view.name, tilt + TILT_STEP_RAD),
+                                     _template(body, view.name, tilt - TILT_STEP_RAD),
                                      TILT_STEP_RAD) if final else None))
     if not fit.ok:
         return fit, fit.reason, wires, affine, ()
