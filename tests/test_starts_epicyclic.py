@@ -92,3 +92,43 @@ def test_auto_keeps_the_plain_estimate_without_spin():
     assert start_estimates([shot], "linear") is None
     with pytest.raises(ValueError, match="auto, linear or epicyclic"):
         start_estimates([shot], "guess")
+
+
+def test_tunnel_release_of_a_spinning_model_gives_its_moment_slope_and_spin():
+    """A free flight in a wind tunnel (seed 002's kind of test): the epicyclic fit of theta,
+    psi against the stream, in time, gives C_m_alpha and the spin for the start, which the
+    damped sines cannot (two arms). Truth: the 6-DOF dynamics with the tunnel mode; lift 0
+    (the estimate leaves the path's turning by lift out)."""
+    from cadra.aero import model_from_dict
+    from cadra.dynamics.modes import TestMode
+    from cadra.dynamics.observe import observe
+    from cadra.dynamics.setup import RigidBody, propagate_states
+    from cadra.dynamics.trajectory import Launch
+    from cadra.fitting.data import ShotData
+
+    body = RigidBody(mass_kg=0.0277, inertia_body_kg_m2=np.diag([1.0, 0.69, 0.69]) * 1e-6,
+                     d_m=0.0381, cg_from_ref_body_m=[0.0, 0.0, 0.0], density_kg_m3=0.0372,
+                     speed_of_sound_m_s=170.0, viscosity_pa_s=5e-6, gravity_m_s2=0.0,
+                     mode=TestMode(kind="tunnel", stream_m_s=677.0))
+    truth = model_from_dict({
+        "format": "cadra.aero/1", "name": "tunnel-spin", "angle_plane": "sigma",
+        "coefficients": {"CD": "CD0", "Cm": "Cma*sin(sigma)", "Cmq": "Cmq0"},
+        "parameters": {"CD0": {"value": 1.3}, "Cma": {"value": -0.185},
+                       "Cmq0": {"value": -0.8}}})
+    p = 2 * math.pi * 28.0
+    t = np.arange(180) / 2000.0
+    states = propagate_states(Launch(speed_m_s=0.0, theta_rad=math.radians(8.0),
+                                     p_rad_s=p, q_rad_s=30.0).state(body), 0.0, t,
+                              body.phys(), truth.compile(), truth.values())
+    obs = observe(states, body.ref_from_cg_body_m())
+    rng = np.random.default_rng(2)
+    s = math.radians(0.1)
+    meas = np.column_stack([obs["x_m"], obs["y_m"], obs["z_m"],
+                            obs["theta_rad"] + s * rng.standard_normal(t.size),
+                            obs["psi_rad"] + s * rng.standard_normal(t.size)])
+    sig = np.column_stack([np.full((t.size, 3), 1e-4), np.full((t.size, 2), s)])
+    shot = ShotData("tunnel-spin", body, "cone", np.arange(1, t.size + 1), t, meas, sig)
+    est = epicyclic_estimates([shot])[0]
+    assert est.cm_alpha == pytest.approx(-0.185, rel=0.05)
+    assert est.spin_rad_s == pytest.approx(p, rel=0.05)
+    assert start_estimates([shot], "auto")[0] == est       # it spins: auto takes the arms

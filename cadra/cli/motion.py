@@ -195,16 +195,19 @@ def epicyclic_estimates(shots) -> list:
     starting values otherwise use see one frequency; a spinning body has two, and a
     gyroscopically stable one (C_mα > 0) has no pitch frequency that gives the sign.
     A shot the fit cannot reduce (a mounted record, too few stations) keeps the plain
-    estimate; pure function of the shots (a campaign's scheduler can ship it)."""
+    estimate; pure function of the shots (a campaign's scheduler can ship it). A free flight in
+    a wind tunnel is fitted in time against the stream (:func:`_stream_coefficients`)."""
     from cadra.fitting.start import estimate_motion
     from cadra.motion import MotionFitError
 
     out = []
     for shot in shots:
         est = estimate_motion(shot)
-        if shot.rigid.mode.kind == "range" and shot.has_angles:
+        kind = shot.rigid.mode.kind
+        if kind in ("range", "tunnel") and shot.has_angles:
             try:
-                lc = analyse_shot(shot, window=None).coefficients
+                lc = (analyse_shot(shot, window=None).coefficients if kind == "range"
+                      else _stream_coefficients(shot))
             except (ValueError, MotionFitError, np.linalg.LinAlgError, FloatingPointError):
                 lc = None
             if (lc is not None and np.isfinite(lc.Cm_alpha)
@@ -217,6 +220,37 @@ def epicyclic_estimates(shots) -> list:
                               else math.nan)
         out.append(est)
     return out
+
+
+def _stream_coefficients(shot):
+    """Linear-theory coefficients of a free flight in a wind tunnel (docs/dynamics.md, test
+    modes): the axis angles θ, ψ are the angles to the stream (+x), the epicyclic fit runs in
+    time at the rms air-relative speed over the record, and the flight path's turning by lift
+    is left out (the drift across the stream is slow; first order in the lift, as on a
+    gimbal)."""
+    from cadra.motion import FlightConditions, fit_epicyclic, linear_coefficients
+
+    m, sg = shot.meas, shot.sigma
+    ok = np.isfinite(m[:, 3]) & np.isfinite(m[:, 4])
+    if ok.sum() < _min_points(False, False):
+        raise ValueError(f"{shot.shot_id}: {int(ok.sum())} frames with both angles")
+    fit = fit_epicyclic(shot.t_s[ok], m[ok, 3], m[ok, 4], sg[ok, 3], sg[ok, 4],
+                        variable="time")
+    r = shot.rigid
+    inertia = r.inertia_body_kg_m2
+    # the air-relative speed w = U + v_x falls as the model drifts with the stream: the
+    # frequencies follow the mean dynamic pressure, so the speed is the rms of w over the
+    # record (v_x from a quadratic in time of the measured x, when positions are measured)
+    speed = r.mode.stream_m_s
+    hx = np.isfinite(m[:, 0])
+    if hx.sum() >= 3:
+        tt = shot.t_s[ok]
+        vx = np.polyval(np.polyder(np.polyfit(shot.t_s[hx], m[hx, 0], 2)), tt)
+        speed = float(np.sqrt(np.mean((speed + vx) ** 2)))
+    cond = FlightConditions(mass_kg=r.mass_kg, Ix_kg_m2=float(inertia[0, 0]),
+                            I_kg_m2=float(0.5 * (inertia[1, 1] + inertia[2, 2])), d_m=r.d_m,
+                            density_kg_m3=r.density_kg_m3, speed_m_s=speed, spin_rad_s=0.0)
+    return linear_coefficients(fit, cond)
 
 
 def start_estimates(shots, how: str = "auto"):
