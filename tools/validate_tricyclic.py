@@ -383,9 +383,9 @@ def tricyclic_estimate(shot, spin_rad_s: float):
     independently measured spin (seed 002: a fiber-optics camera or a painted stripe), C_m
     alpha and C_mq + C_m alpha-dot from its arms by linear theory (docs/motion.md), and the
     starting state spinning at that spin. ``cadra.cli.motion.epicyclic_estimates`` does the
-    same for range shots only; the fitter's own start (damped sines, no spin) puts a body
-    spinning at 28 rps with I_x > I_y in another basin (C_m alpha -0.07 for -0.185,
-    chi^2/dof 238 on the cg case)."""
+    same from the two-arm fit (spin from the arms); the fitter's damped-sine start alone (no
+    spin) puts a body spinning at 28 rps with I_x > I_y in another basin (C_m alpha -0.07
+    for -0.185, chi^2/dof 238 on the cg case)."""
     from cadra.fitting.start import estimate_motion
     from cadra.motion import FlightConditions, linear_coefficients
 
@@ -406,7 +406,7 @@ def diagnose(case: Case, sigma_angle_deg: float, seed: int, folder: Path,
     """The gap diagnosis of the case with noise: ``cadra2 diagnose``'s code path (the shot
     and trajectory files read by ``load_shots``, ``fit_shots``, ``diagnose_gap``,
     ``write_diagnosis``) with the fit started from :func:`tricyclic_estimate`; ``cli``: the
-    command itself (``cadra2 diagnose``, in process), whose start has no spin. Returns what
+    command itself (``cadra2 diagnose``, in process, its own ``--start auto``). Returns what
     the verdict names."""
     import contextlib
     import io
@@ -577,7 +577,7 @@ def main(argv=None) -> None:
                          "accuracy, 0.5 deg")
     ap.add_argument("--cli", action="store_true",
                     help="also run the cg case through the cadra2 diagnose command itself "
-                         "(its own start, no spin; about 2 min)")
+                         "(its own epicyclic start; about 2 min)")
     ap.add_argument("--no-sensitivity", action="store_true",
                     help="skip the tricyclic table's sensitivity to the unstated choices")
     ap.add_argument("--seed", type=int, default=1)
