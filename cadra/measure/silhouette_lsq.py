@@ -49,6 +49,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from cadra.measure.centroid import centroid_pose
 from cadra.measure.edge_segments import outline_geometry, stage_a
@@ -307,20 +308,31 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
 def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
                   reach_px: float = 3.0) -> np.ndarray:
     """Signed distance t (px) from each foot along its normal to the closed polyline ``poly``
-    (the crossing nearest the foot within ``reach_px``; NaN if none)."""
-    P0 = poly
+    (the crossing nearest the foot within ``reach_px``; NaN if none). Only the edges that
+    start within reach + the longest edge of a foot are tried (a k-d tree)."""
     E = np.roll(poly, -1, axis=0) - poly                  # edges P_i -> P_i+1
-    # p + t n = P0 + s E:  t = cross(P0 - p, E) / cross(n, E), s = cross(P0 - p, n) / cross(n, E)
-    d = P0[None, :, :] - feet[:, None, :]
-    den = normals[:, None, 0] * E[None, :, 1] - normals[:, None, 1] * E[None, :, 0]
+    r = reach_px + float(np.max(np.hypot(E[:, 0], E[:, 1])))
+    near = cKDTree(poly).query_ball_point(feet, r)
+    k = np.repeat(np.arange(len(feet)), [len(c) for c in near])
+    i = np.fromiter((j for c in near for j in c), dtype=np.intp, count=k.size)
+    out = np.full(len(feet), np.nan)
+    if k.size == 0:
+        return out
+    # p + t n = P_i + s E_i:  t = cross(P_i - p, E_i) / cross(n, E_i),
+    #                         s = cross(P_i - p, n) / cross(n, E_i)
+    d = poly[i] - feet[k]
+    n, e = normals[k], E[i]
+    den = n[:, 0] * e[:, 1] - n[:, 1] * e[:, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (d[..., 0] * E[None, :, 1] - d[..., 1] * E[None, :, 0]) / den
-        sp = (d[..., 0] * normals[:, None, 1] - d[..., 1] * normals[:, None, 0]) / den
+        t = (d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]) / den
+        sp = (d[:, 0] * n[:, 1] - d[:, 1] * n[:, 0]) / den
     ok = (np.abs(den) > 1e-12) & (sp >= 0.0) & (sp <= 1.0) & (np.abs(t) <= reach_px)
-    t = np.where(ok, t, np.inf)
-    best = np.argmin(np.abs(t), axis=1)
-    out = t[np.arange(len(feet)), best]
-    return np.where(np.isfinite(out), out, np.nan)
+    k, t = k[ok], t[ok]
+    order = np.lexsort((np.abs(t), k))                     # per foot, nearest crossing first
+    k, t = k[order], t[order]
+    first = np.r_[True, k[1:] != k[:-1]]
+    out[k[first]] = t[first]
+    return out
 
 
 def _tilt_sensitivity(tilt_step, pose, projection, seg, X, wts, keep, fit_phi):
