@@ -305,34 +305,40 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         edge_profile=tuple(float(x) for x in seg.profile), tilt_sensitivity=tilt_sens)
 
 
+def _densified(poly: np.ndarray, max_edge_px: float = 1.0) -> np.ndarray:
+    """``poly`` with points inserted along every edge longer than ``max_edge_px`` (the
+    outline's flats are single long edges)."""
+    E = np.roll(poly, -1, axis=0) - poly
+    n = np.maximum(np.ceil(np.hypot(E[:, 0], E[:, 1]) / max_edge_px).astype(int), 1)
+    i = np.repeat(np.arange(len(poly)), n)
+    f = (np.arange(i.size) - np.repeat(np.cumsum(n) - n, n)) / n[i]
+    return poly[i] + f[:, None] * E[i]
+
+
 def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
                   reach_px: float = 3.0) -> np.ndarray:
     """Signed distance t (px) from each foot along its normal to the closed polyline ``poly``
-    (the crossing nearest the foot within ``reach_px``; NaN if none). Only the edges that
-    start within reach + the longest edge of a foot are tried (a k-d tree)."""
-    E = np.roll(poly, -1, axis=0) - poly                  # edges P_i -> P_i+1
-    r = reach_px + float(np.max(np.hypot(E[:, 0], E[:, 1])))
-    near = cKDTree(poly).query_ball_point(feet, r)
-    k = np.repeat(np.arange(len(feet)), [len(c) for c in near])
-    i = np.fromiter((j for c in near for j in c), dtype=np.intp, count=k.size)
-    out = np.full(len(feet), np.nan)
-    if k.size == 0:
-        return out
+    (the crossing nearest the foot within ``reach_px``; NaN if none). The polyline is
+    densified to 1-px edges and only the edges at a foot's 24 nearest points (a k-d tree)
+    are tried."""
+    P = _densified(poly)
+    E = np.roll(P, -1, axis=0) - P
+    k_near = min(24, len(P))
+    _, idx = cKDTree(P).query(feet, k=k_near)
+    idx = np.concatenate([idx, (idx - 1) % len(P)], axis=1)     # the edges ending there too
+    d = P[idx] - feet[:, None, :]                                  # (feet, candidates, 2)
+    e = E[idx]
+    n = normals[:, None, :]
     # p + t n = P_i + s E_i:  t = cross(P_i - p, E_i) / cross(n, E_i),
     #                         s = cross(P_i - p, n) / cross(n, E_i)
-    d = poly[i] - feet[k]
-    n, e = normals[k], E[i]
-    den = n[:, 0] * e[:, 1] - n[:, 1] * e[:, 0]
+    den = n[..., 0] * e[..., 1] - n[..., 1] * e[..., 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0]) / den
-        sp = (d[:, 0] * n[:, 1] - d[:, 1] * n[:, 0]) / den
+        t = (d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]) / den
+        sp = (d[..., 0] * n[..., 1] - d[..., 1] * n[..., 0]) / den
     ok = (np.abs(den) > 1e-12) & (sp >= 0.0) & (sp <= 1.0) & (np.abs(t) <= reach_px)
-    k, t = k[ok], t[ok]
-    order = np.lexsort((np.abs(t), k))                     # per foot, nearest crossing first
-    k, t = k[order], t[order]
-    first = np.r_[True, k[1:] != k[:-1]]
-    out[k[first]] = t[first]
-    return out
+    t = np.where(ok, t, np.inf)
+    out = t[np.arange(len(feet)), np.argmin(np.abs(t), axis=1)]
+    return np.where(np.isfinite(out), out, np.nan)
 
 
 def _tilt_sensitivity(tilt_step, pose, projection, seg, X, wts, keep, fit_phi):
