@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cadra.body.mass import solid_properties
-from cadra.body.model import Body, make_body
+from cadra.body.model import Body, make_body, spec_from_params
 from cadra.body.outline import silhouette
 
 #: Body kind of :func:`finner`.
@@ -133,15 +133,7 @@ class FinnedBody:
 
     def to_spec(self) -> dict:
         """Plain-data spec in file units (cm, deg); ``body_from_spec`` rebuilds the body."""
-        spec: dict = {"kind": self.kind, "name": self.name}
-        if self.preset is not None:
-            spec["preset"] = self.preset
-        for key, value in self.params:
-            if key.endswith("_m"):
-                spec[key[:-2] + "_cm"] = float(value) * 100.0
-            else:
-                spec[key[:-4] + "_deg"] = float(np.degrees(value))
-        return spec
+        return spec_from_params(self.kind, self.name, self.preset, self.params)
 
 
 def _positive(name: str, value) -> float:

@@ -78,22 +78,28 @@ class Body:
 
     def to_spec(self) -> dict:
         """Plain-data spec in file units (cm, deg); ``body_from_spec`` rebuilds the body."""
-        spec: dict = {"kind": self.kind, "name": self.name}
-        if self.preset is not None:
-            spec["preset"] = self.preset
-        for key, value in self.params:
-            if key.endswith("_m"):
-                spec[key[:-2] + "_cm"] = float(value) * 100.0
-            elif key.endswith("_rad"):
-                spec[key[:-4] + "_deg"] = float(np.degrees(value))
-            else:  # pragma: no cover - constructors only store lengths and angles
-                raise AssertionError(key)
-        return spec
+        return spec_from_params(self.kind, self.name, self.preset, self.params)
 
     @property
     def param(self) -> dict:
         """``params`` as a dict (SI)."""
         return dict(self.params)
+
+
+def spec_from_params(kind: str, name: str, preset: str | None, params) -> dict:
+    """A body's plain-data spec in file units (cm, deg) from its constructor's SI
+    ``(key, value)`` pairs (``*_m`` lengths, ``*_rad`` angles)."""
+    spec: dict = {"kind": kind, "name": name}
+    if preset is not None:
+        spec["preset"] = preset
+    for key, value in params:
+        if key.endswith("_m"):
+            spec[key[:-2] + "_cm"] = float(value) * 100.0
+        elif key.endswith("_rad"):
+            spec[key[:-4] + "_deg"] = float(np.degrees(value))
+        else:  # pragma: no cover - constructors only store lengths and angles
+            raise AssertionError(key)
+    return spec
 
 
 def arc_points(arcs: np.ndarray, k: int, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
