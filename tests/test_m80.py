@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from test_magnus import fit_two_arms  # Prony roots and amplitudes of the two arms
 
 from cadra.aero import resolve_model
 from cadra.dynamics.observe import observe
@@ -131,16 +132,6 @@ def mccoy_roots(f):
     r = np.sqrt(a * a - 4 * b)
     lam = np.array([(-a + r) / 2, (-a - r) / 2])
     return lam[np.argsort(-lam.imag)], P, M
-
-
-def fit_two_arms(xi, ds):
-    """Prony: roots (fast, slow) per calibre of xi[n+2] = c1 xi[n+1] + c0 xi[n]."""
-    c = np.linalg.lstsq(np.stack([xi[1:-1], xi[:-2]], 1), xi[2:], rcond=None)[0]
-    lam = np.log(np.roots([1.0, -c[0], -c[1]]).astype(complex)) / ds
-    lam = lam[np.argsort(-lam.imag)]
-    s = np.arange(xi.size) * ds
-    K = np.linalg.lstsq(np.exp(np.outer(s, lam)), xi, rcond=None)[0]
-    return lam, K
 
 
 def test_p_over_v_constant_as_assumed(flight):
