@@ -228,7 +228,7 @@ def _stream_coefficients(shot):
     time at the rms air-relative speed over the record, and the flight path's turning by lift
     is left out (the drift across the stream is slow; first order in the lift, as on a
     gimbal)."""
-    from cadra.motion import FlightConditions, fit_epicyclic, linear_coefficients
+    from cadra.motion import fit_epicyclic, linear_coefficients
 
     m, sg = shot.meas, shot.sigma
     ok = np.isfinite(m[:, 3]) & np.isfinite(m[:, 4])
@@ -236,20 +236,14 @@ def _stream_coefficients(shot):
         raise ValueError(f"{shot.shot_id}: {int(ok.sum())} frames with both angles")
     fit = fit_epicyclic(shot.t_s[ok], m[ok, 3], m[ok, 4], sg[ok, 3], sg[ok, 4],
                         variable="time")
-    r = shot.rigid
-    inertia = r.inertia_body_kg_m2
+    cond, _ = _conditions(shot, 0.0, "time")        # the stream's speed
     # the air-relative speed w = U + v_x falls as the model drifts with the stream: the
     # frequencies follow the mean dynamic pressure, so the speed is the rms of w over the
     # record (v_x from a quadratic in time of the measured x, when positions are measured)
-    speed = r.mode.stream_m_s
     hx = np.isfinite(m[:, 0])
     if hx.sum() >= 3:
-        tt = shot.t_s[ok]
-        vx = np.polyval(np.polyder(np.polyfit(shot.t_s[hx], m[hx, 0], 2)), tt)
-        speed = float(np.sqrt(np.mean((speed + vx) ** 2)))
-    cond = FlightConditions(mass_kg=r.mass_kg, Ix_kg_m2=float(inertia[0, 0]),
-                            I_kg_m2=float(0.5 * (inertia[1, 1] + inertia[2, 2])), d_m=r.d_m,
-                            density_kg_m3=r.density_kg_m3, speed_m_s=speed, spin_rad_s=0.0)
+        vx = np.polyval(np.polyder(np.polyfit(shot.t_s[hx], m[hx, 0], 2)), shot.t_s[ok])
+        cond = replace(cond, speed_m_s=float(np.sqrt(np.mean((cond.speed_m_s + vx) ** 2))))
     return linear_coefficients(fit, cond)
 
 
