@@ -263,10 +263,10 @@ def start_estimates(shots, how: str = "auto"):
         return epi
     if how != "auto":
         raise ValueError(f"--start {how!r}: expected auto, linear or epicyclic")
-    from cadra.fitting.start import estimate_motion
-
-    return [e if np.isfinite(e.spin_rad_s) else estimate_motion(s)
-            for s, e in zip(shots, epi, strict=True)]
+    # a shot without a spin keeps its damped sines: the estimate without the arms' fields
+    return [e if np.isfinite(e.spin_rad_s)
+            else replace(e, cm_alpha=math.nan, cmq_sum=math.nan, spin_rad_s=math.nan)
+            for e in epi]
 
 
 def _sectional(t, alpha, beta, sa, sb, fit, lc, cond, spin, window, step, notes):
