@@ -231,7 +231,9 @@ BAD_FILES = [
     (_set("mass", "inertia_g_cm2", [[100.0, 0, "x"], [0, 80.0, 0], [0, 0, 80.0]]),
      "mass.inertia_g_cm2[0][2]: expected a number"),
     (_set("model", "d_cm", 0.0), "model.d_cm"),
-    (_set("model", "kind", "finner"), "model.kind"),
+    (_set("model", "kind", "brick"), "model.kind"),
+    # a known kind with another kind's keys: the body spec names the key
+    (_set("model", "kind", "finner"), "model.h_cm: unknown key for a finner spec"),
     (_set(None, "schema_version", 2), "schema_version"),
     (_set(None, "colour", "red"), "colour: unknown key"),
     (_set("mass", "mass_kg", 0.1), "mass.mass_kg: unknown key"),

@@ -35,7 +35,7 @@ from cadra.io.toml_file import Fields, prefixed_by, read_toml
 #: Current shot-file schema version.
 SCHEMA_VERSION = 1
 #: Model kinds ``cadra.body.body_from_spec`` builds.
-MODEL_KINDS = ("sphere", "capsule", "cone", "bullet")
+MODEL_KINDS = ("sphere", "capsule", "cone", "bullet", "finner")
 
 # Plausibility bounds: a value outside them is a unit error, not a range condition.
 PRESSURE_TORR_RANGE = (0.01, 7600.0)      # 1.3 Pa .. 10 atm
@@ -337,11 +337,21 @@ def _stations_from_list(stations) -> tuple[StationRecord, ...]:
     return tuple(out)
 
 
+def _solid_volume_m3(body) -> float:
+    """The body's volume, m^3: a body of revolution's, or a finned body's with its fins
+    (:func:`cadra.body.finner_mass_properties` at unit density)."""
+    from cadra.body import FinnedBody, finner_mass_properties
+    from cadra.body.mass import solid_properties
+
+    if isinstance(body, FinnedBody):
+        return finner_mass_properties(body, 1.0).mass_kg
+    return solid_properties(body, n_meridian=401).volume_m3
+
+
 def _check_density(model: dict, mass: MassProperties) -> None:
     """The body must be buildable from ``model`` and ``mass_g`` over its volume a plausible
     density (:data:`DENSITY_G_CM3_RANGE`): catches kg written as g and size-unit slips."""
     from cadra.body import body_from_spec
-    from cadra.body.mass import solid_properties
 
     try:
         body = body_from_spec(model)
@@ -349,8 +359,7 @@ def _check_density(model: dict, mass: MassProperties) -> None:
         raise ShotFileError(f"model.{exc}") from None
     with np.errstate(all="ignore"):
         vol = float(np.pi / 6 * body.diameter_m**2 * body.length_m * 1e6)  # order of magnitude
-        volume_cm3 = (solid_properties(body, n_meridian=401).volume_m3 * 1e6
-                      if 1e-9 < vol < 1e9 else vol)
+        volume_cm3 = (_solid_volume_m3(body) * 1e6 if 1e-9 < vol < 1e9 else vol)
     if not 1e-9 < volume_cm3 < 1e9:
         raise ShotFileError(f"model: the body's volume, {volume_cm3:.3g} cm^3, is not a "
                             "model's (a dimension in the wrong unit?)")

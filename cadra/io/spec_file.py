@@ -37,7 +37,7 @@ _TOP_KEYS = ("shot_id", "seed004_shot", "model", "mass", "range", "aero_model", 
              "launch", "effects", "facility", "n_stations", "trigger", "film", "render", "seed",
              "dt_max_s", "aim", "station_biases")
 _MASS_KEYS = ("mass_g", "x_cg_from_base_cm", "x_cg_from_ref_cm", "y_cg_cm", "z_cg_cm",
-              "inertia_g_cm2")
+              "inertia_g_cm2", "uniform_density_g_cm3")
 _TRIGGER_KEYS = ("offset_mean_m", "offset_sd_m")
 
 
@@ -132,7 +132,8 @@ def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
         body = body_from_spec(model)
     except ValueError as exc:
         raise _F.fail("model", str(exc)) from None
-    mass_kg, cg_model, inertia = _mass(_table(data, "mass"), row, body.base_s_m)
+    mass_kg, cg_model, inertia = _mass(_uniform_solid(_table(data, "mass"), body), row,
+                                       body.base_s_m)
     p_pa, t_k = _range(_table(data, "range"), row)
     launch = _launch(_table(data, "launch"), row)
     try:
@@ -174,6 +175,34 @@ def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
         aim=_aim(data.get("aim", "none")),
         station_biases=_station_biases(data.get("station_biases")),
     )
+
+
+def _uniform_solid(mass: dict, body) -> dict:
+    """``[mass]`` with ``uniform_density_g_cm3`` replaced by the uniform solid's mass, axial cg
+    and inertia (:func:`cadra.body.finner_mass_properties` for a finned body, else
+    :func:`cadra.body.mass.solid_properties`; on the axis, so y, z of the cg are 0). The
+    density excludes the other mass keys (a model is either measured or a uniform solid)."""
+    if "uniform_density_g_cm3" not in mass:
+        return mass
+    others = sorted(set(mass) - {"uniform_density_g_cm3"})
+    if others:
+        raise _F.fail(f"mass.{others[0]}", "give either uniform_density_g_cm3 (a uniform "
+                                           "solid of the model's geometry) or the mass keys")
+    rho_g_cm3 = _F.positive(mass["uniform_density_g_cm3"], "mass.uniform_density_g_cm3")
+    rho_kg_m3 = units.g_to_kg(rho_g_cm3) / units.cm_to_m(1.0) ** 3
+    from cadra.body import FinnedBody, finner_mass_properties
+    from cadra.body.mass import solid_properties
+
+    if isinstance(body, FinnedBody):
+        mp = finner_mass_properties(body, rho_kg_m3)
+        m, cg, inertia = mp.mass_kg, mp.cg_s_m, np.diag(mp.inertia_kg_m2)
+    else:
+        sp = solid_properties(body, rho_kg_m3)
+        m, cg = sp.mass_kg, sp.centroid_s_m
+        inertia = np.array([sp.ixx_kg_m2, sp.itrans_kg_m2, sp.itrans_kg_m2])
+    # body-axis diagonal = model-axis diagonal (I_M = D I_B D, D = diag(1, -1, -1))
+    return {"mass_g": units.kg_to_g(m), "x_cg_from_ref_cm": units.m_to_cm(cg),
+            "inertia_g_cm2": [float(units.kg_m2_to_g_cm2(i)) for i in inertia]}
 
 
 def _mass(mass: dict, row, base_s_m: float) -> tuple[float, tuple, np.ndarray]:

@@ -26,8 +26,8 @@ import pandas as pd
 
 from cadra.aero import AeroModel, ModelNotFoundError, resolve_model
 from cadra.atmosphere import Atmosphere
-from cadra.body import Body, body_from_spec, silhouette
-from cadra.conventions import body_to_facility_matrix
+from cadra.body import Body, FinnedBody, body_from_spec, outline_polygon
+from cadra.conventions import FLIP, body_to_facility_matrix
 from cadra.dynamics.setup import (
     DT_MAX_DEFAULT,
     RigidBody,
@@ -91,7 +91,7 @@ def aim_launch(launch: Launch, rigid: RigidBody, program, params, x_first: float
     return launch
 
 
-def rigid_body(spec: ShotSpec, body: Body | None = None) -> RigidBody:
+def rigid_body(spec: ShotSpec, body: Body | FinnedBody | None = None) -> RigidBody:
     """The dynamics' view of the shot: mass properties in body axes, air, effects."""
     body = body or body_from_spec(spec.model)
     return rigid_body_from_mass(spec.mass_kg, spec.cg_model_m, spec.inertia_model_kg_m2,
@@ -113,7 +113,7 @@ class SimulatedShot:
     """
 
     spec: ShotSpec
-    body: Body
+    body: Body | FinnedBody
     rigid: RigidBody
     model: AeroModel
     facility: Facility
@@ -213,8 +213,8 @@ def film_affine(nominal: np.ndarray, film: FilmPlacement, rng: np.random.Generat
     return nominal @ A
 
 
-def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: np.ndarray,
-               v_F: np.ndarray, exposure_s: float = EXPOSURE_S):
+def view_scene(body: Body | FinnedBody, view, affine: np.ndarray, R_FB: np.ndarray,
+               r_ref_F: np.ndarray, v_F: np.ndarray, exposure_s: float = EXPOSURE_S):
     """One view's pixel-space :class:`~cadra.synthetic.render.Scene` and its exact truth.
 
     ``affine`` is the image->view-plane map actually used (film placement included), ``R_FB``
@@ -222,7 +222,9 @@ def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: 
     blur and the flow-clutter direction). Points reach the image through the view's
     :class:`~cadra.optics.projection.Projection` with that affine (``view.optics``). Truth:
     reference-point pixel position, image-plane axis angle (atan2(dv, du) of the nose
-    direction), motion blur, the affine's entries.
+    direction), motion blur, the affine's entries; for a finned body also ``roll_deg``, the
+    aircraft roll angle of ``R_FB`` (``conventions.quat_to_euler``: about the nose axis, 0 =
+    z_b vertical and down), which places the fins (docs/bodies.md, "Roll convention").
     """
     from cadra.synthetic.render import Scene
 
@@ -233,7 +235,8 @@ def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: 
 
     r_ref = np.asarray(r_ref_F, float)
     v = np.asarray(v_F, float)
-    poly_px = projection.from_plane(silhouette(body, R_FB, r_ref, projection.plane_basis))
+    # one exact polygon for any body, the fins of a finned body placed by R_FB's roll
+    poly_px = projection.from_plane(outline_polygon(body, R_FB, r_ref, projection.plane_basis))
     ref_px = to_px(r_ref)[0]
     axis_px = to_px(r_ref + 0.01 * R_FB[:, 0])[0] - ref_px
     blur_px = to_px(r_ref + v * exposure_s)[0] - ref_px
@@ -258,7 +261,17 @@ def view_scene(body: Body, view, affine: np.ndarray, R_FB: np.ndarray, r_ref_F: 
         "motion_blur_du_px": float(blur_px[0]), "motion_blur_dv_px": float(blur_px[1]),
         **{f"affine_{i}{j}": float(affine[i, j]) for i in range(2) for j in range(3)},
     }
+    if isinstance(body, FinnedBody):
+        truth["roll_deg"] = float(np.degrees(roll_from_matrix(R_FB)))
     return scene, truth
+
+
+def roll_from_matrix(R_FB: np.ndarray) -> float:
+    """Aircraft roll angle, rad in (-pi, pi], of the attitude ``R_FB`` (body -> facility):
+    ``quat_from_axis_roll``'s roll, as ``conventions.quat_to_euler`` reads it from the B->E
+    matrix ``FLIP @ R_FB`` (docs/conventions.md)."""
+    R_EB = FLIP @ np.asarray(R_FB, dtype=float)
+    return float(np.arctan2(R_EB[2, 1], R_EB[2, 2]))
 
 
 def station_scenes(shot: SimulatedShot, k: int, rng: np.random.Generator) -> list[dict]:
