@@ -111,6 +111,10 @@ def pct(values: dict) -> dict:
     return {k: 100.0 * abs(values[k] / TRUTH[k] - 1.0) for k in TRUTH}
 
 
+def pct_sigma(sigmas: dict) -> dict:
+    return {k: 100.0 * sigmas[k] / abs(TRUTH[k]) for k in TRUTH}
+
+
 # --- the classic reductions ------------------------------------------------------------
 
 def classic(t, g, sigma=None) -> dict:
@@ -172,9 +176,57 @@ def cadra_fit_least_squares(t, g, sigma: float, start: dict) -> dict:
             "method": "scipy least_squares around propagate_states (roll_bearing)"}
 
 
-def cadra_fit(t, states, g, sigma: float, start: dict) -> dict:
-    """CADRA's 6-DOF fit of the record (:func:`cadra_fit_least_squares`)."""
-    return cadra_fit_least_squares(t, g, sigma, start)
+def phi_channel_available() -> bool:
+    """Whether stage two observes the roll angle (the ``phi`` channel of cadra.channels)."""
+    from cadra import channels
+    return "phi" in channels.NAMES
+
+
+def cadra_fit_stage_two(t, states, noise, sigma: float, start: dict) -> dict:
+    """CADRA's stage-two fit (``cadra.fitting.fit_shots``: the fit problem, its sensitivity
+    integration and solver) of the record as a roll-only ShotData: the ``phi`` channel (the
+    aircraft roll of the same states, plus the same noise) alone measured; C_l(α), C_lp0,
+    C_lp2 free with the mount's local unknowns (roll orientation and rate at the epoch),
+    started from the pureroll MDC's coefficients and the record's own roll and rate there."""
+    from cadra import channels
+    from cadra.dynamics.observe import observe
+    from cadra.fitting import FitOptions, Integration, ShotData, fit_shots
+
+    b = body()
+    k = channels.NAMES.index("phi")
+    n = t.size
+    meas = np.full((n, channels.N_CHANNELS), np.nan)
+    sg = np.full((n, channels.N_CHANNELS), np.nan)
+    phi = observe(states, b.ref_from_cg_body_m())["phi_rad"] + noise
+    meas[:, k] = channels.wrap_angle(phi)
+    sg[:, k] = sigma
+    shot = ShotData(shot_id="LOCKIN-70", rigid=b, body_kind="finner", stations=np.arange(n),
+                    t_s=t.copy(), meas=meas, sigma=sg, source={"origin": "simulated"})
+    e = shot.epoch_index
+    un = np.unwrap(phi)
+    rate = (un[e + 1] - un[e - 1]) / (t[e + 1] - t[e - 1])
+    y0 = Launch(speed_m_s=0.0, theta_rad=ALPHA, roll_rad=float(un[e]),
+                p_rad_s=float(rate)).state(b)
+    model = lockin_model(start["Cl_alpha"], start["Clp0"], start["Clp2"])
+    opts = FitOptions(integration=Integration(threads=1))
+    t0 = time.perf_counter()
+    res, _ = fit_shots([shot], model, options=opts, auto_start=False, initial=[y0],
+                       continuation=None)
+    vals = dict(zip(res.aero_names, res.aero_values, strict=True))
+    sigs = dict(zip(res.aero_names, res.aero_sigma, strict=True))
+    return {"values": {k2: float(vals[v]) for k2, v in PARAM.items()},
+            "sigmas": {k2: float(sigs[v]) for k2, v in PARAM.items()},
+            "status": f"{res.status} in {res.iterations} iterations",
+            "chi2_dof": float(res.reduced_chi2), "seconds": time.perf_counter() - t0,
+            "method": "cadra.fitting.fit_shots, phi channel only (roll_bearing mode)"}
+
+
+def cadra_fit(t, states, g_true, noise, sigma: float, start: dict) -> dict:
+    """CADRA's 6-DOF fit of the record: stage two on the phi channel when it exists, else
+    :func:`cadra_fit_least_squares` on the same dynamics path."""
+    if phi_channel_available():
+        return cadra_fit_stage_two(t, states, noise, sigma, start)
+    return cadra_fit_least_squares(t, g_true + noise, sigma, start)
 
 
 # --- the limit cycle (eq. 31) ------------------------------------------------------------
@@ -255,7 +307,7 @@ def main(argv=None) -> dict:
     # noise-free
     cl = classic(t, g)
     nf_sigma = 1e-6
-    cf = cadra_fit(t, states, g, nf_sigma, values_of(cl["mdc"]))
+    cf = cadra_fit(t, states, g, np.zeros_like(g), nf_sigma, values_of(cl["mdc"]))
     errs = {k: pct(values_of(cl[k])) for k in ("mdc", "harmonic", "harmonic_no_freq",
                                                "sections")}
     errs["cadra"] = pct(cf["values"])
@@ -283,10 +335,12 @@ def main(argv=None) -> dict:
     sig = np.radians(NOISE_DEG)
     rows = {"mdc": [], "harmonic": [], "cadra": []}
     pulls = {"mdc": [], "cadra": []}
+    sigpct = {"mdc": [], "cadra": []}
     for _ in range(args.draws):
-        gn = g + rng.normal(0.0, sig, t.size)
+        noise = rng.normal(0.0, sig, t.size)
+        gn = g + noise
         cn = classic(t, gn, sig)
-        fn = cadra_fit(t, states, gn, sig, values_of(cn["mdc"]))
+        fn = cadra_fit(t, states, g, noise, sig, values_of(cn["mdc"]))
         rows["mdc"].append(pct(values_of(cn["mdc"])))
         rows["harmonic"].append(pct(values_of(cn["harmonic"])))
         rows["cadra"].append(pct(fn["values"]))
@@ -294,14 +348,20 @@ def main(argv=None) -> dict:
                              for k in TRUTH})
         pulls["cadra"].append({k: (fn["values"][k] - TRUTH[k]) / fn["sigmas"][k]
                                for k in TRUTH})
+        sigpct["mdc"].append(pct_sigma(sigmas_of(cn["mdc"])))
+        sigpct["cadra"].append(pct_sigma(fn["sigmas"]))
     mean = {k: {c2: float(np.mean([r[c2] for r in v])) for c2 in TRUTH} for k, v in rows.items()}
     table(f"{NOISE_DEG} deg noise: mean |% error| over {args.draws} draw(s)", [
         ("MDC, pendulum averaging", mean["mdc"]), ("MDC, seed's harmonic + fc", mean["harmonic"]),
         ("CADRA 6-DOF fit", mean["cadra"])])
+    msig = {k: {c2: float(np.mean([r[c2] for r in v])) for c2 in TRUTH}
+            for k, v in sigpct.items()}
+    table("  their quoted sigmas (% of the input), mean over the draws", [
+        ("MDC, pendulum averaging", msig["mdc"]), ("CADRA 6-DOF fit", msig["cadra"])])
     table("  pulls (fit - truth)/sigma, last draw", [
         ("MDC, pendulum averaging", pulls["mdc"][-1]), ("CADRA 6-DOF fit", pulls["cadra"][-1])],
         "{:>12.2f}")
-    out["noisy"] = {"draws": args.draws, "mean_err_pct": mean,
+    out["noisy"] = {"draws": args.draws, "mean_err_pct": mean, "mean_sigma_pct": msig,
                     "pulls_last": {k: v[-1] for k, v in pulls.items()}}
     out["lockin_noisy_cadra_over_mdc_error_max"] = float(
         f"{max(mean['cadra'][k] / mean['mdc'][k] for k in TRUTH):.3g}")
