@@ -243,14 +243,20 @@ class RollFit:
         return float(self.sigmas[NAMES.index(name)])
 
     def amplitude(self, t) -> np.ndarray:
-        """K(t) (rad) of the fitted averaged motion."""
+        """K(t) (rad) of the fitted averaged motion at times ``t`` (s, increasing, ≥ t0)."""
         return _slow(self.values, self.model, self.frequency_correction, self.t0,
-                     np.asarray(t, float))[0]
+                     self._times(t))[0]
 
     def predict(self, t) -> np.ndarray:
-        """γ(t) (rad) of the fitted model."""
+        """γ(t) (rad) of the fitted model at times ``t`` (s, increasing, ≥ t0)."""
         return _model(self.values, self.model, self.frequency_correction, self.t0,
-                      np.asarray(t, float))
+                      self._times(t))
+
+    def _times(self, t) -> np.ndarray:
+        t = _checks.abscissa("t", np.atleast_1d(t), min_points=1)
+        if t[0] < self.t0:
+            raise ValueError(f"t: the fit starts at t0 = {self.t0} s, got {t[0]} s")
+        return t
 
 
 # ----------------------------------------------------------------------------------------
@@ -286,6 +292,8 @@ def _slow(x, model, fc, t0, t):
     def rhs(_t, s):
         return _rates(s[0], A, a0, a2, model, fc)
 
+    if t[-1] <= t0:
+        return np.full(t.size, K0), np.full(t.size, psi0)
     sol = solve_ivp(rhs, (t0, t[-1]), [K0, psi0], t_eval=t, method="DOP853", rtol=1e-11,
                     atol=1e-13)
     if not sol.success:
