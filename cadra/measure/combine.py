@@ -64,6 +64,11 @@ class StationPose:
     sigma_psi_rad: float
     x_top_minus_side_m: float
     x_consistency_sigma: float   # |x_top - x_side| / sqrt(s_top^2 + s_side^2)
+    #: roll about the nose axis (a finned body's; ``quat_from_axis_roll``'s roll), rad, and
+    #: its sigma: set along the shot by cadra.measure.shot (continuity, docs/stage1.md "Roll
+    #: of a finned body"); NaN where not measured (a body of revolution)
+    phi_rad: float = math.nan
+    sigma_phi_rad: float = math.nan
 
 
 def inclinations_from_views(theta_p: float, psi_p: float) -> tuple[float, float]:

@@ -93,8 +93,40 @@ def quality_rows(results) -> pd.DataFrame:
                     ls_minus_centroid_axis_deg=math.degrees(
                         f.axis_angle_px_rad - f.centroid_axis_px_rad),
                 )
+                roll = getattr(r, "roll", None)
+                if roll is not None and name in roll.best.views:
+                    vr = roll.best.views[name]   # this view's roll, modulo 90 deg
+                    row.update(roll_mod90_deg=math.degrees(vr.roll_rad) % 90.0,
+                               sigma_roll_deg=math.degrees(vr.sigma_rad),
+                               roll_candidates=len(roll.candidates),
+                               roll_mirror_chi2=(roll.candidates[1].chi2_excess
+                                                 if len(roll.candidates) > 1 else math.nan))
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+def with_roll_track(results, times_s: dict) -> list:
+    """``results`` with each measured station's roll set on its pose (``phi_rad``,
+    ``sigma_phi_rad``): a finned body's roll candidates resolved along the shot by continuity
+    (:func:`cadra.measure.roll.resolve_roll_track`; docs/stage1.md, "Roll of a finned body").
+    Unchanged when no station measured a roll (a body of revolution)."""
+    from dataclasses import replace
+
+    rolls = [r.roll if r.pose is not None else None for r in results]
+    if all(x is None for x in rolls):
+        return list(results)
+    from cadra.measure.roll import resolve_roll_track
+
+    order = np.argsort([times_s[r.station] for r in results], kind="stable")
+    t = [times_s[results[k].station] for k in order]
+    phi, sig, _ = resolve_roll_track(t, [rolls[k] for k in order])
+    out = list(results)
+    for j, k in enumerate(order):
+        if math.isfinite(phi[j]):
+            r = out[k]
+            out[k] = replace(r, pose=replace(r.pose, phi_rad=float(phi[j]),
+                                             sigma_phi_rad=float(sig[j])))
+    return out
 
 
 def _watch_parent(parent_pid: int, period_s: float = 0.5) -> None:
@@ -205,6 +237,7 @@ def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None
         if bar is not None:
             bar.close()
     times = {rec.station: rec.time_s for rec in shot.stations}
+    results = with_roll_track(results, times)
     table = station_rows(results, times)
     quality = quality_rows(results)
     meta = {"shot_id": shot.shot_id, "shot_file": str(Path(shot_path).resolve()),

@@ -18,6 +18,13 @@ The two views are then alternated: each view's outline depends on the axis' tilt
 plane, which the other view measures; two or three rounds converge (the outline depends on the
 tilt only through its cosine). Finally :func:`cadra.measure.combine.combine_views`.
 
+For a finned body (:class:`cadra.body.FinnedBody`) the outline depends on the roll as well:
+its templates are made at the station's current roll estimate, and after each round the roll
+is measured from the fin silhouettes of both views with the poses held
+(:mod:`cadra.measure.roll`); the rounds go on until tilts and roll settle.
+``StationResult.roll`` keeps the station's roll candidates; the shot's driver chooses among them
+by continuity (:func:`cadra.measure.roll.resolve_roll_track`).
+
 Every problem is a reason string on the view or station; nothing raises for bad data.
 """
 
@@ -29,6 +36,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from cadra.body import FinnedBody
 from cadra.conventions import axis_from_projected_angles
 from cadra.measure.combine import StationPose, ViewPose, combine_views
 from cadra.measure.loading import load_station_image
@@ -41,6 +49,14 @@ VIEWS = ("top", "side")
 
 #: Half-width (px) of the pixel mask about each found wire that the silhouette fit ignores.
 WIRE_MASK_HALF_WIDTH_PX = 4.0
+#: roll (rad) of a finned body's templates before its roll is measured: halfway between the
+#: mirror folds at 0 and 45 deg (docs/stage1.md, "Roll of a finned body")
+ROLL_START_RAD = math.radians(22.5)
+#: a finned body's view is refitted with a fresh edge model when its template's roll moved
+#: more than this since the last fit (rad)
+ROLL_RESTART_RAD = math.radians(0.2)
+#: a finned body's rounds stop when the roll moves less than this between rounds (rad)
+ROLL_TOL_RAD = math.radians(0.002)
 #: tilt step (rad) of the outline template that gives a view's pose sensitivity to the tilt
 #: (ViewFit.tilt_sensitivity; linear within 3 % up to 1 deg)
 TILT_STEP_RAD = math.radians(0.3)
@@ -62,6 +78,7 @@ class ViewResult:
     seconds: float = 0.0
     overlay_png: bytes | None = None
     projection: Projection | None = None   # the view's optics with that affine
+    roll_rad: float = 0.0                  # roll of the template (a finned body's)
 
 
 @dataclass(frozen=True)
@@ -75,6 +92,7 @@ class StationResult:
     pose: StationPose | None
     views: dict = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    roll: object | None = None      # a finned body's cadra.measure.roll.StationRoll
 
 
 @functools.lru_cache(maxsize=8)
@@ -96,13 +114,17 @@ def _body(body_spec: dict):
 
 
 @functools.lru_cache(maxsize=64)
-def _template_cached(body_key, body, view_name: str, tilt_rad: float, n_points: int):
-    return make_template(body, view_name, tilt_rad, n_points=n_points)
+def _template_cached(body_key, body, view_name: str, tilt_rad: float, n_points: int,
+                     roll_rad: float):
+    return make_template(body, view_name, tilt_rad, n_points=n_points, roll_rad=roll_rad)
 
 
-def _template(body, view_name: str, tilt_rad: float, n_points: int = 1024):
-    """Outline template, cached per process (a station asks for the same one repeatedly)."""
-    return _template_cached(id(body), body, view_name, float(tilt_rad), int(n_points))
+def _template(body, view_name: str, tilt_rad: float, n_points: int = 1024,
+              roll_rad: float = 0.0):
+    """Outline template, cached per process (a station asks for the same one repeatedly);
+    the roll only for a finned body (a body of revolution's outline does not depend on it)."""
+    roll = float(roll_rad) if isinstance(body, FinnedBody) else 0.0
+    return _template_cached(id(body), body, view_name, float(tilt_rad), int(n_points), roll)
 
 
 def _view_pose(fit: ViewFit, wires) -> ViewPose:
@@ -136,15 +158,18 @@ def _wire_crossings(fit: ViewFit, template, projection, wires) -> list[str]:
 
 
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
-                  coarse=None, final: bool = True, masks: dict | None = None):
+                  coarse=None, final: bool = True, masks: dict | None = None,
+                  roll: float = 0.0, restart: bool = False):
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
-    wire mask) keeps the wire mask of the first pass for the refits (same affine)."""
+    wire mask) keeps the wire mask of the first pass for the refits (same affine);
+    ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
+    so template, changed much since ``prev``: its edge profile was fitted to mismatched fins)."""
     from cadra.measure.wires import measure_wires, wire_mask
 
     masks = {} if masks is None else masks
 
-    template = _template(body, view.name, tilt)
+    template = _template(body, view.name, tilt, roll_rad=roll)
     if prev is None:
         if coarse is None:
             coarse = locate_model(img, template, view.optics())
@@ -170,16 +195,19 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         if mask is None:
             mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
         settings_used = settings
-    if prev is not None:   # a refit after a small tilt change: start close, few iterations
+    if prev is not None and not restart:   # a refit after a small tilt change: few iterations
         settings_used = replace(settings, max_iter=min(settings.max_iter, 4))
+    warm = prev is not None and not restart
     fit = fit_silhouette(img, template, wires.projection, pose0, exclude=mask,
                          settings=settings_used,
-                         edge_sigma0=prev.fit.edge_sigma_px if prev is not None else 0.9,
-                         noise_coef=prev.fit.noise_coef if prev is not None else None,
-                         edge_profile0=prev.fit.edge_profile if prev is not None else None,
+                         edge_sigma0=prev.fit.edge_sigma_px if warm else 0.9,
+                         noise_coef=prev.fit.noise_coef if warm else None,
+                         edge_profile0=prev.fit.edge_profile if warm else None,
                          centroid=final,
-                         tilt_step=((_template(body, view.name, tilt + TILT_STEP_RAD),
-                                     _template(body, view.name, tilt - TILT_STEP_RAD),
+                         tilt_step=((_template(body, view.name, tilt + TILT_STEP_RAD,
+                                               roll_rad=roll),
+                                     _template(body, view.name, tilt - TILT_STEP_RAD,
+                                               roll_rad=roll),
                                      TILT_STEP_RAD) if final else None))
     if not fit.ok:
         return fit, fit.reason, wires, affine, ()
@@ -242,7 +270,10 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
         tilts = {"top": math.asin(a[2]), "side": math.asin(a[1])}
     fits: dict[str, ViewResult] = {}
     masks: dict[str, np.ndarray] = {}
-    for _round in range(max_rounds if not sphere else 1):
+    finned = isinstance(body, FinnedBody)
+    roll, station_roll = ROLL_START_RAD, None
+    rounds = 1 if sphere else (max_rounds + 2 if finned else max_rounds)
+    for _round in range(rounds):
         for name, img in images.items():
             t0 = time.perf_counter()
             prev = fits.get(name)
@@ -251,7 +282,9 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             try:
                 fit, reason, wires, affine, warn = _measure_view(
                     img, station.views[name], body, tilts[name], settings, prev, coarse[name],
-                    final=sphere or _round > 0, masks=masks)
+                    final=sphere or _round > 0, masks=masks, roll=roll,
+                    restart=prev is not None and abs(_wrap_period(roll - prev.roll_rad))
+                    > ROLL_RESTART_RAD)
             except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                 fit, reason, wires, affine, warn = (
                     None, f"measurement error ({type(exc).__name__}: {exc})", None, None, ())
@@ -259,14 +292,29 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             fits[name] = ViewResult(name, str(image_paths[name]), ok, reason, fit, wires,
                                     affine, tilts[name], warn,
                                     time.perf_counter() - t0 + (prev.seconds if prev else 0.0),
-                                    projection=None if wires is None else wires.projection)
+                                    projection=None if wires is None else wires.projection,
+                                    roll_rad=roll)
         if sphere or not all(n in fits and fits[n].ok for n in VIEWS):
             break
         a = axis_from_projected_angles(fits["side"].fit.pose[2], fits["top"].fit.pose[2])
         new = {"top": math.asin(a[2]), "side": math.asin(a[1])}
         change = max(abs(new[n] - tilts[n]) for n in VIEWS)
         tilts = new
-        if change < 2e-5 and _round > 0:   # round 0 is a quick pass; round 1 always follows
+        roll_settled = True
+        if finned:
+            try:
+                station_roll = _station_roll(body, images, fits, tilts, masks, settings,
+                                             station_roll)
+            except Exception as exc:  # noqa: BLE001 - the pose stands without a roll
+                station_roll = None
+                roll_warning = f"roll not measured ({type(exc).__name__}: {exc})"
+                fits = {n: replace(r, warnings=(*r.warnings, roll_warning))
+                        for n, r in fits.items()}
+                break
+            new_roll = station_roll.best.roll_rad
+            roll_settled = abs(_wrap_period(new_roll - roll)) < ROLL_TOL_RAD
+            roll = new_roll
+        if change < 2e-5 and roll_settled and _round > 0:   # round 0 is a quick pass
             break
     results.update(fits)
     if overlays:
@@ -274,7 +322,8 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
 
         for name, img in images.items():
             r = results[name]
-            tpl = _template(body, name, r.tilt_rad) if r.fit is not None and r.fit.ok else None
+            tpl = (_template(body, name, r.tilt_rad, roll_rad=r.roll_rad)
+                   if r.fit is not None and r.fit.ok else None)
             png = encode_png(view_overlay(img, r, tpl, station_id))
             results[name] = ViewResult(**{**r.__dict__, "overlay_png": png})
     ok_views = [n for n in VIEWS if n in results and results[n].ok]
@@ -291,4 +340,29 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
         pose = StationPose(**{**pose.__dict__, "theta_rad": math.nan, "psi_rad": math.nan,
                               "sigma_theta_rad": math.nan, "sigma_psi_rad": math.nan})
     status = "warning" if warnings else "ok"
-    return StationResult(station_id, status, "", pose, results, warnings)
+    return StationResult(station_id, status, "", pose, results, warnings, roll=station_roll)
+
+
+def _wrap_period(x: float) -> float:
+    """``x`` (rad) brought into the cruciform's half period about 0, [-45, 45) deg."""
+    from cadra.measure.roll import PERIOD_RAD
+
+    return (x + 0.5 * PERIOD_RAD) % PERIOD_RAD - 0.5 * PERIOD_RAD
+
+
+def _station_roll(body, images: dict, fits: dict, tilts: dict, masks: dict,
+                  settings: FitSettings, previous=None):
+    """The roll of a finned body from both views' fin silhouettes, each view's fitted pose
+    held (:mod:`cadra.measure.roll`); ``previous`` this station's roll of the last round."""
+    from cadra.measure.roll import ViewRollModel, measure_station_roll, view_outline_px
+
+    models = {}
+    for name in VIEWS:
+        r = fits[name]
+        f = r.fit
+        profile = f.edge_profile or (f.edge_sigma_px, 0.0, 0.0, 0.0)
+        outline = functools.partial(view_outline_px, body, r.projection, name, f.pose,
+                                    tilts[name])
+        models[name] = ViewRollModel(images[name], outline, masks.get(name), profile,
+                                     settings.fringe_width_ratio)
+    return measure_station_roll(models, previous=previous)

@@ -1,6 +1,6 @@
 """The body's outline template in one view and its pixel outline at a pose (stage one).
 
-A :class:`Template` is the exact outline of the body (:func:`cadra.body.silhouette`) in a
+A :class:`Template` is the exact outline of the body (:func:`cadra.body.outline_polygon`) in a
 view's plane at zero pose: the reference point at the origin, the projected axis along the
 first view axis (view-plane metres, counter-clockwise), for one out-of-plane tilt of the axis
 (seen by the other view; the outline depends on |cos| of the axis' angle to the line of
@@ -8,7 +8,10 @@ sight, so the tilt's sign does not matter). The pose of one view is ``(a, b, phi
 reference point's view-plane coordinates and the in-plane axis angle from the first view axis
 toward the second (top view: psi_p = atan2(a_y, a_x); side view: theta_p = atan2(a_z, a_x);
 docs/conventions.md). :func:`outline_px` and :func:`pose_px` place it in the image through the
-view's :class:`~cadra.optics.projection.Projection`.
+view's :class:`~cadra.optics.projection.Projection`. A finned body's outline depends on its
+roll too (docs/bodies.md): its template is made at a given roll (``roll_rad``, about the nose
+axis as ``conventions.quat_from_axis_roll`` defines it; docs/stage1.md, "Roll of a finned
+body"), which :mod:`cadra.measure.roll` measures.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cadra.body import Body, silhouette
+from cadra.body import Body, FinnedBody, outline_polygon
 from cadra.conventions import FLIP, quat_from_axis_roll, quat_to_matrix
 from cadra.facility.reference import VIEW_AXES
 from cadra.geometry import polygon_moments
@@ -40,9 +43,10 @@ class Template:
     principal_is_axis: bool       # the body axis is the major (True) or minor principal axis
 
 
-def make_template(body: Body, view_name: str, tilt_rad: float = 0.0,
-                  n_points: int = 1024) -> Template:
-    """Outline template of ``body`` for a view (``"top"``/``"side"``) at out-of-plane tilt."""
+def make_template(body: Body | FinnedBody, view_name: str, tilt_rad: float = 0.0,
+                  n_points: int = 1024, roll_rad: float = 0.0) -> Template:
+    """Outline template of ``body`` for a view (``"top"``/``"side"``) at out-of-plane tilt
+    and, for a finned body, roll (ignored by a body of revolution)."""
     axes = VIEW_AXES[view_name]
     P = np.zeros((2, 3))
     P[0, axes[0]] = 1.0
@@ -51,8 +55,8 @@ def make_template(body: Body, view_name: str, tilt_rad: float = 0.0,
     a = np.zeros(3)
     a[axes[0]] = math.cos(tilt_rad)
     a[out_axis] = math.sin(tilt_rad)
-    R_FB = FLIP @ quat_to_matrix(quat_from_axis_roll(a))
-    poly = silhouette(body, R_FB, np.zeros(3), P, n_points=n_points)
+    R_FB = FLIP @ quat_to_matrix(quat_from_axis_roll(a, float(roll_rad)))
+    poly = outline_polygon(body, R_FB, np.zeros(3), P, n_points=n_points)
     area, centroid, m2 = polygon_moments(poly)
     # principal axes of the outline: is the body axis (the first view axis) the major one?
     principal_is_axis = bool(m2[0, 0] >= m2[1, 1])
