@@ -97,3 +97,134 @@ def measured_record(run: TrueRun, rng: np.random.Generator | None,
     sig = math.radians(sigma_deg)
     phi = run.phi_rad + (rng.standard_normal(run.phi_rad.size) * sig if rng is not None else 0.0)
     return RollRecord(run.name, run.t_s, np.mod(phi, 2 * math.pi), sig)
+
+
+def fit_draw(draw: int, *, seed: int = 2003, stepwise: bool = False, body=None, model=None,
+             runs=None):
+    """One noise draw of both runs, segmented and fitted (all 14 coefficients; the paper's
+    stepwise order with ``stepwise``). Returns the :class:`SegmentedFit`."""
+    from cadra.fitting.segmented import STEPS, TABLE_ORDER, segmented_fit
+
+    body = body or seed003_body()
+    model = model or resolve_model(MODEL)
+    runs = runs or [simulate_run(n, body, model) for n in RUNS]
+    rng = np.random.default_rng([seed, draw])
+    records = [measured_record(r, rng) for r in runs]
+    steps = STEPS if stepwise else (TABLE_ORDER,)
+    return segmented_fit(records, model, body, ALPHA, steps=steps)
+
+
+def _nearest_stable(tab, target: float) -> float:
+    st = tab[tab["stable"]]
+    if st.empty:
+        return math.nan
+    return float(st["p_hat"].iloc[int(np.argmin(np.abs(st["p_hat"] - target)))])
+
+
+def main(argv=None) -> int:
+    import pandas as pd
+
+    from cadra.fitting.segmented import (
+        PAPER_TABLE2,
+        TABLE_ORDER,
+        paper_correlation,
+        seed003_tables,
+        steady_spins,
+        write_tables,
+    )
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=DEFAULT_DRAWS)
+    ap.add_argument("--seed", type=int, default=2003)
+    ap.add_argument("--stepwise", action="store_true",
+                    help="every draw through the paper's stepwise order (slower; default: "
+                         "draw 0 only)")
+    ap.add_argument("--out", type=Path, default=None, help="write the tables (CSV, markdown)")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    body, model = seed003_body(), resolve_model(MODEL)
+    truth = {n: float(model.parameter(n).value) for n in TABLE_ORDER}
+    runs = [simulate_run(n, body, model) for n in RUNS]
+    vals, sigs, cors, spins, stats = [], [], [], [], []
+    first = None
+    for k in range(args.draws):
+        sf = fit_draw(k, seed=args.seed, stepwise=args.stepwise or k == 0, body=body,
+                      model=model, runs=runs)
+        res = sf.result
+        tabs = seed003_tables(sf)
+        first = first or (sf, tabs)
+        t2 = tabs["table2"]
+        vals.append(t2["value"].reindex(TABLE_ORDER).to_numpy())
+        sigs.append(t2["sigma"].reindex(TABLE_ORDER).to_numpy())
+        cors.append(tabs["table3"].reindex(index=TABLE_ORDER, columns=TABLE_ORDER).to_numpy())
+        sp = steady_spins(res.model)
+        spins.append((_nearest_stable(sp, 0.0280), _nearest_stable(sp, -0.0212)))
+        seg = tabs["segments"]
+        stats.append({"converged": res.converged, "chi2_dof": res.reduced_chi2,
+                      "segments": len(sf.segments), "bias_abs_deg": seg["bias_deg"].abs().mean(),
+                      "rms_deg": seg["rms_deg"].mean(), "runs_z": seg["runs_z"].mean(),
+                      "longest_run_s": seg["longest_run_s"].max(),
+                      "iterations": sum(r.iterations for r in [sf.local, *sf.steps])})
+        print(f"draw {k}: {res.status}, chi2/dof {res.reduced_chi2:.3f}, "
+              f"{len(sf.segments)} segments, {time.perf_counter() - t0:.0f} s", flush=True)
+    V, S = np.array(vals), np.array(sigs)
+    tv = np.array([truth[n] for n in TABLE_ORDER])
+    pulls = (V - tv) / S
+    paper = np.array([PAPER_TABLE2[n] for n in TABLE_ORDER])
+    snr = np.mean(np.abs(V) / S, axis=0)
+    t2 = pd.DataFrame({
+        "truth": tv, "fit_mean": V.mean(0), "fit_std": V.std(0, ddof=1) if len(V) > 1 else np.nan,
+        "sigma_mean": S.mean(0), "signal_noise": snr, "paper_sigma": paper[:, 1],
+        "paper_signal_noise": paper[:, 2],
+        "snr_over_paper": snr / np.abs(paper[:, 0] / paper[:, 1]),
+        "pull_mean": pulls.mean(0), "pull_std": pulls.std(0, ddof=1) if len(V) > 1 else np.nan,
+        "within_2sigma": np.mean(np.abs(pulls) < 2, axis=0)},
+        index=pd.Index(TABLE_ORDER, name="coefficient"))
+    R = np.mean(cors, axis=0)
+    P = paper_correlation().to_numpy()
+    iu = np.triu_indices(len(TABLE_ORDER), 1)
+    t3 = pd.DataFrame(np.where(np.triu(np.ones_like(R), 1) > 0, R, np.nan),
+                      index=list(TABLE_ORDER), columns=list(TABLE_ORDER))
+    pd.set_option("display.width", 200)
+    pd.set_option("display.max_columns", 20)
+    print(f"\nTable 2 over {args.draws} draws (truth = seed 003 Table 2):")
+    print(t2.to_string(float_format=lambda v: f"{v:.5g}"))
+    print("\nTable 3, mean correlation over the draws (upper triangle):")
+    print(t3.iloc[:-1, 1:].to_string(float_format=lambda v: f"{v:+.3f}", na_rep=""))
+    print(f"\nagainst the paper's Table 3: rms difference "
+          f"{np.sqrt(np.mean((R[iu] - P[iu]) ** 2)):.3f}, correlation of the 91 entries "
+          f"{np.corrcoef(R[iu], P[iu])[0, 1]:.3f}")
+    sp = np.array(spins)
+    rel = np.abs(sp - np.array([0.0280, -0.0212])) / np.array([0.0280, 0.0212])
+    st = pd.DataFrame(stats)
+    print(f"steady spins of the fitted coefficients: +{np.nanmean(sp[:, 0]):.5f} "
+          f"({np.nanstd(sp[:, 0]):.5f}), {np.nanmean(sp[:, 1]):.5f} ({np.nanstd(sp[:, 1]):.5f})")
+    print(f"segments {st['segments'].mean():.1f}, mean |bias| {st['bias_abs_deg'].mean():.4f} "
+          f"deg, mean rms {st['rms_deg'].mean():.4f} deg, mean runs z {st['runs_z'].mean():+.3f}"
+          f", longest run {st['longest_run_s'].max():.2f} s")
+    if args.out is not None:
+        sf, tabs = first
+        write_tables({**tabs, "table2_draws": t2, "table3_draws": t3}, args.out)
+        print(f"tables written to {args.out}")
+    out = {
+        "seed003_pull_std_min": float(np.min(t2["pull_std"])),
+        "seed003_pull_std_max": float(np.max(t2["pull_std"])),
+        "seed003_pull_mean_absmax": float(np.max(np.abs(t2["pull_mean"]))),
+        "seed003_within_2sigma": float(np.mean(np.abs(pulls) < 2)),
+        "seed003_snr_over_paper_min": float(np.min(t2["snr_over_paper"])),
+        "seed003_snr_over_paper_max": float(np.max(t2["snr_over_paper"])),
+        "steady_spin_rel_err_max": float(np.nanmax(rel)),
+        "corr_C10_C11": float(R[TABLE_ORDER.index("C10"), TABLE_ORDER.index("C11")]),
+        "corr_C10_C30": float(R[TABLE_ORDER.index("C10"), TABLE_ORDER.index("C30")]),
+        "converged": int(st["converged"].sum()),
+        "chi2_dof_mean": float(st["chi2_dof"].mean()),
+        "segments": float(st["segments"].mean()),
+        "draws": args.draws,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
