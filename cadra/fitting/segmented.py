@@ -320,8 +320,9 @@ def equation_error_start(records: Sequence[RollRecord], model: AeroModel, rigid:
     rows, rhs = [], []
     for rec in records:
         phi, rate, acc = smoothed_roll(rec, window)
+        w = min(window | 1, len(phi) - 1 + len(phi) % 2)
         sl = slice(window, len(phi) - window)
-        phi, p_hat, acc = phi[sl], rate[sl] * kd, acc[sl]
+        p_hat = rate * kd
         rest = model.values().copy()
         for nm in names:
             rest[model.index(nm)] = 0.0
@@ -330,8 +331,10 @@ def equation_error_start(records: Sequence[RollRecord], model: AeroModel, rigid:
         if not np.allclose(model.evaluate(1.0, 0.0, 1.0, mach, p_hat=p_hat, phi=phi,
                                           params=zero)["Cl"], 0.0):
             raise ValueError(f"model {model.name}: Cl is not linear in its parameters")
-        rows.append(_basis(model, names, phi, p_hat, mach))
-        rhs.append(acc / Q - other)
+        # the filter's attenuation of the fast (4k gamma) terms, given to both sides
+        smooth = lambda x: savgol_filter(x, w, 3, axis=0)  # noqa: E731
+        rows.append(smooth(_basis(model, names, phi, p_hat, mach))[sl])
+        rhs.append(acc[sl] / Q - smooth(other)[sl])
     c, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
     return model.with_values(dict(zip(names, map(float, c), strict=True)))
 
