@@ -19,7 +19,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from cadra.aero import resolve_model
-from cadra.dynamics.observe import air_angles
+from cadra.dynamics.observe import air_angles, observe
 from cadra.fitting.segmented import (
     PAPER_TABLE2,
     STEPS,
@@ -106,6 +106,12 @@ def test_roll_bearing_flies_eq5(body, run1):
     np.testing.assert_allclose(run1.p_rad_s[:t.size], ref.y[1], atol=2e-4)
     # the run breaks out positive and ends in the steady spin p = +0.0280
     assert run1.p_rad_s[-1] * kd == pytest.approx(0.0280, abs=0.0005)
+    # on this mount the aerodynamic roll angle (gamma) is the observed aircraft roll (phi)
+    y0 = case.Launch(speed_m_s=0.0, theta_rad=case.ALPHA, roll_rad=1.0).state(body)
+    states = case.propagate_states(y0, 0.0, t[::10], body.phys(), MODEL.compile(),
+                                   MODEL.values(), dt_max=5e-4)
+    d = air_angles(states, body)["phi_rad"] - observe(states, body.ref_from_cg_body_m())["phi_rad"]
+    assert np.max(np.abs((d + np.pi) % (2 * np.pi) - np.pi)) < 1e-12
 
 
 def true_peaks(run):
