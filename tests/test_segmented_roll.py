@@ -195,7 +195,8 @@ def test_global_fit_recovers_the_start_set_within_its_sigmas(body, run1, tmp_pat
     rec_for_start = case.measured_record(case.TrueRun("run1", run1.t_s[keep],
                                                       run1.phi_rad[keep], run1.p_rad_s[keep]),
                                          np.random.default_rng(21))
-    start = equation_error_start([rec_for_start], start, body, list(STEPS[0]))
+    start = equation_error_start([rec_for_start], start, body, list(STEPS[0]),
+                                 alpha_rad=case.ALPHA)
     assert abs(start.parameter("S01").value - TRUTH["S01"]) < 0.5 * TRUTH["S01"]
     sf = small_fit(body, run1, np.random.default_rng(21), start, STEPS[:1])
     res = sf.result

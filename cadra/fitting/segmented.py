@@ -298,22 +298,25 @@ def roll_constants(rigid: RigidBody) -> tuple[float, float]:
     return 0.5 * rigid.density_kg_m3 * V * V * rigid.area_m2 * rigid.d_m / Ix, rigid.d_m / (2 * V)
 
 
-def _basis(model: AeroModel, names: Sequence[str], phi, p_hat, mach: float) -> np.ndarray:
+def _basis(model: AeroModel, names: Sequence[str], phi, p_hat, mach: float,
+           alpha: float) -> np.ndarray:
     """(n, len(names)) the model's Cl per unit of each parameter (Cl is linear in them)."""
     cols = []
     for nm in names:
         e = np.zeros(len(model.names))
         e[model.index(nm)] = 1.0
-        cols.append(np.asarray(model.evaluate(1.0, 0.0, 1.0, mach, p_hat=p_hat, phi=phi,
+        cols.append(np.asarray(model.evaluate(alpha, 0.0, alpha, mach, p_hat=p_hat, phi=phi,
                                               params=e)["Cl"], dtype=float))
     return np.column_stack(cols)
 
 
 def equation_error_start(records: Sequence[RollRecord], model: AeroModel, rigid: RigidBody,
-                         names: Sequence[str], *, window: int = 11) -> AeroModel:
+                         names: Sequence[str], *, alpha_rad: float, window: int = 11
+                         ) -> AeroModel:
     """``model`` with ``names`` set by equation error: the smoothed records' acceleration
-    divided by Q regressed on the model's Cl terms at the smoothed roll angle and rate (the
-    other parameters at their values). Rough (differentiated noise), but no guess."""
+    divided by Q regressed on the model's Cl terms at the smoothed roll angle and rate and
+    the bearing's angle of attack ``alpha_rad`` (the other parameters at their values).
+    Rough (differentiated noise), but no guess."""
     Q, kd = roll_constants(rigid)
     mach = rigid.mode.stream_m_s / rigid.speed_of_sound_m_s
     zero = np.zeros(len(model.names))
@@ -326,15 +329,16 @@ def equation_error_start(records: Sequence[RollRecord], model: AeroModel, rigid:
         rest = model.values().copy()
         for nm in names:
             rest[model.index(nm)] = 0.0
-        other = np.asarray(model.evaluate(1.0, 0.0, 1.0, mach, p_hat=p_hat, phi=phi,
-                                          params=rest)["Cl"], dtype=float)
-        if not np.allclose(model.evaluate(1.0, 0.0, 1.0, mach, p_hat=p_hat, phi=phi,
-                                          params=zero)["Cl"], 0.0):
+        args = (alpha_rad, 0.0, alpha_rad, mach)
+        other = np.asarray(model.evaluate(*args, p_hat=p_hat, phi=phi, params=rest)["Cl"],
+                           dtype=float)
+        if not np.allclose(model.evaluate(*args, p_hat=p_hat, phi=phi, params=zero)["Cl"],
+                           0.0):
             raise ValueError(f"model {model.name}: Cl is not linear in its parameters")
         # the filter's attenuation of the fast (4k gamma) terms, given to both sides
-        smooth = lambda x: savgol_filter(x, w, 3, axis=0)  # noqa: E731
-        rows.append(smooth(_basis(model, names, phi, p_hat, mach))[sl])
-        rhs.append(acc[sl] / Q - smooth(other)[sl])
+        basis = savgol_filter(_basis(model, names, phi, p_hat, mach, alpha_rad), w, 3, axis=0)
+        rows.append(basis[sl])
+        rhs.append(acc[sl] / Q - savgol_filter(other, w, 3)[sl])
     c, *_ = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)
     return model.with_values(dict(zip(names, map(float, c), strict=True)))
 
@@ -406,7 +410,8 @@ def segmented_fit(records: Sequence[RollRecord], model: AeroModel, rigid: RigidB
     stepped = [n for st in steps for n in st]
     if start is None:
         start = model.with_values({n: 0.0 for n in stepped})
-        start = equation_error_start(records, start, rigid, list(steps[0]), window=window)
+        start = equation_error_start(records, start, rigid, list(steps[0]),
+                                     alpha_rad=alpha_rad, window=window)
     held = start.with_vary({n: False for n in start.names})
     local = fit_segments(shots, held, states, options=options)
     notes = [] if local.converged else [f"local fit: {local.status}"]
