@@ -28,8 +28,8 @@ vertical and down) is fitted in one dimension:
 3. **Sigma.** The Gauss-Newton curvature ``J^T J`` (J the projected derivative image) with a
    heteroscedasticity- and autocorrelation-consistent score variance (Bartlett-weighted
    products of ``J r`` over pixel lags up to :data:`HAC_LAG_PX`, r the residual), so the film
-   grain's pixel-to-pixel correlation shows in the sigma; the formal ``s^2 / J^T J`` is kept
-   for comparison.
+   grain's pixel-to-pixel correlation shows in the sigma), never below the formal
+   ``s^2 / J^T J``, which is kept for comparison.
 4. **Continuity** (:func:`resolve_roll_track`). A station's roll is known modulo 90 deg and up
    to the mirror; along the shot the branch is chosen by continuity: from each candidate of
    the first station a track is followed, at every station taking the candidate (and multiple
@@ -53,7 +53,7 @@ from scipy.special import erfc
 from cadra.body import outline_polygon
 from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import VIEW_AXES
-from cadra.measure.edge_segments import PHI1, band_pixels, outline_geometry
+from cadra.measure.edge_segments import CORNER_TURN_RAD, PHI1, band_pixels, outline_geometry
 
 __all__ = ["HAC_LAG_PX", "PERIOD_RAD", "TRACK_SIGMA_RAD", "RollCandidate", "StationRoll",
            "ViewRoll", "ViewRollModel", "measure_station_roll", "resolve_roll_track",
@@ -72,6 +72,16 @@ HAC_LAG_PX = 3
 TRACK_SIGMA_RAD = math.radians(10.0)
 #: Band (px) about the outline where the edge profile is evaluated; beyond it g is 0 or 1.
 BAND_PX = 5.0
+#: Pixels this close to a sharp corner of the outline are left out of the refinement (px):
+#: the blurred-edge model of the nearest side does not hold there (as stage A's corner
+#: clearance, ``FitSettings.corner_clear_px``).
+CORNER_CLEAR_PX = 3.0
+#: The local background (``ViewRollModel.background``): unshadowed pixels farther than this
+#: outside the outline (px), smoothed by a normalized Gaussian of this sigma (px), from a
+#: window this much wider than the model's box (px).
+BACKGROUND_CLEAR_PX = 4.0
+BACKGROUND_SIGMA_PX = 10.0
+BACKGROUND_PAD_PX = 40
 #: Margin (px) of the pixel box around the fins at every roll.
 ROI_MARGIN_PX = 6.0
 SQRT2 = math.sqrt(2.0)
@@ -147,6 +157,15 @@ class ViewRollModel:
             use &= ~np.asarray(exclude, bool)[self.v0:self.v0 + self.shape[0],
                                               self.u0:self.u0 + self.shape[1]]
         self.use = use
+        # a window BACKGROUND_PAD_PX wider, for the local background (:meth:`background`)
+        pad = BACKGROUND_PAD_PX
+        self.pu0, self.pv0 = max(self.u0 - pad, 0), max(self.v0 - pad, 0)
+        pu1 = min(self.u0 + self.shape[1] + pad, W)
+        pv1 = min(self.v0 + self.shape[0] + pad, H)
+        self.I_pad = np.asarray(img, dtype=float)[self.pv0:pv1, self.pu0:pu1]
+        self.ok_pad = (np.ones(self.I_pad.shape, bool) if exclude is None else
+                       ~np.asarray(exclude, bool)[self.pv0:pv1, self.pu0:pu1])
+        self.B = np.ones(self.shape)
         vv, uu = np.indices(self.shape)
         cu, cv = 0.5 * (self.shape[1] - 1), 0.5 * (self.shape[0] - 1)
         self.du = (uu - cu) / max(cu, 1.0)
@@ -173,24 +192,55 @@ class ViewRollModel:
             c4 = 1.0 - 8.0 * nrm[:, 0] ** 2 * nrm[:, 1] ** 2
             s = self.s0 + self.s4 * c4
             a = self.a0 + self.a4 * c4
-            z = -sd / s
-            zf = z / self.ratio
             r, c = np.divmod(lin, self.shape[1])
+            # beyond 1 px the side from the fill, not from the nearest edge's normal: beside a
+            # concave vertex (a fin root) that sign flips with the slightest move. (cv2's fill
+            # takes in the pixels its boundary touches, so not within 1 px of the outline.)
+            far = np.abs(sd) > 1.0
+            d = np.where(far, np.where(g[r, c] > 0.5, -np.abs(sd), np.abs(sd)), sd)
+            z = -d / s
+            zf = z / self.ratio
             g[r, c] = _phi_cdf(z)
             h[r, c] = a * (-zf * np.exp(-0.5 * zf * zf) / math.sqrt(2 * math.pi) / PHI1)
         return 1.0 - g + h, g
 
-    def design(self, roll_rad: float) -> np.ndarray:
-        """(n_used, 4) design matrix of the linear levels ``(l0, l1, l2, D)``."""
+    def design(self, roll_rad: float, use=None) -> np.ndarray:
+        """(n_used, 4) design matrix of the linear levels ``(l0, l1, l2, D)`` on the pixels
+        ``use`` (default: all of the model's), times the local background ``self.B``."""
         bright, dark = self.basis(roll_rad)
-        u = self.use
+        bright, dark = bright * self.B, dark * self.B
+        u = self.use if use is None else use
         return np.column_stack([bright[u], (bright * self.du)[u], (bright * self.dv)[u],
                                 dark[u]])
 
-    def solve(self, roll_rad: float):
+    def background(self, roll_rad: float) -> np.ndarray:
+        """The beam's local level on the model's pixels, relative (mean 1): the image's
+        unshadowed pixels (farther than :data:`BACKGROUND_CLEAR_PX` outside the outline at
+        ``roll_rad``, wires masked) smoothed by a normalized Gaussian convolution of sigma
+        :data:`BACKGROUND_SIGMA_PX`, which fills in the shadow from its surroundings. A
+        plane over the fins' box is not enough: the beam's mottle (~1 % over ~60 px) moved a
+        fin edge by ~0.005 px, 0.05 deg of roll near a mirror fold (docs/stage1.md)."""
+        shape = self.I_pad.shape
+        poly = self.outline_fn(roll_rad) - np.array([self.pu0, self.pv0], dtype=float)
+        shadow = self._inside(poly, shape).astype(np.uint8)
+        k = 2 * int(math.ceil(BACKGROUND_CLEAR_PX)) + 1
+        shadow = cv2.dilate(shadow, np.ones((k, k), np.uint8)).astype(bool)
+        w = (~shadow & self.ok_pad).astype(float)
+        sig = BACKGROUND_SIGMA_PX
+        num = cv2.GaussianBlur(self.I_pad * w, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
+        den = cv2.GaussianBlur(w, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
+        good = den > 1e-3
+        level = np.where(good, num / np.where(good, den, 1.0), np.nan)
+        fill = np.nanmean(level) if np.any(good) else 1.0
+        level = np.where(good, level, fill)
+        ru, rv = self.u0 - self.pu0, self.v0 - self.pv0
+        B = level[rv:rv + self.shape[0], ru:ru + self.shape[1]]
+        return B / float(np.mean(B))
+
+    def solve(self, roll_rad: float, use=None):
         """Linear levels, residual vector and residual sum of squares at ``roll_rad``."""
-        X = self.design(roll_rad)
-        y = self.I[self.use]
+        X = self.design(roll_rad, use)
+        y = self.I[self.use if use is None else use]
         coef, *_ = np.linalg.lstsq(X, y, rcond=None)
         r = y - X @ coef
         return coef, r, float(r @ r), X
@@ -198,49 +248,78 @@ class ViewRollModel:
     def rss(self, roll_rad: float) -> float:
         return self.solve(roll_rad)[2]
 
+    def corner_free(self, roll_rad: float) -> np.ndarray:
+        """The model's pixels farther than :data:`CORNER_CLEAR_PX` from every sharp corner of
+        the outline at ``roll_rad`` (fin tips, fin roots): there a blurred corner is not the
+        blurred edge of the nearest side the model assumes (docs/stage1.md)."""
+        poly = self.outline_fn(roll_rad) - np.array([self.u0, self.v0], dtype=float)
+        d = np.roll(poly, -1, axis=0) - poly
+        keep = np.hypot(d[:, 0], d[:, 1]) > 1e-9
+        poly, d = poly[keep], d[keep]
+        ang = np.arctan2(d[:, 1], d[:, 0])
+        turn = np.abs(np.angle(np.exp(1j * (ang - np.roll(ang, 1)))))
+        mask = np.zeros(self.shape, np.uint8)
+        r = int(round(CORNER_CLEAR_PX * 16))
+        for u, v in poly[turn > CORNER_TURN_RAD]:
+            cv2.circle(mask, (int(round(u * 16)), int(round(v * 16))), r, 1, -1,
+                       lineType=cv2.LINE_8, shift=4)
+        return self.use & ~mask.astype(bool)
+
     def refine(self, roll0: float, iterations: int = 6, step_rad: float = math.radians(0.02),
-               max_move_rad: float = math.radians(3.0)) -> ViewRoll:
-        """Gauss-Newton in roll from ``roll0`` with the linear levels projected out; the
-        sigma by the HAC score variance (module docstring, step 3)."""
+               max_move_rad: float = math.radians(3.0), passes: int = 2) -> ViewRoll:
+        """Gauss-Newton in roll from ``roll0`` with the linear levels projected out, on the
+        pixels clear of the outline's corners (re-chosen after each of ``passes``); the sigma
+        by the HAC score variance (module docstring, step 3). ``rss`` is on all the model's
+        pixels (comparable between candidates)."""
         # stay on roll0's side of the mirror folds at multiples of 45 deg (module docstring)
         lo = math.floor(roll0 / FOLD_RAD) * FOLD_RAD + step_rad
         hi = lo - step_rad + FOLD_RAD - step_rad
         g = min(max(float(roll0), lo), hi)
-        for _ in range(iterations):
-            coef, r, rss, X = self.solve(g)
-            J = self._projected_derivative(g, coef, X, step_rad)
-            jj = float(J @ J)
-            if jj <= 0.0:
-                break
-            move = float(J @ r) / jj
-            move = max(-max_move_rad, min(max_move_rad, move))
-            g_new = min(max(g + move, lo), hi)
-            if abs(g_new - g) < 1e-7:
+        for _ in range(passes):
+            use = self.corner_free(g)
+            self.B = self.background(g)
+            for _ in range(iterations):
+                coef, r, rss, X = self.solve(g, use)
+                J = self._projected_derivative(g, coef, X, step_rad, use)
+                jj = float(J @ J)
+                if jj <= 0.0:
+                    break
+                move = float(J @ r) / jj
+                move = max(-max_move_rad, min(max_move_rad, move))
+                g_new = min(max(g + move, lo), hi)
+                if abs(g_new - g) < 1e-7:
+                    g = g_new
+                    break
                 g = g_new
-                break
-            g = g_new
-        coef, r, rss, X = self.solve(g)
-        J = self._projected_derivative(g, coef, X, step_rad)
+        coef, r, rss, X = self.solve(g, use)
+        J = self._projected_derivative(g, coef, X, step_rad, use)
         jj = float(J @ J)
-        dof = max(self.n - 5, 1)
-        s2 = rss / dof
+        n = int(use.sum())
+        s2 = rss / max(n - 5, 1)
         sigma_formal = math.sqrt(s2 / jj) if jj > 0 else math.inf
-        sigma = math.sqrt(self._hac(J * r)) / jj if jj > 0 else math.inf
-        return ViewRoll(roll_rad=g, sigma_rad=sigma, sigma_formal_rad=sigma_formal, rss=rss,
-                        s2=s2, n_pixels=self.n)
+        # the HAC sigma, never below the formal one: with few pixels carrying the roll's
+        # signal its Bartlett sum can come out near zero (one station of the sample shot:
+        # 0.0002 deg for a 0.01 deg error)
+        sigma = (max(math.sqrt(self._hac(J * r, use)) / jj, sigma_formal) if jj > 0
+                 else math.inf)
+        self.B = np.ones(self.shape)           # the scan's and the candidates' model
+        rss_all = self.rss(g)
+        return ViewRoll(roll_rad=g, sigma_rad=sigma, sigma_formal_rad=sigma_formal,
+                        rss=rss_all, s2=rss_all / max(self.n - 5, 1), n_pixels=n)
 
-    def _projected_derivative(self, g, coef, X, h):
+    def _projected_derivative(self, g, coef, X, h, use=None):
         """d(model)/d(roll) at fixed levels, with the levels' directions projected out."""
-        dp = self.design(g + h) @ coef
-        dm = self.design(g - h) @ coef
+        dp = self.design(g + h, use) @ coef
+        dm = self.design(g - h, use) @ coef
         J = (dp - dm) / (2.0 * h)
         beta, *_ = np.linalg.lstsq(X, J, rcond=None)
         return J - X @ beta
 
-    def _hac(self, q_used: np.ndarray) -> float:
-        """Bartlett-weighted sum over pixel lags of ``q(x) q(x + lag)`` (q = J r on the ROI)."""
+    def _hac(self, q_used: np.ndarray, use) -> float:
+        """Bartlett-weighted sum over pixel lags of ``q(x) q(x + lag)`` (q = J r on the
+        pixels ``use``)."""
         q = np.zeros(self.shape)
-        q[self.use] = q_used
+        q[use] = q_used
         L = HAC_LAG_PX
         total = 0.0
         H, W = self.shape

@@ -55,6 +55,8 @@ ROLL_START_RAD = math.radians(22.5)
 #: a finned body's view is refitted with a fresh edge model when its template's roll moved
 #: more than this since the last fit (rad)
 ROLL_RESTART_RAD = math.radians(0.2)
+#: start rolls (rad) of a finned body's first fit of a view, tried in turn until one fits
+ROLL_TRIES_RAD = tuple(math.radians(x) for x in (22.5, 0.0, 45.0, 11.25, 33.75))
 #: a finned body's rounds stop when the roll moves less than this between rounds (rad)
 ROLL_TOL_RAD = math.radians(0.002)
 #: tilt step (rad) of the outline template that gives a view's pose sensitivity to the tilt
@@ -279,21 +281,28 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             prev = fits.get(name)
             if prev is not None and not prev.ok:
                 continue
-            try:
-                fit, reason, wires, affine, warn = _measure_view(
-                    img, station.views[name], body, tilts[name], settings, prev, coarse[name],
-                    final=sphere or _round > 0, masks=masks, roll=roll,
-                    restart=prev is not None and abs(_wrap_period(roll - prev.roll_rad))
-                    > ROLL_RESTART_RAD)
-            except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
-                fit, reason, wires, affine, warn = (
-                    None, f"measurement error ({type(exc).__name__}: {exc})", None, None, ())
+            # a finned body's first fit, before its roll is measured, may fail with fins far
+            # from the template's: then the other start rolls are tried
+            tries = ROLL_TRIES_RAD if finned and prev is None else (roll,)
+            for view_roll in tries:
+                try:
+                    fit, reason, wires, affine, warn = _measure_view(
+                        img, station.views[name], body, tilts[name], settings, prev,
+                        coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
+                        restart=prev is not None and abs(_wrap_period(view_roll - prev.roll_rad))
+                        > ROLL_RESTART_RAD)
+                except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
+                    fit, reason, wires, affine, warn = (
+                        None, f"measurement error ({type(exc).__name__}: {exc})", None, None,
+                        ())
+                if fit is not None and fit.ok:
+                    break
             ok = fit is not None and fit.ok
             fits[name] = ViewResult(name, str(image_paths[name]), ok, reason, fit, wires,
                                     affine, tilts[name], warn,
                                     time.perf_counter() - t0 + (prev.seconds if prev else 0.0),
                                     projection=None if wires is None else wires.projection,
-                                    roll_rad=roll)
+                                    roll_rad=view_roll)
         if sphere or not all(n in fits and fits[n].ok for n in VIEWS):
             break
         a = axis_from_projected_angles(fits["side"].fit.pose[2], fits["top"].fit.pose[2])
