@@ -39,6 +39,11 @@ class Channel:
     display_unit : the unit of reports and residual files.
     label : the name on plots (``"θ"``).
     description : one line, for documentation.
+    periodic : an angle defined modulo 2 pi (the roll angle): a residual is wrapped to
+        (-pi, pi] (:func:`residual`), and a file may carry it unwrapped (continuous along a
+        shot) or wrapped.
+    optional : a trajectory or truth file may leave out its two columns (read as "not
+        measured"): stage one measures it only for some bodies (the roll of a finned body).
     """
 
     name: str
@@ -47,6 +52,8 @@ class Channel:
     display_unit: str
     label: str
     description: str = ""
+    periodic: bool = False
+    optional: bool = False
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -106,9 +113,12 @@ OBSERVED: tuple[Channel, ...] = (
             "inclination of the nose axis to the x-y plane, + up"),
     Channel("psi", "angle", "deg", "deg", "ψ",
             "inclination of the nose axis to the x-z plane, + port"),
+    Channel("phi", "angle", "deg", "deg", "φ",
+            "roll angle about the nose axis (aircraft 3-2-1 roll: 0 = body z in the vertical "
+            "plane, pointing down; docs/conventions.md)", periodic=True, optional=True),
 )
 
-#: channel names in order (``("x", "y", "z", "theta", "psi")``)
+#: channel names in order (``("x", "y", "z", "theta", "psi", "phi")``)
 NAMES: tuple[str, ...] = tuple(c.name for c in OBSERVED)
 #: SI units in order
 UNITS: tuple[str, ...] = tuple(c.unit for c in OBSERVED)
@@ -137,9 +147,33 @@ def _read_only(a: np.ndarray) -> np.ndarray:
     return a
 
 
-#: column indices of the position channels (x, y, z) and of the angle channels (theta, psi)
+#: column indices of the position channels (x, y, z) and of the angle channels (theta, psi,
+#: phi)
 POSITION = _read_only(indices("position"))
 ANGLE = _read_only(indices("angle"))
+#: the nose axis's inclinations (theta, psi): the angle channels that are not periodic
+AXIS = _read_only(np.array([i for i, c in enumerate(OBSERVED)
+                            if c.kind == "angle" and not c.periodic], dtype=int))
+#: the roll channel(s) (phi): periodic angles
+ROLL = _read_only(np.array([i for i, c in enumerate(OBSERVED) if c.periodic], dtype=int))
+_TWO_PI = 2.0 * math.pi
+
+
+def wrap_angle(a):
+    """``a`` (rad) wrapped to [-pi, pi) (real or complex: the imaginary part, a complex
+    step's derivative, is kept)."""
+    return a - _TWO_PI * np.floor((np.real(a) + math.pi) / _TWO_PI)
+
+
+def residual(meas: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """``meas - pred`` over (..., N_CHANNELS) arrays (SI), the periodic channels (roll)
+    wrapped to [-pi, pi): a roll measured continuously along a shot and a prediction in
+    (-pi, pi] differ by whole turns that are no error. NaN stays NaN."""
+    d = np.asarray(meas) - np.asarray(pred)
+    if ROLL.size:
+        d = np.array(d, copy=True)
+        d[..., ROLL] = wrap_angle(d[..., ROLL])
+    return d
 
 
 def to_si(values, unit: str):
@@ -172,6 +206,6 @@ def trajectory_sigma_columns() -> list[str]:
     return [c.sigma_column for c in OBSERVED]
 
 
-__all__ = ["ANGLE", "BY_NAME", "Channel", "KINDS", "NAMES", "N_CHANNELS", "OBSERVED",
-           "POSITION", "UNITS", "channel", "from_si", "indices", "to_si",
-           "trajectory_sigma_columns", "trajectory_value_columns"]
+__all__ = ["ANGLE", "AXIS", "BY_NAME", "Channel", "KINDS", "NAMES", "N_CHANNELS", "OBSERVED",
+           "POSITION", "ROLL", "UNITS", "channel", "from_si", "indices", "residual", "to_si",
+           "trajectory_sigma_columns", "trajectory_value_columns", "wrap_angle"]

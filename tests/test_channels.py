@@ -1,7 +1,7 @@
 """The channel registry (cadra.channels) and the layering it serves.
 
 Truth: the trajectory file format of docs/stage1.md (its column names, degrees in the file)
-and stage two's fixed channel order x, y, z, theta, psi (docs/fitting.md).
+and stage two's fixed channel order x, y, z, theta, psi, phi (docs/fitting.md).
 """
 
 from __future__ import annotations
@@ -20,20 +20,24 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_registry_matches_the_documented_channels():
-    assert C.NAMES == ("x", "y", "z", "theta", "psi")
-    assert C.UNITS == ("m", "m", "m", "rad", "rad")
+    assert C.NAMES == ("x", "y", "z", "theta", "psi", "phi")
+    assert C.UNITS == ("m", "m", "m", "rad", "rad", "rad")
     assert [c.value_column for c in C.OBSERVED] == ["x_m", "y_m", "z_m", "theta_deg",
-                                                     "psi_deg"]
+                                                     "psi_deg", "phi_deg"]
     assert [c.sigma_column for c in C.OBSERVED] == ["sigma_x_m", "sigma_y_m", "sigma_z_m",
-                                                     "sigma_theta_deg", "sigma_psi_deg"]
+                                                     "sigma_theta_deg", "sigma_psi_deg",
+                                                     "sigma_phi_deg"]
+    assert [c.name for c in C.OBSERVED if c.periodic] == ["phi"]
+    assert [c.name for c in C.OBSERVED if c.optional] == ["phi"]
     assert C.channel("theta").si_column == "theta_rad"
     assert C.channel("psi").display_scale == 180.0 / math.pi
     assert C.channel("x").display_scale == 1.0
-    assert list(C.POSITION) == [0, 1, 2] and list(C.ANGLE) == [3, 4]
+    assert list(C.POSITION) == [0, 1, 2] and list(C.ANGLE) == [3, 4, 5]
+    assert list(C.AXIS) == [3, 4] and list(C.ROLL) == [5]
     with pytest.raises(ValueError):
         C.POSITION[0] = 5                    # read-only
     with pytest.raises(KeyError, match="unknown channel"):
-        C.channel("phi")
+        C.channel("roll")
     with pytest.raises(ValueError, match="not a angle unit"):
         C.Channel("phi", "angle", "m", "deg", "φ")
 
@@ -43,13 +47,20 @@ def test_old_names_are_aliases_of_the_registry():
     from cadra.fitting.report import CHANNEL_OUTPUT_UNITS
     from cadra.io.trajectory import COLUMNS
 
-    assert data.CHANNELS == C.NAMES and data.N_CHANNELS == 5
+    assert data.CHANNELS == C.NAMES and data.N_CHANNELS == 6
     assert data.CHANNEL_UNITS == C.UNITS
     assert CHANNEL_OUTPUT_UNITS == {"x": ("m", 1.0), "y": ("m", 1.0), "z": ("m", 1.0),
                                     "theta": ("deg", 180.0 / math.pi),
-                                    "psi": ("deg", 180.0 / math.pi)}
+                                    "psi": ("deg", 180.0 / math.pi),
+                                    "phi": ("deg", 180.0 / math.pi)}
     assert COLUMNS[3:13] == ("x_m", "y_m", "z_m", "theta_deg", "psi_deg", "sigma_x_m",
                              "sigma_y_m", "sigma_z_m", "sigma_theta_deg", "sigma_psi_deg")
+    from cadra.io.trajectory import ALL_COLUMNS, OPTIONAL_COLUMNS
+
+    assert OPTIONAL_COLUMNS == ("phi_deg", "sigma_phi_deg")
+    assert ALL_COLUMNS[3:15] == ("x_m", "y_m", "z_m", "theta_deg", "psi_deg", "phi_deg",
+                                 "sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_deg",
+                                 "sigma_psi_deg", "sigma_phi_deg")
 
 
 def test_trajectory_file_angles_become_radians(tmp_path):

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cadra.fitting import fit_shots, shot_data_from_truth
+from cadra.fitting import CHANNELS, fit_shots, shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SPECS = "sample_shots/specs"
@@ -27,8 +27,12 @@ def _shots(sims, true_scale, seed):
     for sim in sims:
         sd = shot_data_from_truth(sim.truth, sim.rigid, sim.spec.shot_id, sim.body.kind,
                                   sigma_position_m=1e-4, sigma_angle_rad=np.radians(0.1))
-        noise = rng.standard_normal(sd.meas.shape) * sd.sigma * np.asarray(true_scale)
-        out.append(replace(sd, meas=sd.meas + noise))
+        cols = [CHANNELS.index(n) for n in NAMES]       # the measured ones (no roll)
+        noise = (rng.standard_normal((len(sd.t_s), len(NAMES))) * sd.sigma[:, cols]
+                 * np.asarray(true_scale))
+        meas = sd.meas.copy()
+        meas[:, cols] += noise
+        out.append(replace(sd, meas=meas))
     return out
 
 

@@ -100,7 +100,7 @@ def flight_path_angles(shot, degree: int = 2):
     from cadra.conventions import axis_from_inclinations
 
     m, sg = shot.meas, shot.sigma
-    keep = np.all(np.isfinite(m), axis=1)
+    keep = np.all(np.isfinite(m[:, :5]), axis=1)       # x, y, z, theta, psi (not the roll)
     n = int(keep.sum())
     if n < degree + 2:
         raise ValueError(f"{shot.source.get('trajectory_file', shot.shot_id)}: {n} station(s) "

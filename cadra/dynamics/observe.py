@@ -31,6 +31,15 @@ def rotation_fb_batch(quats: np.ndarray) -> np.ndarray:
     return R
 
 
+def _atan2(y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``arctan2(y, x)``, also for complex-step arguments (numpy's has no complex form): the
+    real part is the real angle, the imaginary part its first-order change."""
+    if not (np.iscomplexobj(y) or np.iscomplexobj(x)):
+        return np.arctan2(y, x)
+    yr, xr = np.real(y), np.real(x)
+    return np.arctan2(yr, xr) + 1j * (xr * np.imag(y) - yr * np.imag(x)) / (xr * xr + yr * yr)
+
+
 def observe(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> dict[str, np.ndarray]:
     """Predicted measurements at each state.
 
@@ -42,7 +51,10 @@ def observe(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> dict[str, np.
     Returns
     -------
     dict with ``x_m, y_m, z_m`` (reference point in F), ``theta_rad``, ``psi_rad``
-    (inclinations of the nose axis) and ``axis`` (n, 3) unit nose axis in F.
+    (inclinations of the nose axis), ``phi_rad`` (the roll angle about the nose axis in
+    (-pi, pi]: the aircraft 3-2-1 roll of the attitude, 0 with body z in the vertical plane
+    pointing down, as :func:`cadra.conventions.quat_from_axis_roll` takes it) and ``axis``
+    (n, 3) unit nose axis in F.
     """
     states = np.atleast_2d(states)
     R = rotation_fb_batch(states[:, S_QUAT])
@@ -54,6 +66,8 @@ def observe(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> dict[str, np.
         "z_m": ref[:, 2],
         "theta_rad": np.arcsin(axis[:, 2]),
         "psi_rad": np.arcsin(axis[:, 1]),
+        # E = diag(1, -1, -1) F: the Euler roll atan2(R_E[2, 1], R_E[2, 2]) from R_FB's rows
+        "phi_rad": _atan2(-R[:, 2, 1], -R[:, 2, 2]),
         "axis": axis,
     }
 

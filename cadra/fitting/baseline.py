@@ -40,6 +40,7 @@ import numpy as np
 from cadra.aero import AeroModel
 from cadra.aero.expr import evaluate_tree
 from cadra.aero.program import COEFFICIENTS, VARIABLES
+from cadra.channels import residual
 from cadra.dynamics import layout as L
 from cadra.dynamics.eom import derivative
 from cadra.dynamics.integrate import inverse3
@@ -366,7 +367,7 @@ def baseline_fit(shots: Sequence[ShotData], model: AeroModel,
                                 model=model)
         n_traj[0] += 1
         pred = observables(states, refs[k])
-        return ((shots[k].meas - pred) / shots[k].sigma)[masks[k]]
+        return (residual(shots[k].meas, pred) / shots[k].sigma)[masks[k]]
 
     def residuals(x):
         p = params0.copy()

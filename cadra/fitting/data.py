@@ -33,6 +33,9 @@ CHANNELS = channel_registry.NAMES
 CHANNEL_UNITS = channel_registry.UNITS
 N_CHANNELS = channel_registry.N_CHANNELS
 _POS, _ANG = channel_registry.POSITION, channel_registry.ANGLE
+_AXIS, _ROLL = channel_registry.AXIS, channel_registry.ROLL
+#: the channels every measurement has a column for (not optional: x, y, z, theta, psi)
+_REQUIRED = np.array([i for i, c in enumerate(channel_registry.OBSERVED) if not c.optional])
 #: typical film-range measurement noise (seed 004 era): 0.1 mm, 0.1 deg, 10 ns
 FILM_SIGMAS = {"position_m": 1e-4, "angle_rad": math.radians(0.1), "time_s": 1e-8}
 #: fewest stations with a measured position a trajectory file must give (a fit's starting
@@ -52,12 +55,15 @@ class ShotData:
     ----------
     shot_id : e.g. ``"M2-2429"``.
     rigid : mass properties, air and effects of the shot (the dynamics' view).
-    body_kind : ``"sphere"``, ``"capsule"`` or ``"cone"``.
+    body_kind : the body's kind (``"sphere"``, ``"capsule"``, ``"cone"``, ...).
     stations : (n,) station ids of the measured stations.
     t_s : (n,) spark times, s.
-    meas : (n, 5) measured x, y, z (m, reference point, facility frame) and theta, psi (rad);
-        NaN where not measured (a sphere's angles, a failed channel).
-    sigma : (n, 5) 1-sigma of ``meas`` (same units), timing included (see ``sigma_t_s``).
+    meas : (n, N_CHANNELS) measured x, y, z (m, reference point, facility frame), theta, psi
+        (rad) and the roll angle phi (rad; :mod:`cadra.channels`); NaN where not measured (a
+        sphere's angles, a body of revolution's roll, a failed channel).
+    sigma : (n, N_CHANNELS) 1-sigma of ``meas`` (same units), timing included (see
+        ``sigma_t_s``). Both may also be given with the required channels' columns only
+        (x .. psi, (n, 5)): the optional ones (phi) are then not measured.
     sigma_t_s : timing sigma, s, already folded into ``sigma`` (x as V sigma_t).
     source : where the data came from (paths or "simulated").
     """
@@ -74,6 +80,12 @@ class ShotData:
 
     def __post_init__(self):
         n = len(self.t_s)
+        for name in ("meas", "sigma"):       # the required channels only: optional ones NaN
+            a = np.asarray(getattr(self, name), dtype=float)
+            if a.ndim == 2 and a.shape == (n, _REQUIRED.size) and _REQUIRED.size < N_CHANNELS:
+                full = np.full((n, N_CHANNELS), np.nan)
+                full[:, _REQUIRED] = a
+                object.__setattr__(self, name, full)
         for name, shape in (("stations", (n,)), ("meas", (n, N_CHANNELS)),
                             ("sigma", (n, N_CHANNELS))):
             if np.shape(getattr(self, name)) != shape:
@@ -89,7 +101,7 @@ class ShotData:
 
     @property
     def mask(self) -> np.ndarray:
-        """(n, 5) True where a channel was measured."""
+        """(n, N_CHANNELS) True where a channel was measured."""
         return np.isfinite(self.meas)
 
     @property
@@ -103,7 +115,13 @@ class ShotData:
 
     @property
     def has_angles(self) -> bool:
-        return bool(self.mask[:, _ANG].any())
+        """Whether the nose axis's inclinations (theta, psi) were measured anywhere."""
+        return bool(self.mask[:, _AXIS].any())
+
+    @property
+    def has_roll(self) -> bool:
+        """Whether the roll angle phi was measured anywhere."""
+        return bool(self.mask[:, _ROLL].any())
 
     def with_effects(self, effects: Effects) -> ShotData:
         return replace(self, rigid=self.rigid.with_effects(effects))
@@ -213,31 +231,55 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
 def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, body_kind: str, *,
                          sigma_position_m: float, sigma_angle_rad: float,
                          sigma_t_s: float = 0.0, rng: np.random.Generator | None = None,
-                         angles: bool | None = None) -> ShotData:
+                         angles: bool | None = None, roll: bool | None = None,
+                         sigma_roll_rad: float | None = None,
+                         positions: bool = True) -> ShotData:
     """Measurements made from a simulated shot's exact truth (``truth.csv`` columns).
 
     With ``rng`` the measurements get Gaussian noise of the given sigmas, and the spark times
     a timing error of ``sigma_t_s`` (the data then carry times that are off, as real ones are);
     without it they are exact (noise-free tests) but still carry the sigmas as weights.
     ``angles=False`` drops theta and psi (a sphere shows none); default: not for a sphere.
+    ``roll`` keeps the roll angle phi (sigma ``sigma_roll_rad``, default
+    ``sigma_angle_rad``); default: only for a finned body (``"finner"``), whose roll stage one
+    measures. ``positions=False`` drops x, y, z (a mounted wind-tunnel record).
+    A truth table without an optional channel's column (an older ``truth.csv`` without
+    ``phi_deg``) reads it as not measured.
     """
     n = len(truth)
     meas = np.column_stack([channel_registry.to_si(truth[c.value_column].to_numpy(float),
                                                    c.file_unit)
+                            if c.value_column in truth or not c.optional
+                            else np.full(n, np.nan)
                             for c in channel_registry.OBSERVED])
     t_s = truth["t_s"].to_numpy(float).copy()
     sigma = np.empty((n, N_CHANNELS))
     sigma[:, _POS] = sigma_position_m
     sigma[:, _ANG] = sigma_angle_rad
+    sigma[:, _ROLL] = sigma_angle_rad if sigma_roll_rad is None else sigma_roll_rad
     if angles is None:
         angles = body_kind != "sphere"
+    if roll is None:
+        roll = body_kind == "finner"
     if not angles:
-        meas[:, _ANG] = np.nan
+        meas[:, _AXIS] = np.nan
+    if not roll:
+        meas[:, _ROLL] = np.nan
+    if not positions:
+        meas[:, _POS] = np.nan
     stations = truth["station"].to_numpy(int)
     if rng is not None:
-        meas = meas + rng.standard_normal(meas.shape) * sigma
+        # the required channels' noise first, the optional ones' (phi) after the timing's and
+        # only when measured: a seeded draw of a shot without them is what it always was
+        core = np.array([not c.optional for c in channel_registry.OBSERVED])
+        meas = meas.copy()
+        meas[:, core] += rng.standard_normal((n, int(core.sum()))) * sigma[:, core]
+        dt = rng.standard_normal(n) * sigma_t_s if sigma_t_s > 0 else np.zeros(n)
+        extra = ~core & np.isfinite(meas).any(axis=0)
+        if extra.any():
+            meas[:, extra] += rng.standard_normal((n, int(extra.sum()))) * sigma[:, extra]
         if sigma_t_s > 0:
-            t_s = t_s + rng.standard_normal(n) * sigma_t_s
+            t_s = t_s + dt
             order = np.argsort(t_s)
             t_s, meas, stations = t_s[order], meas[order], stations[order]
     return ShotData(shot_id=shot_id, rigid=rigid, body_kind=body_kind,

@@ -61,28 +61,31 @@ def default_local_free(data: ShotData, model: AeroModel | None = None) -> np.nda
 
     All 12, except what the data cannot see: a shot with no angle measurements (a sphere)
     fits position and velocity only; a symmetric body (total-angle model, transverse inertia
-    equal within 1e-3, no products of inertia) does not fit its roll angle about the axis --
-    turning such a body about its axis changes no measurement. A wind-tunnel mount
-    (:mod:`cadra.dynamics.modes`) fits the attitude (on a pitch pivot it includes the pivot
-    axis's direction) and the rates the mount allows: all three on a gimbal, q on a pitch
-    pivot, p on a roll bearing; never the position or velocity.
+    equal within 1e-3, no products of inertia) whose roll was not measured does not fit its
+    roll angle about the axis -- turning such a body about its axis changes no measurement.
+    A wind-tunnel mount (:mod:`cadra.dynamics.modes`) fits the attitude (on a pitch pivot it
+    includes the pivot axis's direction) and the rates the mount allows: all three on a
+    gimbal, q on a pitch pivot, p on a roll bearing; never the position or velocity. A mounted
+    record that measures the roll angle (phi) but not the axis's inclinations fits the roll
+    about the axis only: the axis stays where the reference state puts it.
     """
-    if not data.has_angles:
+    if not (data.has_angles or data.has_roll):
         return np.arange(6)
     mode = data.rigid.mode
+    hide_roll = _axisymmetric(data, model) and not data.has_roll
     if mode.mounted:
         # a mount leaves the attitude and the rates it allows free: the pivot holds the
         # position and the rotation sets the cg velocity (cadra.dynamics.modes). The attitude
         # keeps all three rotations: on a pitch pivot two of them set the pivot axis (body y)
         # in the facility, on a roll bearing the axis held in the stream
-        rotations = ("rot_x_rad", "rot_y_rad", "rot_z_rad")
+        rotations = ("rot_x_rad", "rot_y_rad", "rot_z_rad") if data.has_angles else ("rot_x_rad",)
         rates = {"gimbal": ("p_rad_s", "q_rad_s", "r_rad_s"), "pitch_pivot": ("q_rad_s",),
                  "roll_bearing": ("p_rad_s",)}[mode.kind]
         names = rotations + rates
-        if mode.kind != "pitch_pivot" and _axisymmetric(data, model):
+        if mode.kind != "pitch_pivot" and hide_roll:
             names = names[1:]       # turning the body about its own axis shows nowhere
         return np.array([LOCAL_NAMES.index(n) for n in names])
-    if _axisymmetric(data, model):
+    if hide_roll:
         return np.array([k for k in range(N_LOCAL) if LOCAL_NAMES[k] != "rot_x_rad"])
     return np.arange(N_LOCAL)
 

@@ -43,7 +43,7 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero import AeroModel
-from cadra.channels import BY_NAME, OBSERVED
+from cadra.channels import BY_NAME, N_CHANNELS, OBSERVED, residual
 from cadra.dynamics.observe import air_angles
 from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.histories import fitted_histories
@@ -118,16 +118,16 @@ def shot_epoch_table(result: FitResult, shots: Sequence[ShotData]) -> list[dict]
         y = np.asarray(sf.state, dtype=float)
         obs0 = _epoch_observables(y, ref)
         free = list(sf.local_free_indices)
-        J = np.zeros((5, len(free)))
+        J = np.zeros((N_CHANNELS, len(free)))
         for c, k in enumerate(free):
             u = np.zeros(len(LOCAL_NAMES))
             u[k] = _FD_STEP
             up = _epoch_observables(apply_local(y, u), ref)
             dn = _epoch_observables(apply_local(y, -u), ref)
-            J[:, c] = (up - dn) / (2.0 * _FD_STEP)
+            J[:, c] = residual(up, dn) / (2.0 * _FD_STEP)      # the roll wrapped
         idx = [result.param_names.index(f"{sf.shot_id}:{LOCAL_NAMES[k]}") for k in free]
         C = result.covariance[np.ix_(idx, idx)] if idx else np.zeros((0, 0))
-        var = np.einsum("ij,jk,ik->i", J, C, J) if idx else np.zeros(5)
+        var = np.einsum("ij,jk,ik->i", J, C, J) if idx else np.zeros(N_CHANNELS)
         sig_obs = np.sqrt(np.maximum(var, 0.0))
         local_sig = np.asarray(sf.local_sigma, dtype=float)
         inf_cols = [c for c, k in enumerate(free) if math.isinf(local_sig[k])]
@@ -149,6 +149,9 @@ def shot_epoch_table(result: FitResult, shots: Sequence[ShotData]) -> list[dict]
             "speed_m_s": float(np.linalg.norm(y[3:6])),
             "theta_deg": obs0[3] * deg, "theta_sigma_deg": sig_obs[3] * deg,
             "psi_deg": obs0[4] * deg, "psi_sigma_deg": sig_obs[4] * deg,
+            # the roll only where measured (else the fit did not determine it)
+            "phi_deg": obs0[5] * deg if sd.has_roll else math.nan,
+            "phi_sigma_deg": sig_obs[5] * deg if sd.has_roll else math.nan,
             "rates_rad_s": y[10:13], "rates_sigma_rad_s": local_sig[9:12],
             "alpha_deg": air["alpha_rad"][0] * deg, "beta_deg": air["beta_rad"][0] * deg,
             "sigma_deg": air["sigma_rad"][0] * deg, "mach": air["mach"][0],

@@ -33,6 +33,7 @@ import pandas as pd
 from scipy import sparse
 
 from cadra.aero import AeroModel
+from cadra.channels import residual
 from cadra.fitting.data import CHANNELS
 from cadra.fitting.sensitivity import LOCAL_NAMES
 
@@ -346,7 +347,7 @@ def build_result(problem, params: np.ndarray, states, status: str, message: str,
     for st, off in zip(states, offsets, strict=True):
         sd = st.data
         pred = st.pred if st.pred is not None else np.full(sd.meas.shape, np.nan)
-        res = sd.meas - pred
+        res = residual(sd.meas, pred)
         nl = st.local_free.size
         if have_jac:
             Jfull = np.zeros((int(st.mask.sum()), P))

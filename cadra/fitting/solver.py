@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cadra.aero import AeroModel
+from cadra.channels import residual
 from cadra.fitting.data import ShotData
 from cadra.fitting.extras import Extra
 from cadra.fitting.problem import FitProblem, default_local_free
@@ -74,7 +75,7 @@ class _ShotState:
 
 
 def _weighted(st: _ShotState, pred: np.ndarray) -> np.ndarray:
-    r = (st.data.meas - pred) / st.data.sigma
+    r = residual(st.data.meas, pred) / st.data.sigma
     return r[st.mask]
 
 

@@ -29,9 +29,10 @@ import numpy as np
 from scipy.optimize import least_squares, minimize
 
 from cadra.aero import AeroModel
+from cadra.channels import residual
 from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
 from cadra.dynamics.setup import state_from_reference
-from cadra.fitting.data import CHANNELS, ShotData
+from cadra.fitting.data import CHANNELS, FitDataError, ShotData
 from cadra.fitting.problem import FitProblem
 from cadra.fitting.sensitivity import Integration
 
@@ -39,6 +40,7 @@ from cadra.fitting.sensitivity import Integration
 ROLL_GRID_DEG = tuple(range(0, 360, 30))
 #: the axis-inclination channels (columns of ``ShotData.meas``)
 _THETA, _PSI = CHANNELS.index("theta"), CHANNELS.index("psi")
+_PHI = CHANNELS.index("phi")
 
 
 @dataclass(frozen=True)
@@ -340,11 +342,32 @@ def _axis_and_rate(shot: ShotData):
     return a, adot
 
 
+def _roll_and_rate(shot: ShotData) -> tuple[float, float]:
+    """The measured roll angle phi (rad) and its rate (rad/s) at the epoch: a local quadratic
+    fit of phi unwrapped along the shot (whole turns between samples are not seen: a roll
+    sampled more coarsely than half a turn per station aliases)."""
+    ok = np.isfinite(shot.meas[:, _PHI])
+    t, phi = shot.t_s[ok], np.unwrap(shot.meas[ok, _PHI])
+    if t.size == 1:
+        return float(phi[0]), 0.0
+    k = int(np.argmin(np.abs(t - shot.t_s[shot.epoch_index])))
+    lo, hi = max(0, k - 3), min(t.size, k + 4)
+    if hi - lo < 3:
+        lo, hi = 0, t.size
+    c = np.polyfit(t[lo:hi] - shot.t_s[shot.epoch_index], phi[lo:hi], min(2, hi - lo - 1))
+    return float(np.polyval(c, 0.0)), float(np.polyval(np.polyder(c), 0.0))
+
+
 def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
                      spin_rad_s: float = 0.0) -> list[np.ndarray]:
     """Starting states at the epoch for each roll angle of the grid (one if no angles),
     spinning at ``spin_rad_s`` about the measured axis (stage one does not see roll: 0 unless
     an estimate gives it, :class:`MotionEstimate`).
+
+    A shot that measures its roll angle (``phi``: a finned body) starts at its measured roll
+    and at the roll rate phi's slope gives, in place of the grid and ``spin_rad_s``. A mounted
+    record that measures the roll but not the axis (theta, psi) cannot place the axis: pass
+    its starting state (``fit_shots(initial=...)``).
 
     A mounted wind-tunnel record (cadra.dynamics.modes) may have no positions: the pivot is
     then put at the facility origin (nothing observed depends on where it is), and the
@@ -357,15 +380,29 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
     if mode.mounted:
         vel = np.zeros(3)
     ref = shot.rigid.ref_from_cg_body_m()
+    if not shot.has_angles and shot.has_roll:
+        raise FitDataError(f"{shot.shot_id}: the roll angle is measured but the nose axis "
+                           "(theta, psi) is not, so no starting attitude can be made: measure "
+                           "theta and psi, or give the starting state")
     if not shot.has_angles:
         a = vel / np.linalg.norm(vel)
         q = quat_from_axis_roll(a, 0.0)
         return [state_from_reference(pos, vel, q, np.zeros(3), ref)]
     a, adot = _axis_and_rate(shot)
     w_F = np.cross(a, adot)                # transverse angular velocity, facility frame
-    if np.isfinite(spin_rad_s) and not mode.mounted:
+    if shot.has_roll:
+        phi0, phi_dot = _roll_and_rate(shot)
+        roll_grid_deg = (math.degrees(phi0),)
+        # phi' = p + (q sin phi + r cos phi) tan theta (3-2-1 Euler kinematics); q, r from the
+        # axis's swing, which cross(a, a') gives without a part along the axis
+        w_B = body_to_facility_matrix(quat_from_axis_roll(a, phi0)).T @ w_F
+        theta = math.asin(float(np.clip(a[2], -1.0, 1.0)))
+        spin_rad_s = phi_dot - (w_B[1] * math.sin(phi0) + w_B[2] * math.cos(phi0)) * math.tan(theta)
+        if mode.kind != "pitch_pivot":
+            w_F = w_F + spin_rad_s * a
+    elif np.isfinite(spin_rad_s) and not mode.mounted:
         w_F = w_F + spin_rad_s * a
-    if mode.kind == "pitch_pivot":
+    if mode.kind == "pitch_pivot" and not shot.has_roll:
         roll_grid_deg = _pivot_rolls(shot, a)
     out = []
     for roll in roll_grid_deg:
@@ -407,7 +444,7 @@ def initial_state(shot: ShotData, model: AeroModel,
     mask = shot.mask
     for y in cands:
         pred = problem.predict_from(params, np.zeros(0), [y])[0]
-        r = ((shot.meas - pred) / shot.sigma)[mask]
+        r = (residual(shot.meas, pred) / shot.sigma)[mask]
         chi2 = float(r @ r) if np.all(np.isfinite(r)) else math.inf
         if chi2 < best_chi2:
             best, best_chi2 = y, chi2

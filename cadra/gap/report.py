@@ -14,7 +14,8 @@ from cadra.gap.where import by_group
 from cadra.io.atomic import atomic_output_dir
 
 _UNIT = {"x": ("µm", 1e6), "y": ("µm", 1e6), "z": ("µm", 1e6),
-         "theta": ("deg", 180 / math.pi), "psi": ("deg", 180 / math.pi)}
+         "theta": ("deg", 180 / math.pi), "psi": ("deg", 180 / math.pi),
+         "phi": ("deg", 180 / math.pi)}
 
 
 def summary_markdown(dg, result, where_tables=None) -> str:

@@ -32,7 +32,7 @@ import pandas as pd
 from scipy import stats
 
 from cadra.aero import AeroModel
-from cadra.channels import POSITION
+from cadra.channels import POSITION, residual
 from cadra.fitting.data import ShotData
 from cadra.fitting.extras import station_columns
 from cadra.fitting.problem import result_problem
@@ -129,7 +129,7 @@ def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candi
             cols[c.name] = station_columns(candidate_extras(c, ids), sid, sd.stations, pred, states)
         mask = sd.mask
         w = 1.0 / sd.sigma[mask]
-        r = ((sd.meas - pred)[mask]) * w
+        r = (residual(sd.meas, pred)[mask]) * w
         out.append({"shot": sd, "fit": sf, "r": r, "J": Jfit[mask] * w[:, None],
                     "local": local.size,
                     "cols": {k: C[mask] * w[:, None] for k, C in cols.items()},

@@ -48,7 +48,8 @@ SHARES = {"global": 0.3, "channel": 0.1, "station": 0.15, "cross_shot": 0.15, "r
 MAX_LOCALIZED = 3
 #: display units of the channels in the verdict's sentences
 _UNIT = {"x": ("um", 1e6), "y": ("um", 1e6), "z": ("um", 1e6),
-         "theta": ("deg", 180 / math.pi), "psi": ("deg", 180 / math.pi)}
+         "theta": ("deg", 180 / math.pi), "psi": ("deg", 180 / math.pi),
+         "phi": ("deg", 180 / math.pi)}
 _POSITION = ("x", "y", "z")
 
 

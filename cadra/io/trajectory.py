@@ -13,6 +13,10 @@ Columns (in this order):
 ``x_m, y_m, z_m``       reference point of the body in the facility frame F, m
 ``theta_deg, psi_deg``  inclinations of the nose axis to the x-y plane (+ up) and to the
                         x-z plane (+ port), deg (docs/conventions.md); empty for a sphere
+``phi_deg``             roll angle about the nose axis, deg (aircraft 3-2-1 roll; continuous
+                        along the shot or wrapped, either is read); empty where not measured
+                        (a body of revolution). Optional: a file may leave out ``phi_deg`` and
+                        ``sigma_phi_deg`` (files written before the roll channel)
 ``sigma_*``             1-sigma of each of the above (same unit)
 ``x_top_minus_side_m``  x seen by the top view minus x seen by the side view, m
 ``x_consistency``       that difference over its sigma
@@ -40,19 +44,28 @@ from cadra.io.atomic import atomic_write_text
 
 FORMAT = "cadra-trajectory-1"
 
-#: the file's columns; the value and sigma columns come from the channel registry
-#: (:mod:`cadra.channels`: a channel added there is a column pair here)
-COLUMNS = (
+#: every column a file may have, in file order; the value and sigma columns come from the
+#: channel registry (:mod:`cadra.channels`: a channel added there is a column pair here)
+ALL_COLUMNS = (
     "station", "t_s", "status",
     *trajectory_value_columns(),
     *trajectory_sigma_columns(),
     "x_top_minus_side_m", "x_consistency", "reason", "warnings",
 )
+#: an optional channel's columns (the roll, ``phi_deg`` and ``sigma_phi_deg``): written when a
+#: table measures it, read as "not measured" when a file leaves them out
+OPTIONAL_COLUMNS = tuple(c for ch in OBSERVED if ch.optional
+                         for c in (ch.value_column, ch.sigma_column))
+#: the columns every file has
+COLUMNS = tuple(c for c in ALL_COLUMNS if c not in OPTIONAL_COLUMNS)
 STATUSES = ("ok", "warning", "failed")
 #: largest plausible magnitude of each numeric column, file units (larger is a unit slip or
-#: a corrupted file): positions 10 km, angles 180 deg, times 10 s (as in the shot file)
+#: a corrupted file): positions 10 km, angles 180 deg, times 10 s (as in the shot file); a
+#: roll carried continuously along a shot may run to many turns (1e7 deg: 20,000 rad/s for
+#: 10 s)
 LIMITS = {"t_s": 10.0, "x_top_minus_side_m": 1e4, "x_consistency": 1e12,
-          **{c.value_column: (180.0 if c.file_unit == "deg" else 1e4) for c in OBSERVED},
+          **{c.value_column: (1e7 if c.periodic else 180.0 if c.file_unit == "deg" else 1e4)
+             for c in OBSERVED},
           **{c.sigma_column: (180.0 if c.file_unit == "deg" else 1e4) for c in OBSERVED}}
 
 
@@ -75,15 +88,25 @@ class Trajectory:
 
 
 def trajectory_to_csv(table: pd.DataFrame, meta: dict) -> str:
-    """CSV text (with the ``#`` metadata header) of a table with :data:`COLUMNS`."""
+    """CSV text (with the ``#`` metadata header) of a table with :data:`COLUMNS`, and an
+    optional channel's two columns (:data:`OPTIONAL_COLUMNS`) where the table has a value in
+    them (a body of revolution's file is as it was before the roll channel)."""
     missing = [c for c in COLUMNS if c not in table]
     if missing:
         raise TrajectoryFileError(f"trajectory table lacks columns {missing}")
+    written = [c for ch in OBSERVED if ch.optional
+               if ch.value_column in table
+               and pd.to_numeric(table[ch.value_column], errors="coerce").notna().any()
+               for c in (ch.value_column, ch.sigma_column)]
+    missing = [c for c in written if c not in table]
+    if missing:
+        raise TrajectoryFileError(f"trajectory table lacks columns {missing}")
+    columns = [c for c in ALL_COLUMNS if c in COLUMNS or c in written]
     head = [f"# format: {FORMAT}"]
     for k, v in meta.items():
         text = str(v).replace("\n", " ")
         head.append(f"# {k}: {text}")
-    body = table.loc[:, list(COLUMNS)].to_csv(index=False, float_format="%.10g",
+    body = table.loc[:, columns].to_csv(index=False, float_format="%.10g",
                                              lineterminator="\n")
     return "\n".join(head) + "\n" + body
 
@@ -116,7 +139,11 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
     import io
 
     table = _read_csv(io.StringIO(text), path, comment="#", keep_default_na=True, dtype=str)
-    missing = [c for c in COLUMNS if c not in table]
+    for ch in OBSERVED:       # an optional channel's columns may be left out: not measured
+        if ch.optional and ch.value_column not in table and ch.sigma_column not in table:
+            table[ch.value_column] = ""
+            table[ch.sigma_column] = ""
+    missing = [c for c in ALL_COLUMNS if c not in table]
     if missing:
         raise TrajectoryFileError(f"{path}: missing column(s) {missing}")
     if table.empty:
@@ -148,12 +175,13 @@ def _read_csv(source, path, **kwargs) -> pd.DataFrame:
 
 
 #: columns a truth table (``--truth``: a simulated shot's ``truth.csv``) must have
-TRUTH_COLUMNS = tuple(c.value_column for c in OBSERVED)
+TRUTH_COLUMNS = tuple(c.value_column for c in OBSERVED if not c.optional)
 
 
 def load_truth(path: str | os.PathLike) -> pd.DataFrame:
     """A truth table to draw beside a measurement (``cadra1 --truth``): a CSV file with
-    :data:`TRUTH_COLUMNS` (others are kept). :class:`TrajectoryFileError` naming the file,
+    :data:`TRUTH_COLUMNS` (others are kept; an optional channel's column, ``phi_deg``, is
+    read when there, as NaN when not). :class:`TrajectoryFileError` naming the file,
     and the row and column of a value that is not a number."""
     path = Path(path)
     if not path.is_file():
@@ -164,7 +192,10 @@ def load_truth(path: str | os.PathLike) -> pd.DataFrame:
         raise TrajectoryFileError(f"{path}: truth table lacks column(s) {missing}")
     if table.empty:
         raise TrajectoryFileError(f"{path}: truth table has no rows")
-    for c in TRUTH_COLUMNS:
+    for ch in OBSERVED:
+        if ch.optional and ch.value_column not in table:
+            table[ch.value_column] = np.nan
+    for c in (ch.value_column for ch in OBSERVED):
         col = table[c]
         if col.dtype == object:  # integers beyond int64 are Python ints: as text, they are inf
             col = col.map(lambda v: v if isinstance(v, float) else str(v))
@@ -189,7 +220,7 @@ def _numeric(table: pd.DataFrame, path: Path) -> pd.DataFrame:
 
     raw = table
     table = table.copy()
-    for c in COLUMNS:
+    for c in ALL_COLUMNS:
         if c in ("status", "reason", "warnings"):
             continue
         text = raw[c].str.strip()
@@ -232,7 +263,8 @@ def _numeric(table: pd.DataFrame, path: Path) -> pd.DataFrame:
 
 
 def station_rows(results, times_s: dict) -> pd.DataFrame:
-    """Table rows (:data:`COLUMNS`) from :class:`cadra.measure.station.StationResult` s."""
+    """Table rows (:data:`ALL_COLUMNS`) from :class:`cadra.measure.station.StationResult` s
+    (the roll from a pose's ``phi_rad`` / ``sigma_phi_rad`` where it has them)."""
     rows = []
     for r in results:
         p = r.pose
@@ -244,11 +276,13 @@ def station_rows(results, times_s: dict) -> pd.DataFrame:
                        sigma_x_m=p.sigma_x_m, sigma_y_m=p.sigma_y_m, sigma_z_m=p.sigma_z_m,
                        sigma_theta_deg=math.degrees(p.sigma_theta_rad),
                        sigma_psi_deg=math.degrees(p.sigma_psi_rad),
+                       phi_deg=math.degrees(getattr(p, "phi_rad", math.nan)),
+                       sigma_phi_deg=math.degrees(getattr(p, "sigma_phi_rad", math.nan)),
                        x_top_minus_side_m=p.x_top_minus_side_m,
                        x_consistency=p.x_consistency_sigma)
         rows.append(row)
     table = pd.DataFrame(rows)
-    for c in COLUMNS:
+    for c in ALL_COLUMNS:
         if c not in table:
             table[c] = math.nan
-    return table.loc[:, list(COLUMNS)].sort_values("station").reset_index(drop=True)
+    return table.loc[:, list(ALL_COLUMNS)].sort_values("station").reset_index(drop=True)

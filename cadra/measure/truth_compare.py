@@ -63,6 +63,9 @@ def compare_with_truth(table: pd.DataFrame, truth: pd.DataFrame) -> TruthCompari
         m = measured[c.value_column].to_numpy(float)
         s = measured[c.sigma_column].to_numpy(float)
         err = m - t[c.value_column].to_numpy(float)
+        if c.periodic:          # whole turns are no error (a roll measured continuously)
+            half = float(channel_registry.from_si(np.pi, c.file_unit))
+            err = err - 2 * half * np.floor((err + half) / (2 * half))
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.where(np.isfinite(s) & (s > 0), err / s, np.nan)
         rows[f"{c.name}_error_{c.file_unit}"] = err
