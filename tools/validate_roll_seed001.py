@@ -10,12 +10,13 @@ aerodynamic roll angle φ = γ, noise-free and with 0.05° of white noise, is re
   sin 4γ pendulum averaged exactly: docs/pureroll.md), the seed's own harmonic averaging
   (eqs. 28-30) with and without its frequency-variation amplitude correction, and the
   sectional estimates that start them;
-* CADRA's 6-DOF fit of the same record with C_l(α), C_lp0, C_lp2 free (see ``--help``).
+* CADRA's 6-DOF fit of the same record with C_l(α), C_lp0, C_lp2 free: stage two
+  (``fit_shots``) on the ``phi`` channel alone, or a least-squares fallback without it.
 
 Then the limit cycle (eq. 31) against the exact energy balance and the simulated one.
 The seed gives no conditions: the choices are the constants below (docs/pureroll.md).
 
-Usage: python tools/validate_roll_seed001.py [--noise-seed 1] [--draws 5]   (about 40 s)
+Usage: python tools/validate_roll_seed001.py [--noise-seed 1] [--draws 5]   (about 10 s)
 Last line: a JSON object (lockin_mdc_err_pct, lockin_cadra_err_pct,
 lockin_cadra_over_mdc_error_max, limit_cycle_rel_err, seconds, and the other figures).
 """
