@@ -3,7 +3,8 @@
 Epicyclic and tricyclic fits by differential corrections (10- and 12-constant forms, the
 nonrolling-axis correction), 1-DOF pitch fits, overlapping sectional fits, the
 Kryloff-Bogoliuboff nonlinear reduction, linear-theory coefficients from the fitted arms,
-Murphy's cubic correlator, the Nonplanar Ratio and the cg transfer. Plain numpy in, frozen
+Murphy's cubic correlator, the Nonplanar Ratio, the cg transfer and seed 001's pure-roll
+(roll lock-in) reduction by differential corrections (docs/pureroll.md). Plain numpy in, frozen
 dataclasses out; no file I/O. May import only the numerical core (numpy, scipy,
 cadra.conventions, cadra.units, cadra.numfmt).
 """
@@ -31,16 +32,24 @@ from cadra.motion.nonplanar import (
 )
 from cadra.motion.nonrolling import fixed_plane_angles, nonrolling_angle, nonrolling_rate
 from cadra.motion.pitch import PitchFit, fit_pitch
+from cadra.motion.pureroll import (
+    RollCoefficients,
+    RollFit,
+    energy_balance_amplitude,
+    limit_cycle_amplitude_eq31,
+    mdc_fit,
+    pure_roll_coefficients,
+)
 from cadra.motion.report import coefficients_report, fit_report
 from cadra.motion.sectional import Sections, sectional_epicyclic, sectional_pitch
 
 __all__ = [
     "Arm", "CgSeriesFit", "CubicCorrelator", "EpicyclicFit", "FlightConditions", "KBResult",
     "Layout", "LinearCoefficients", "MomentDerivatives", "MotionFitError", "NonplanarRatio",
-    "PitchFit", "Sections", "SwerveFit", "coefficients_report", "cubic_correlator",
-    "fit_cg_series", "fit_epicyclic", "fit_report",
-    "fit_pitch", "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
-    "linear_coefficients", "nonplanar_ratio", "nonplanar_ratio_of_fit", "nonrolling_angle",
-    "nonrolling_rate", "pitch_coefficients", "sectional_epicyclic", "sectional_pitch",
-    "transfer_cg",
+    "PitchFit", "RollCoefficients", "RollFit", "Sections", "SwerveFit", "coefficients_report",
+    "cubic_correlator", "energy_balance_amplitude", "fit_cg_series", "fit_epicyclic", "fit_pitch",
+    "fit_report", "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
+    "limit_cycle_amplitude_eq31", "linear_coefficients", "mdc_fit", "nonplanar_ratio",
+    "nonplanar_ratio_of_fit", "nonrolling_angle", "nonrolling_rate", "pitch_coefficients",
+    "pure_roll_coefficients", "sectional_epicyclic", "sectional_pitch", "transfer_cg",
 ]
