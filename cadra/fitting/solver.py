@@ -32,6 +32,7 @@ import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.channels import residual
+from cadra.dynamics.integrate import MAX_ADAPTIVE_EVALS
 from cadra.fitting.data import ShotData
 from cadra.fitting.extras import Extra
 from cadra.fitting.problem import FitProblem, default_local_free
@@ -245,7 +246,10 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                                 warnings, iterations, t_start, options, lam, xvals)
         if not math.isfinite(chi2):
             message = ("the starting point gives a non-finite prediction (the trajectory "
-                       "diverges or tumbles); better starting values are needed"
+                       "diverges or tumbles, or a run needs more than "
+                       f"{MAX_ADAPTIVE_EVALS:,} derivative evaluations: a long record at a "
+                       f"small Integration.h_max_s, here {options.integration.h_max_s:g} s); "
+                       "better starting values, or a larger h_max_s, are needed"
                        + model.nonfinite_note(params))
             return build_result(problem, params, states, status, message, history,
                                 warnings, iterations, t_start, options, lam, xvals)
