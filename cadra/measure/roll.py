@@ -108,6 +108,40 @@ def view_outline_px(body, projection, view_name: str, pose, tilt_rad: float, rol
     return projection.from_plane(plane)
 
 
+def _local_linear_level(img: np.ndarray, w: np.ndarray, sigma: float) -> np.ndarray:
+    """At every pixel the value at that pixel of the plane fitted to ``img`` over the pixels of
+    weight ``w``, weighted by a Gaussian of ``sigma`` px about it (first-order normalized
+    convolution): unlike a weighted mean it is not pulled toward the side its pixels lie on,
+    so a gradient of the beam does not bias the level at an edge. Where the weights are too
+    few (deep in a shadow) the weighted mean, and the overall mean beyond that."""
+    r = int(math.ceil(3.0 * sigma))
+    x = np.arange(-r, r + 1, dtype=float)
+    g = np.exp(-0.5 * (x / sigma) ** 2)
+    g1 = x * g
+    g2 = x * x * g
+
+    def corr(a, kx, ky):     # sum_d kx(du) ky(dv) a(x + d): cv2 correlates
+        return cv2.sepFilter2D(a, cv2.CV_64F, kx, ky, borderType=cv2.BORDER_CONSTANT)
+
+    iw = img * w
+    m00, m10, m01 = corr(w, g, g), corr(w, g1, g), corr(w, g, g1)
+    m20, m11, m02 = corr(w, g2, g), corr(w, g1, g1), corr(w, g, g2)
+    r0, r1, r2 = corr(iw, g, g), corr(iw, g1, g), corr(iw, g, g1)
+    A = np.stack([np.stack([m00, m10, m01], -1), np.stack([m10, m20, m11], -1),
+                  np.stack([m01, m11, m02], -1)], -2)
+    b = np.stack([r0, r1, r2], -1)
+    scale = g.sum() ** 2
+    det = np.linalg.det(A / scale)
+    good = (m00 > 0.05 * scale) & (np.abs(det) > 1e-6 * sigma ** 4)
+    level = np.full(img.shape, np.nan)
+    if np.any(good):
+        level[good] = np.linalg.solve(A[good], b[good][..., None])[:, 0, 0]
+    mean_ok = ~good & (m00 > 1e-3 * scale)
+    level[mean_ok] = r0[mean_ok] / m00[mean_ok]
+    fill = np.nanmean(level) if np.any(np.isfinite(level)) else 1.0
+    return np.where(np.isfinite(level), level, fill)
+
+
 def _phi_cdf(z):
     return 0.5 * erfc(-z / SQRT2)
 
@@ -216,23 +250,19 @@ class ViewRollModel:
     def background(self, roll_rad: float) -> np.ndarray:
         """The beam's local level on the model's pixels, relative (mean 1): the image's
         unshadowed pixels (farther than :data:`BACKGROUND_CLEAR_PX` outside the outline at
-        ``roll_rad``, wires masked) smoothed by a normalized Gaussian convolution of sigma
-        :data:`BACKGROUND_SIGMA_PX`, which fills in the shadow from its surroundings. A
-        plane over the fins' box is not enough: the beam's mottle (~1 % over ~60 px) moved a
-        fin edge by ~0.005 px, 0.05 deg of roll near a mirror fold (docs/stage1.md)."""
+        ``roll_rad``, wires masked) fitted by a Gaussian-weighted local plane (sigma
+        :data:`BACKGROUND_SIGMA_PX`, :func:`_local_linear_level`), which carries the level
+        into the shadow from its surroundings. A plane over the fins' box is not enough: the
+        beam's mottle (~1 % over ~60 px) moved a fin edge by ~0.005 px, 0.05 deg of roll near a
+        mirror fold; a local mean (no plane) still ~0.001 px at the edge, 0.1 deg at 1-2 deg
+        of roll (docs/stage1.md)."""
         shape = self.I_pad.shape
         poly = self.outline_fn(roll_rad) - np.array([self.pu0, self.pv0], dtype=float)
         shadow = self._inside(poly, shape).astype(np.uint8)
         k = 2 * int(math.ceil(BACKGROUND_CLEAR_PX)) + 1
         shadow = cv2.dilate(shadow, np.ones((k, k), np.uint8)).astype(bool)
         w = (~shadow & self.ok_pad).astype(float)
-        sig = BACKGROUND_SIGMA_PX
-        num = cv2.GaussianBlur(self.I_pad * w, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
-        den = cv2.GaussianBlur(w, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
-        good = den > 1e-3
-        level = np.where(good, num / np.where(good, den, 1.0), np.nan)
-        fill = np.nanmean(level) if np.any(good) else 1.0
-        level = np.where(good, level, fill)
+        level = _local_linear_level(self.I_pad, w, BACKGROUND_SIGMA_PX)
         ru, rv = self.u0 - self.pu0, self.v0 - self.pv0
         B = level[rv:rv + self.shape[0], ru:ru + self.shape[1]]
         return B / float(np.mean(B))
