@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero.program import COEFFICIENTS
-from cadra.channels import BY_NAME, POSITION
+from cadra.channels import BY_NAME, POSITION, wrap_angle
 from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.histories import fitted_histories
 from cadra.fitting.result import FitResult
@@ -231,8 +231,9 @@ def plot_angle_histories(result: FitResult, shots: Sequence[ShotData], *, fig=No
     sm = _shot_map(shots)
     ids = [sf.shot_id for sf in result.shots]
     nrows = len(ids)
-    fig = _new_figure(fig, (15, 3.0 * nrows + 0.6))
-    axes = fig.subplots(nrows, 3, squeeze=False, sharex="row")
+    roll = any(sm[sid].has_roll for sid in ids)      # a finned body: a fourth panel, φ
+    fig = _new_figure(fig, (20 if roll else 15, 3.0 * nrows + 0.6))
+    axes = fig.subplots(nrows, 4 if roll else 3, squeeze=False, sharex="row")
     third = ("sigma_deg", "σ, total angle (deg)") if result.model.angle_plane == "sigma" \
         else ("alpha_deg", "α, classical (deg)")
     deg = 180.0 / math.pi
@@ -276,10 +277,30 @@ def plot_angle_histories(result: FitResult, shots: Sequence[ShotData], *, fig=No
         if r == 0:
             axes[r, 0].legend(fontsize=8, loc="best")
             ax.legend(fontsize=8, loc="best")
+        if roll:
+            _roll_panel(axes[r, 3], sid, sd, h, x_st)
     for ax in axes[-1]:
         ax.set_xlabel("x (m, downrange)")
     fig.suptitle(_title(result, "measured and fitted angles vs distance"), fontsize=11)
     return fig
+
+
+def _roll_panel(ax, sid: str, sd: ShotData, h: pd.DataFrame, x_st: np.ndarray) -> None:
+    """The roll φ (deg) measured and fitted vs x: the fitted history unwrapped along the
+    shot, each measurement moved by whole turns to the fitted branch (the channel is
+    periodic: channels.residual)."""
+    j = CHANNELS.index("phi")
+    fitted = np.unwrap(np.radians(h["phi_deg"].to_numpy(float)))
+    ax.plot(h["x_m"], np.degrees(fitted), "-", color="C0", lw=1.3, label="fitted")
+    ok = np.isfinite(sd.meas[:, j])
+    if ok.any():
+        at = np.interp(sd.t_s[ok], h["t_s"], fitted)
+        m = at + wrap_angle(sd.meas[ok, j] - at)
+        ax.errorbar(x_st[ok], np.degrees(m), yerr=np.degrees(sd.sigma[ok, j]), fmt="o",
+                    ms=4, color="k", ecolor="C3", capsize=2, label="measured (±1σ)")
+    ax.set_ylabel("φ (deg, roll about the nose axis)")
+    ax.set_title(f"{sid}: φ" + ("" if ok.any() else " (not measured)"), fontsize=9)
+    ax.grid(alpha=0.3)
 
 
 # --------------------------------------------------------------------------- residuals
