@@ -48,7 +48,7 @@ RUNS = {"run1": dict(phi0_deg=41.16, p0_rad_s=0.0, duration_s=11.0),
         "run2": dict(phi0_deg=42.16, p0_rad_s=0.0, duration_s=17.0)}
 MODEL = "seed003_romof"
 #: the default number of noise draws (what was measured to fit in the time budget)
-DEFAULT_DRAWS = 50
+DEFAULT_DRAWS = 50            # 1547 s on the shared 2-core machine (docs/segmented_roll.md)
 
 
 def seed003_body() -> RigidBody:
