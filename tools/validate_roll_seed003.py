@@ -259,7 +259,9 @@ def main(argv=None) -> int:
         "draws": args.draws,
         "seconds": round(time.perf_counter() - t0, 1),
     }
-    print(json.dumps(out))
+    # strict JSON: a figure one draw cannot give (a spread) is null, not NaN
+    print(json.dumps({k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                      for k, v in out.items()}))
     return 0
 
 
