@@ -243,3 +243,17 @@ def test_roll_bound_scales_with_the_noise_and_repeats_every_90_deg(shot):
     assert b.sigma_roll_rad / a.sigma_roll_rad == pytest.approx(2.0, rel=0.01)
     assert c.sigma_roll_rad == pytest.approx(a.sigma_roll_rad, rel=1e-3)
     assert a.sigma_roll_known_pose_rad <= a.sigma_roll_rad
+
+
+def test_local_level_carries_a_tilted_beam_into_the_shadow():
+    """The beam's level under a shadow (a first-order normalized convolution): a tilted
+    plane is reproduced exactly where it is masked (a weighted mean would lean toward its
+    unshadowed side by the gradient times ~0.8 sigma)."""
+    from cadra.measure.roll import _local_linear_level
+
+    v, u = np.indices((120, 160), dtype=float)
+    beam = 0.8 + 1e-3 * u - 6e-4 * v
+    w = np.ones_like(beam)
+    w[40:80, 50:110] = 0.0                       # a shadow 40 px tall
+    level = _local_linear_level(beam * w + 0.05 * (1 - w), w, 10.0)
+    assert np.abs(level - beam)[35:85, 45:115].max() < 1e-9

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+import shapely
 from scipy.special import erfc
 
 from cadra.body import outline_polygon
@@ -72,10 +73,6 @@ HAC_LAG_PX = 3
 TRACK_SIGMA_RAD = math.radians(10.0)
 #: Band (px) about the outline where the edge profile is evaluated; beyond it g is 0 or 1.
 BAND_PX = 5.0
-#: Pixels this close to a sharp corner of the outline are left out of the refinement (px):
-#: the blurred-edge model of the nearest side does not hold there (as stage A's corner
-#: clearance, ``FitSettings.corner_clear_px``).
-CORNER_CLEAR_PX = 3.0
 #: The local background (``ViewRollModel.background``): unshadowed pixels farther than this
 #: outside the outline (px), smoothed by a normalized Gaussian of this sigma (px), from a
 #: window this much wider than the model's box (px).
@@ -132,7 +129,7 @@ def _local_linear_level(img: np.ndarray, w: np.ndarray, sigma: float) -> np.ndar
     b = np.stack([r0, r1, r2], -1)
     scale = g.sum() ** 2
     det = np.linalg.det(A / scale)
-    good = (m00 > 0.05 * scale) & (np.abs(det) > 1e-6 * sigma ** 4)
+    good = (m00 > 0.01 * scale) & (np.abs(det) > 1e-6 * sigma ** 4)
     level = np.full(img.shape, np.nan)
     if np.any(good):
         level[good] = np.linalg.solve(A[good], b[good][..., None])[:, 0, 0]
@@ -227,11 +224,13 @@ class ViewRollModel:
             s = self.s0 + self.s4 * c4
             a = self.a0 + self.a4 * c4
             r, c = np.divmod(lin, self.shape[1])
-            # beyond 1 px the side from the fill, not from the nearest edge's normal: beside a
-            # concave vertex (a fin root) that sign flips with the slightest move. (cv2's fill
-            # takes in the pixels its boundary touches, so not within 1 px of the outline.)
-            far = np.abs(sd) > 1.0
-            d = np.where(far, np.where(g[r, c] > 0.5, -np.abs(sd), np.abs(sd)), sd)
+            # the side by an exact point-in-polygon test, not from the nearest edge's normal:
+            # where the nearest point is a vertex (beside a fin root, or off a fin tip's
+            # corner) that sign flips with the slightest move of the outline
+            shape = shapely.Polygon(poly)
+            shapely.prepare(shape)
+            inside = shapely.contains_xy(shape, c.astype(float), r.astype(float))
+            d = np.where(inside, -np.abs(sd), np.abs(sd))
             z = -d / s
             zf = z / self.ratio
             g[r, c] = _phi_cdf(z)
@@ -279,28 +278,34 @@ class ViewRollModel:
         return self.solve(roll_rad)[2]
 
     def corner_free(self, roll_rad: float) -> np.ndarray:
-        """The model's pixels farther than :data:`CORNER_CLEAR_PX` from every sharp corner of
-        the outline at ``roll_rad`` (fin tips, fin roots): there a blurred corner is not the
-        blurred edge of the nearest side the model assumes (docs/stage1.md)."""
+        """The model's pixels but the one holding each sharp corner of the outline at
+        ``roll_rad`` (fin tips, fin roots): there a blurred corner is farthest from the blurred
+        edge of the nearest side the model assumes (docs/stage1.md)."""
         poly = self.outline_fn(roll_rad) - np.array([self.u0, self.v0], dtype=float)
         d = np.roll(poly, -1, axis=0) - poly
         keep = np.hypot(d[:, 0], d[:, 1]) > 1e-9
         poly, d = poly[keep], d[keep]
         ang = np.arctan2(d[:, 1], d[:, 0])
         turn = np.abs(np.angle(np.exp(1j * (ang - np.roll(ang, 1)))))
-        mask = np.zeros(self.shape, np.uint8)
-        r = int(round(CORNER_CLEAR_PX * 16))
-        for u, v in poly[turn > CORNER_TURN_RAD]:
-            cv2.circle(mask, (int(round(u * 16)), int(round(v * 16))), r, 1, -1,
-                       lineType=cv2.LINE_8, shift=4)
-        return self.use & ~mask.astype(bool)
+        mask = np.zeros(self.shape, bool)
+        corners = np.rint(poly[turn > CORNER_TURN_RAD]).astype(int)
+        ok = ((corners[:, 0] >= 0) & (corners[:, 0] < self.shape[1])
+              & (corners[:, 1] >= 0) & (corners[:, 1] < self.shape[0]))
+        mask[corners[ok, 1], corners[ok, 0]] = True
+        return self.use & ~mask
+
 
     def refine(self, roll0: float, iterations: int = 6, step_rad: float = math.radians(0.02),
                max_move_rad: float = math.radians(3.0), passes: int = 2) -> ViewRoll:
-        """Gauss-Newton in roll from ``roll0`` with the linear levels projected out, on the
-        pixels clear of the outline's corners (re-chosen after each of ``passes``); the sigma
-        by the HAC score variance (module docstring, step 3). ``rss`` is on all the model's
-        pixels (comparable between candidates)."""
+        """Gauss-Newton in roll from ``roll0`` with the linear levels projected out and the
+        beam's local level (:meth:`background`, re-estimated at the start of each of
+        ``passes``); the sigma by the HAC score variance (module docstring, step 3). ``rss`` is
+        that of the scan's model (a plane for the beam), comparable between candidates.
+
+        Only the pixel holding each corner of the outline is left out (:meth:`corner_free`):
+        leaving out 0.75, 1.5 or 3 px about the corners (as stage A does) doubled the roll's
+        error near a mirror fold, where the fin tips' corners carry much of what there is to
+        see; keeping those pixels doubled it away from the folds (docs/stage1.md)."""
         # stay on roll0's side of the mirror folds at multiples of 45 deg (module docstring)
         lo = math.floor(roll0 / FOLD_RAD) * FOLD_RAD + step_rad
         hi = lo - step_rad + FOLD_RAD - step_rad
