@@ -14,8 +14,10 @@ vertical and down) is fitted in one dimension:
    centre's exact signed distance from the outline (+ outside) and the view's fitted edge
    profile ``s = s0 + s4 cos 4 theta``, ``a = a0 + a4 cos 4 theta``. The bright level is a
    plane ``L = l0 + l1 du + l2 dv``, the dark level ``D`` a constant: four linear parameters,
-   solved at every trial roll (variable projection). The pixels are a fixed box around the
-   fins at every roll (wire pixels masked), so residual sums compare across rolls.
+   solved at every trial roll (variable projection). The pixels are fixed, those near where
+   any roll changes the coverage (wire pixels masked), so residual sums compare across rolls.
+   The refinement (step 2) multiplies both levels by the beam's local level
+   (:meth:`ViewRollModel.background`) and leaves out the pixel holding each outline corner.
 2. **Scan and refine** (:func:`measure_station_roll`). The cruciform repeats every 90 deg, so
    each view's residual sum is scanned over one period; the two views' curves, each divided by
    its residual variance, are added, and every local minimum of the sum is a candidate. At
