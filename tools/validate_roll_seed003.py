@@ -114,42 +114,6 @@ def fit_draw(draw: int, *, seed: int = 2003, stepwise: bool = False, body=None, 
     return segmented_fit(records, model, body, ALPHA, steps=steps)
 
 
-def plot_fit(sf, path: Path) -> Path:
-    """Seed 003 Figs. 5-6 for one fit: each run's measured roll (0-360 deg) against frame,
-    the fit's values (the fit problem's, from its residual table) and the segment starts;
-    below, the residuals (deg)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    res = sf.result.residuals
-    res = res[res["channel"] == "phi"]
-    names = sorted({s.record for s in sf.segments})
-    fig, axes = plt.subplots(2 * len(names), 1, figsize=(11, 3.2 * len(names)), sharex=False,
-                             gridspec_kw={"height_ratios": [3, 1] * len(names)})
-    for i, name in enumerate(names):
-        top, bot = axes[2 * i], axes[2 * i + 1]
-        g = res[res["shot_id"].str.startswith(name + ":")]
-        top.plot(g["station"], np.degrees(np.mod(g["measured"], 2 * np.pi)), ".", ms=2,
-                 label="measured")
-        top.plot(g["station"], np.degrees(np.mod(g["fitted"], 2 * np.pi)), ".", ms=1,
-                 color="k", label="fit")
-        for s in sf.segments:
-            if s.record == name:
-                top.axvline(s.start, color="0.8", lw=0.5, zorder=0)
-        top.set_ylabel(f"{name}: roll, deg")
-        top.set_ylim(0, 360)
-        top.legend(loc="upper right", fontsize=7)
-        bot.plot(g["station"], np.degrees(g["residual"]), ".", ms=1.5)
-        bot.set_ylabel("residual, deg")
-        bot.set_xlabel("frame")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
 def _nearest_stable(tab, target: float) -> float:
     st = tab[tab["stable"]]
     if st.empty:
@@ -164,6 +128,7 @@ def main(argv=None) -> int:
         PAPER_TABLE2,
         TABLE_ORDER,
         paper_correlation,
+        plot_segmented_fit,
         seed003_tables,
         steady_spins,
         write_tables,
@@ -241,7 +206,7 @@ def main(argv=None) -> int:
     if args.out is not None:
         sf, tabs = first
         write_tables({**tabs, "table2_draws": t2, "table3_draws": t3}, args.out)
-        plot_fit(sf, args.out / "roll_fit_draw0.png")
+        plot_segmented_fit(sf, args.out / "roll_fit_draw0.png")
         print(f"tables written to {args.out}")
     out = {
         "seed003_pull_std_min": float(np.min(t2["pull_std"])),

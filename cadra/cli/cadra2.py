@@ -22,6 +22,7 @@ Subcommands:
   gap lies (docs/gap.md).
 * ``cadra2 motion TRAJECTORY [...] -o OUT_DIR`` — epicyclic fit, linear-theory and K-B
   coefficients, yaw card (:mod:`cadra.cli.motion`, docs/motion.md).
+* ``cadra2 roll TRAJECTORY [...] -o OUT_DIR`` — seed 003's segmented fit (:mod:`cadra.cli.roll`).
 * ``cadra2 simulate SPEC.toml -o OUT_DIR`` — fly a synthetic shot (6-DOF, the same code the fit
   uses), render its shadowgraphs and write the shot file, images and exact truth.
 * ``cadra2 models`` — list the bundled aero models (name, case, angle plane, free parameters).
@@ -31,12 +32,11 @@ errors; warnings go to stderr, ``cadra2 CMD: warning: ...``) and
 ``-v`` (more detail); ``cadra2 --version`` prints the version (docs/cli.md).
 
 Exit status: 0 success, 1 the input was refused (message names the key), the output folder
-would destroy an input (it is or holds one of the command's inputs — trajectory files and
-their folders, shot files and their images, facility, model, spec or bias-table files, the
-station history — or the working folder, or is an existing file; links and ``..`` resolved;
-message names both; with or without ``--overwrite``) or the fit did not converge (its best
-point is still written, marked as not converged), 2 usage error, 130 interrupted (Ctrl-C: one
-line, no traceback, nothing written), 141 stdout closed by its reader (``| head``; no traceback).
+would destroy an input (is or holds an input — trajectory, shot, image, facility, model, spec
+or bias-table files and folders, the station history —, the working folder or a file; links
+and ``..`` resolved; with or without ``--overwrite``) or the fit did not converge (its best
+point is written, marked so), 2 usage error, 130 interrupted (Ctrl-C: no traceback, nothing
+written), 141 stdout closed by its reader (``| head``; no traceback).
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ from cadra.cli._format import (
 )
 from cadra.cli.motion import add_parser as add_motion_parser
 from cadra.cli.motion import start_estimates
+from cadra.cli.roll import add_parser as add_roll_parser
 from cadra.numfmt import pm
 
 #: the top-level help's description (plain text: the module doc is rST)
@@ -79,9 +80,8 @@ def _verbose(args) -> bool:
 
 def _say(args, *lines: str) -> None:
     """Print unless -q (the result/status line is printed with plain ``print``)."""
-    if not _quiet(args):
-        for line in lines:
-            print(line)
+    if lines and not _quiet(args):
+        print("\n".join(lines))
 
 
 def _exists(out: Path, args, command: str) -> bool:
@@ -658,6 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "sigma")
     cal.add_argument("--note", default="", help="a note stored with the history entry")
     add_motion_parser(sub)   # cadra2 motion: cadra/cli/motion.py, docs/motion.md
+    add_roll_parser(sub)     # cadra2 roll: cadra/cli/roll.py, docs/segmented_roll.md
     sim = _subcommand(
         sub, "simulate", _simulate, "simulate and render a synthetic shot",
         "Fly a synthetic shot from a shot specification (6-DOF, the same code the fit uses), "
@@ -668,9 +669,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-images", action="store_true", help="trajectory and truth only")
     sim.add_argument("--overwrite", action="store_true", help="replace an existing output")
     _subcommand(sub, "models", _models, "list the bundled aero models",
-                "List the aero models bundled with CADRA (cadra/aero/models): name, seed 004 "
-                "case, angle plane, number of free parameters and description. Any of them "
-                "is given to --model by name; a model file by its path.")
+                "List the bundled aero models (cadra/aero/models): name, case, angle plane, "
+                "free parameters, description; give one to --model by name.")
     return parser
 
 

@@ -205,10 +205,15 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
     mounted = shot.test_mode.mounted
     angles = np.isfinite(table[[c.si_column for c in channel_registry.OBSERVED
                                 if c.name in ("theta", "psi")]].to_numpy(float)).all(axis=1)
-    if mounted and angles.sum() < MIN_STATIONS:
+    rolls = np.isfinite(table[[c.si_column for c in channel_registry.OBSERVED
+                               if c.periodic]].to_numpy(float)).all(axis=1)
+    if mounted and angles.sum() < MIN_STATIONS and not (
+            shot.test_mode.kind == "roll_bearing" and rolls.sum() >= MIN_STATIONS):
         raise FitDataError(f"{trajectory_path}: {int(angles.sum())} measured frame(s) with "
                            f"both angles (theta, psi); a {shot.test_mode.kind} record needs "
-                           f"at least {MIN_STATIONS}")
+                           f"at least {MIN_STATIONS}"
+                           + (" (a roll bearing's: or its roll, phi)"
+                              if shot.test_mode.kind == "roll_bearing" else ""))
     if not mounted and positions.sum() < MIN_STATIONS:
         raise FitDataError(f"{trajectory_path}: {int(positions.sum())} measured station(s) with "
                            f"a position (x_m, y_m, z_m); stage two needs at least "

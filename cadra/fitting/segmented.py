@@ -542,7 +542,7 @@ def steady_spin_sigmas(result: FitResult) -> pd.DataFrame:
     return tab.assign(sigma=sig)
 
 
-def _markdown(df: pd.DataFrame, digits: int = 5) -> str:
+def markdown_table(df: pd.DataFrame, digits: int = 5) -> str:
     """A pipe table of ``df`` (index as the first column), numbers to ``digits`` significant
     figures."""
     def cell(v):
@@ -570,7 +570,7 @@ def write_tables(tables: Mapping[str, pd.DataFrame], folder, *, digits: int = 5
     for name, df in tables.items():
         csv, md = folder / f"{name}.csv", folder / f"{name}.md"
         df.to_csv(csv)
-        md.write_text(_markdown(df, digits), encoding="utf-8")
+        md.write_text(markdown_table(df, digits), encoding="utf-8")
         out += [csv, md]
     return out
 
@@ -585,9 +585,49 @@ def seed003_tables(fit: SegmentedFit | FitResult) -> dict[str, pd.DataFrame]:
             "steady_spins": steady_spin_sigmas(result)}
 
 
+# ---------------------------------------------------------------------------- plot
+
+
+def plot_segmented_fit(sf: SegmentedFit, path) -> Path:
+    """Seed 003 Figs. 5-6 for one fit: each run's measured roll (0-360 deg) against frame,
+    the fit's values (the fit problem's, from its residual table) and the segment starts;
+    below, the residuals (deg)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    res = sf.result.residuals
+    res = res[res["channel"] == "phi"]
+    names = sorted({s.record for s in sf.segments})
+    fig, axes = plt.subplots(2 * len(names), 1, figsize=(11, 3.2 * len(names)), sharex=False,
+                             gridspec_kw={"height_ratios": [3, 1] * len(names)})
+    for i, name in enumerate(names):
+        top, bot = axes[2 * i], axes[2 * i + 1]
+        g = res[res["shot_id"].str.startswith(name + ":")]
+        top.plot(g["station"], np.degrees(np.mod(g["measured"], 2 * np.pi)), ".", ms=2,
+                 label="measured")
+        top.plot(g["station"], np.degrees(np.mod(g["fitted"], 2 * np.pi)), ".", ms=1,
+                 color="k", label="fit")
+        for s in sf.segments:
+            if s.record == name:
+                top.axvline(s.start, color="0.8", lw=0.5, zorder=0)
+        top.set_ylabel(f"{name}: roll, deg")
+        top.set_ylim(0, 360)
+        top.legend(loc="upper right", fontsize=7)
+        bot.plot(g["station"], np.degrees(g["residual"]), ".", ms=1.5)
+        bot.set_ylabel("residual, deg")
+        bot.set_xlabel("frame")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
 __all__ = ["PAPER_TABLE2", "ROLL_LOCALS", "STEPS", "TABLE_ORDER", "RollRecord", "Segment",
            "SegmentedFit", "choose_segments", "coefficient_table", "correlation_table",
-           "equation_error_start", "fit_segments", "paper_correlation", "roll_constants",
-           "runs_of_sign", "seed003_tables", "segment_shots", "segment_states",
-           "segment_table", "segmented_fit", "smoothed_roll", "steady_spin_sigmas",
-           "steady_spins", "write_tables", "zero_rate_points"]
+           "equation_error_start", "fit_segments", "markdown_table", "paper_correlation",
+           "plot_segmented_fit",
+           "roll_constants", "runs_of_sign", "seed003_tables", "segment_shots",
+           "segment_states", "segment_table", "segmented_fit", "smoothed_roll",
+           "steady_spin_sigmas", "steady_spins", "write_tables", "zero_rate_points"]

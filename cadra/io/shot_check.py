@@ -77,10 +77,14 @@ def size_problems(shot, facility) -> list[str]:
     views (:data:`MAX_FIELD_FRACTION`; a diameter 10x too large does not fit): one line per
     dimension that does not fit, naming the shot file's key, its value and the view's figures
     (width x height px at its scale). The one home of this check: ``cadra1 --check``
-    (:func:`check_shot`), stage one and stage two (:func:`check_model_size`) all use it."""
+    (:func:`check_shot`), stage one and stage two (:func:`check_model_size`) all use it.
+    A wind-tunnel record (``[test_mode]`` not ``range``) is not checked: its frames are not
+    the range's shadowgraphs (a 2-in model on a roll bearing fills no HFFAF view)."""
     from cadra import units
     from cadra.body import body_from_spec
 
+    if shot.test_mode.kind != "range":
+        return []
     body = body_from_spec(shot.model)
     views = [(s.id, n, v) for s in facility.stations for n, v in s.views.items()]
     if not views:

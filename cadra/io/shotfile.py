@@ -295,7 +295,13 @@ def _mass_from_dict(mass: Mapping) -> MassProperties:
                           inertia_model_kg_m2=units.g_cm2_to_kg_m2(inertia))
 
 
-def _stations_from_list(stations) -> tuple[StationRecord, ...]:
+#: largest plausible |time_s|: a range's spark times (a unit slip beyond), a wind-tunnel
+#: record's frames (a free-to-roll run lasts tens of seconds)
+MAX_TIME_S = {"range": 10.0, "tunnel": 3600.0}
+
+
+def _stations_from_list(stations, max_time_s: float = MAX_TIME_S["range"]
+                        ) -> tuple[StationRecord, ...]:
     if not isinstance(stations, list | tuple) or not stations:
         raise ShotFileError("stations: expected a non-empty array of tables "
                             "([[stations]] station = 1, time_s = ..., images = {...})")
@@ -310,9 +316,11 @@ def _stations_from_list(stations) -> tuple[StationRecord, ...]:
             raise ShotFileError(f"{where}station: expected a station id (integer >= 1), "
                                 f"got {sid!r}")
         t = _number(_require(rec, "time_s", where), f"{where}time_s")
-        if abs(t) > 10.0:
-            raise ShotFileError(f"{where}time_s: {t!r} s is not a spark time (check the unit: "
-                                f"seconds)")
+        if abs(t) > max_time_s:
+            raise ShotFileError(f"{where}time_s: {t!r} s is not a "
+                                + ("spark time" if max_time_s <= MAX_TIME_S["range"]
+                                   else "tunnel record's frame time")
+                                + f" (|t| <= {max_time_s:g} s; check the unit: seconds)")
         images = rec.get("images", {})
         if not isinstance(images, Mapping):
             raise ShotFileError(f"{where}images: expected a table view = \"path\"")
@@ -403,9 +411,10 @@ def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) 
     if v_nom is not None:
         v_nom = _in_range(_number(v_nom, "nominal_velocity_m_s"), "nominal_velocity_m_s",
                           *VELOCITY_M_S_RANGE, "a model speed in m/s")
-    stations = _stations_from_list(_require(data, "stations"))
-    _check_density(model, mass)
     test_mode = _test_mode_from_dict(data.get("test_mode"))
+    stations = _stations_from_list(_require(data, "stations"),
+                                   MAX_TIME_S["range" if test_mode.kind == "range" else "tunnel"])
+    _check_density(model, mass)
     return ShotFile(shot_id=shot_id, model=model, mass=mass,
                     pressure_pa=units.torr_to_pa(p_torr), temperature_k=t_k,
                     facility=facility, stations=stations, notes=notes,

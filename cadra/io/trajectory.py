@@ -60,10 +60,11 @@ OPTIONAL_COLUMNS = tuple(c for ch in OBSERVED if ch.optional
 COLUMNS = tuple(c for c in ALL_COLUMNS if c not in OPTIONAL_COLUMNS)
 STATUSES = ("ok", "warning", "failed")
 #: largest plausible magnitude of each numeric column, file units (larger is a unit slip or
-#: a corrupted file): positions 10 km, angles 180 deg, times 10 s (as in the shot file); a
+#: a corrupted file): positions 10 km, angles 180 deg, times 3600 s (a wind-tunnel record's
+#: frames; the shot file holds a range's spark times to 10 s); a
 #: roll carried continuously along a shot may run to many turns (1e7 deg: 20,000 rad/s for
 #: 10 s)
-LIMITS = {"t_s": 10.0, "x_top_minus_side_m": 1e4, "x_consistency": 1e12,
+LIMITS = {"t_s": 3600.0, "x_top_minus_side_m": 1e4, "x_consistency": 1e12,
           **{c.value_column: (1e7 if c.periodic else 180.0 if c.file_unit == "deg" else 1e4)
              for c in OBSERVED},
           **{c.sigma_column: (180.0 if c.file_unit == "deg" else 1e4) for c in OBSERVED}}

@@ -1,0 +1,103 @@
+"""``cadra2 roll``: seed 003's segmented fit of a pure-roll record given as files.
+
+Truth: the coefficients (seed 003 Table 2, the bundled ``seed003_romof``) that flew the
+record on CADRA's roll bearing; the steady spin the paper derives from them (+0.0280).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from cadra.aero import resolve_model
+from cadra.cli.cadra2 import main
+from cadra.dynamics.modes import TestMode
+from cadra.dynamics.observe import observe
+from cadra.dynamics.setup import propagate_states
+from cadra.dynamics.trajectory import Launch
+from cadra.fitting.data import rigid_body_from_shot
+from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, save_shot
+from cadra.io.trajectory import COLUMNS, write_trajectory
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+import validate_roll_seed003 as case  # noqa: E402
+
+R_AIR, T_K = 287.05, 288.15
+
+
+def _files(tmp_path: Path, *, axis: bool = True, duration_s: float = 11.0):
+    """Run 1 of the seed 003 case as a shot file (roll bearing, frames as stations) and a
+    trajectory file measuring phi (0.25 deg) and, with ``axis``, theta and psi."""
+    from cadra.body.finner import finner_mass_properties, finner_preset
+
+    fb = finner_preset("basic_finner", d_m=case.D_M)
+    mp = finner_mass_properties(fb, case.ALUMINIUM)
+    rho = 2.0 * case.Q_INF / case.V_STREAM**2
+    t = np.arange(int(round(duration_s * case.FPS)) + 1) / case.FPS
+    shot = ShotFile(
+        shot_id="ROLL-1", model={"kind": "finner", "preset": "basic_finner",
+                                 "d_cm": case.D_M * 100},
+        mass=MassProperties(mp.mass_kg, np.array([mp.cg_s_m, 0.0, 0.0]), mp.inertia_kg_m2),
+        pressure_pa=rho * R_AIR * T_K, temperature_k=T_K, facility="hffaf",
+        stations=tuple(StationRecord(i + 1, float(tk)) for i, tk in enumerate(t)),
+        test_mode=TestMode(kind="roll_bearing", stream_m_s=case.V_STREAM))
+    save_shot(shot, tmp_path / "shot.toml")
+    body = rigid_body_from_shot(shot)
+    model = resolve_model("seed003_romof")
+    y0 = Launch(speed_m_s=0.0, theta_rad=case.ALPHA, roll_rad=math.radians(41.16)).state(body)
+    states = propagate_states(y0, 0.0, t, body.phys(), model.compile(), model.values(),
+                              dt_max=5e-4)
+    obs = observe(states, body.ref_from_cg_body_m())
+    rng = np.random.default_rng(5)
+    n, s = t.size, case.SIGMA_DEG
+    table = pd.DataFrame({
+        "station": np.arange(1, n + 1), "t_s": t, "status": "ok",
+        "x_m": np.nan, "y_m": np.nan, "z_m": np.nan,
+        "theta_deg": np.degrees(obs["theta_rad"]) + rng.normal(0, 0.05, n) if axis else np.nan,
+        "psi_deg": np.degrees(obs["psi_rad"]) + rng.normal(0, 0.05, n) if axis else np.nan,
+        "phi_deg": np.mod(np.degrees(obs["phi_rad"]) + rng.normal(0, s, n), 360.0),
+        "sigma_x_m": np.nan, "sigma_y_m": np.nan, "sigma_z_m": np.nan,
+        "sigma_theta_deg": 0.05 if axis else np.nan, "sigma_psi_deg": 0.05 if axis else np.nan,
+        "sigma_phi_deg": s, "x_top_minus_side_m": np.nan, "x_consistency": np.nan,
+        "reason": "", "warnings": ""})
+    traj = tmp_path / "trajectory.csv"
+    write_trajectory(traj, table.loc[:, [*COLUMNS, "phi_deg", "sigma_phi_deg"]],
+                     {"shot_id": "ROLL-1", "shot_file": str(tmp_path / "shot.toml")})
+    return traj, model
+
+
+def test_cadra2_roll_fits_a_roll_record_from_files(tmp_path, capsys):
+    traj, model = _files(tmp_path)
+    out = tmp_path / "roll"
+    assert main(["roll", str(traj), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "roll: 1 record(s)" in text and "converged" in text
+    for name in ("report.md", "roll_fit.png", "table2.csv", "table3.csv", "segments.csv",
+                 "steady_spins.csv", "paper_table3.md"):
+        assert (out / name).is_file(), name
+    tab = pd.read_csv(out / "table2.csv", index_col=0)
+    assert len(tab) == 14
+    truth = pd.Series({n: model.parameter(n).value for n in tab.index})
+    pulls = (tab["value"] - truth) / tab["sigma"]
+    assert np.all(np.abs(pulls) < 4), pulls.round(2).to_dict()
+    spins = pd.read_csv(out / "steady_spins.csv", index_col=0)
+    stable = spins[spins["stable"]]
+    near = stable.iloc[np.argmin(np.abs(stable["p_hat"] - 0.0280))]
+    assert near["p_hat"] == pytest.approx(0.0280, abs=max(3 * near["sigma"], 0.001))
+    assert "57.0" in (out / "report.md").read_text()[:400]     # the bearing's angle of attack
+
+
+def test_cadra2_roll_refusals(tmp_path, capsys):
+    traj, _ = _files(tmp_path, axis=False, duration_s=2.0)
+    assert main(["roll", str(traj), "-o", str(tmp_path / "a")]) == 1
+    assert "give --alpha-deg" in capsys.readouterr().err
+    assert main(["roll", str(traj), "-o", str(tmp_path / "b"), "--alpha-deg", "95"]) == 1
+    assert "not an angle of attack" in capsys.readouterr().err
+    assert main(["roll", str(traj), "-o", str(tmp_path / "c"), "--window", "4"]) == 1
+    assert "--window" in capsys.readouterr().err
+    assert not any((tmp_path / d).exists() for d in "abc")
