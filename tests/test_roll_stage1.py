@@ -257,3 +257,21 @@ def test_local_level_carries_a_tilted_beam_into_the_shadow():
     w[40:80, 50:110] = 0.0                       # a shadow 40 px tall
     level = _local_linear_level(beam * w + 0.05 * (1 - w), w, 10.0)
     assert np.abs(level - beam)[35:85, 45:115].max() < 1e-9
+
+
+def test_trajectory_rows_carry_the_tracked_roll():
+    """Through the trajectory file's rows (cadra.io.trajectory.station_rows): the tracked roll
+    and its sigma in degrees in phi_deg, sigma_phi_deg; NaN for a body of revolution."""
+    from cadra.io.trajectory import station_rows
+
+    rng = np.random.default_rng(6)
+    pose = StationPose(*([0.0] * 12))
+    times = {1: 0.0, 2: 0.002}
+    phi = {1: 0.1, 2: 0.5}
+    real = [StationResult(s, "ok", "", pose, roll=_station_roll(phi[s], 50.0, rng))
+            for s in times]
+    rows = station_rows(with_roll_track(real, times), times)
+    assert rows["phi_deg"].to_numpy() == pytest.approx(np.degrees([0.1, 0.5]), abs=0.02)
+    assert rows["sigma_phi_deg"].to_numpy() == pytest.approx(np.degrees([1e-4, 1e-4]))
+    plain = station_rows([dataclasses.replace(r, roll=None) for r in real], times)
+    assert plain["phi_deg"].isna().all()
