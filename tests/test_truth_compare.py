@@ -69,3 +69,22 @@ def test_unmatched_stations_and_no_station_column():
     assert "Stations without a truth row (not compared): [2]" in comparison_markdown(cmp)
     with pytest.raises(ValueError, match="no 'station' column"):
         compare_with_truth(meas, truth.drop(columns="station"))
+
+
+def test_roll_errors_modulo_turns_or_the_fins_period():
+    """A roll measured continuously (whole turns on) and a cruciform's roll known only to a
+    quarter turn (its fins look alike): the errors are what is left modulo the period."""
+    meas, truth, _, _ = _tables()
+    n = len(truth)
+    truth["phi_deg"] = np.linspace(100.0, 170.0, n)
+    err = np.linspace(-0.02, 0.03, n)
+    meas["phi_deg"] = truth["phi_deg"] + err + 720.0          # two turns on
+    meas["sigma_phi_deg"] = 0.01
+    cmp = compare_with_truth(meas, truth)
+    np.testing.assert_allclose(cmp.per_station["phi_error_deg"], err, atol=1e-9)
+    meas["phi_deg"] = truth["phi_deg"] + err - 90.0 * 3       # three fins off
+    assert np.all(np.abs(compare_with_truth(meas, truth).per_station["phi_error_deg"])
+                  > 80.0)
+    cmp = compare_with_truth(meas, truth, roll_period_rad=math.pi / 2)
+    np.testing.assert_allclose(cmp.per_station["phi_error_deg"], err, atol=1e-9)
+    np.testing.assert_allclose(cmp.per_station["phi_error_sigma"], err / 0.01, atol=1e-6)

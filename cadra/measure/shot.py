@@ -275,10 +275,14 @@ def _write_outputs(out_dir: Path, table, quality, results, meta, shot, truth, ov
                         v.overlay_png)
         truth_lines = []
         if truth is not None:
+            from cadra.body import body_from_spec
             from cadra.measure.truth_compare import compare_with_truth, comparison_markdown
 
             try:
-                cmp = compare_with_truth(table, truth)
+                # a finned body's roll is known to the period of its fins only
+                n_fins = len(getattr(body_from_spec(shot.model), "fin_phi_rad", ()))
+                cmp = compare_with_truth(table, truth, roll_period_rad=2 * math.pi
+                                         / max(n_fins, 1))
             except ValueError as exc:
                 truth_lines = ["## Measured minus truth", "", f"Not compared: {exc}.", ""]
             else:

@@ -38,9 +38,14 @@ class TruthComparison:
         self.unmatched = unmatched
 
 
-def compare_with_truth(table: pd.DataFrame, truth: pd.DataFrame) -> TruthComparison:
+def compare_with_truth(table: pd.DataFrame, truth: pd.DataFrame, *,
+                       roll_period_rad: float = 2.0 * math.pi) -> TruthComparison:
     """Compare a stage-one trajectory table (``station``, ``status``, the value and sigma
     columns of :mod:`cadra.channels`) with a truth table that has a ``station`` column.
+
+    ``roll_period_rad``: the roll error is taken modulo this period (whole turns by default;
+    a cruciform finned body's fins look alike, so stage one knows its roll to a quarter turn
+    only: ``pi / 2``).
 
     Failed stations are left out; stations without a truth row are listed in ``unmatched``.
     Raises ``ValueError`` if the truth has no ``station`` column (it cannot be matched).
@@ -63,9 +68,9 @@ def compare_with_truth(table: pd.DataFrame, truth: pd.DataFrame) -> TruthCompari
         m = measured[c.value_column].to_numpy(float)
         s = measured[c.sigma_column].to_numpy(float)
         err = m - t[c.value_column].to_numpy(float)
-        if c.periodic:          # whole turns are no error (a roll measured continuously)
-            half = float(channel_registry.from_si(np.pi, c.file_unit))
-            err = err - 2 * half * np.floor((err + half) / (2 * half))
+        if c.periodic:          # whole periods are no error (a roll measured continuously)
+            period = float(channel_registry.from_si(roll_period_rad, c.file_unit))
+            err = err - period * np.floor((err + 0.5 * period) / period)
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.where(np.isfinite(s) & (s > 0), err / s, np.nan)
         rows[f"{c.name}_error_{c.file_unit}"] = err
