@@ -10,14 +10,18 @@ vertical and down) is fitted in one dimension:
 1. **Model** (:class:`ViewRollModel`). The exact outline at trial roll
    (:func:`view_outline_px`: :func:`cadra.body.outline_polygon` at the view's pose) is turned
    into the blurred-edge image of the silhouette fit (:mod:`cadra.measure.edge_segments`):
-   ``I = L (1 - g + a h) + D g`` with ``g = Phi(-d / s)``, ``h`` the fringe, ``d`` the pixel
-   centre's exact signed distance from the outline (+ outside) and the view's fitted edge
-   profile ``s = s0 + s4 cos 4 theta``, ``a = a0 + a4 cos 4 theta``. The bright level is a
+   ``I = L (1 - g + a h) + D g`` with ``g`` the outline's indicator blurred by a Gaussian of
+   the view's fitted edge width ``s = s0 + s4 cos 4 theta`` and ``h`` the fringe (amplitude
+   ``a = a0 + a4 cos 4 theta``), both of the whole polygon, corners included
+   (:func:`~cadra.measure.edge_segments.blurred_polygon`: beside a straight edge they are the
+   edge model's ``Phi(-d / s)`` and fringe; at the fin tips' and roots' corners, which carry
+   the roll near a mirror fold, the nearest side's profile was the estimator's main error).
+   The bright level is a
    plane ``L = l0 + l1 du + l2 dv``, the dark level ``D`` a constant: four linear parameters,
    solved at every trial roll (variable projection). The pixels are fixed, those near where
    any roll changes the coverage (wire pixels masked), so residual sums compare across rolls.
    The refinement (step 2) multiplies both levels by the beam's local level
-   (:meth:`ViewRollModel.background`) and leaves out the pixel holding each outline corner.
+   (:meth:`ViewRollModel.background`).
 2. **Scan and refine** (:func:`measure_station_roll`). The cruciform repeats every 90 deg, so
    each view's residual sum is scanned over one period; the two views' curves, each divided by
    its residual variance, are added, and every local minimum of the sum is a candidate. At
@@ -50,13 +54,11 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import shapely
-from scipy.special import erfc
 
 from cadra.body import outline_polygon
 from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import VIEW_AXES
-from cadra.measure.edge_segments import CORNER_TURN_RAD, PHI1, band_pixels, outline_geometry
+from cadra.measure.edge_segments import blurred_polygon
 
 __all__ = ["HAC_LAG_PX", "PERIOD_RAD", "TRACK_SIGMA_RAD", "RollCandidate", "StationRoll",
            "ViewRoll", "ViewRollModel", "measure_station_roll", "resolve_roll_track",
@@ -83,7 +85,6 @@ BACKGROUND_SIGMA_PX = 10.0
 BACKGROUND_PAD_PX = 40
 #: Margin (px) of the pixel box around the fins at every roll.
 ROI_MARGIN_PX = 6.0
-SQRT2 = math.sqrt(2.0)
 
 
 def view_outline_px(body, projection, view_name: str, pose, tilt_rad: float, roll_rad: float,
@@ -139,10 +140,6 @@ def _local_linear_level(img: np.ndarray, w: np.ndarray, sigma: float) -> np.ndar
     level[mean_ok] = r0[mean_ok] / m00[mean_ok]
     fill = np.nanmean(level) if np.any(np.isfinite(level)) else 1.0
     return np.where(np.isfinite(level), level, fill)
-
-
-def _phi_cdf(z):
-    return 0.5 * erfc(-z / SQRT2)
 
 
 class ViewRollModel:
@@ -214,29 +211,16 @@ class ViewRollModel:
         return mask.astype(bool)
 
     def basis(self, roll_rad: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(1 - g + a h, g)`` on the ROI at ``roll_rad``."""
+        """``(1 - g + a h, g)`` on the ROI at ``roll_rad``: the blurred-edge model of the whole
+        outline, its corners included (:func:`~cadra.measure.edge_segments.blurred_polygon`),
+        with the view's edge profile ``x0 + x4 cos 4 theta`` per edge."""
         poly = self.outline_fn(roll_rad) - np.array([self.u0, self.v0], dtype=float)
-        g = self._inside(poly, self.shape).astype(float)
-        h = np.zeros(self.shape)
-        geo = outline_geometry(poly, 3.0)
-        lin, sd, edge, _ = band_pixels(geo, BAND_PX, self.shape)
-        if len(lin):
-            nrm = geo.normal[edge]
-            c4 = 1.0 - 8.0 * nrm[:, 0] ** 2 * nrm[:, 1] ** 2
-            s = self.s0 + self.s4 * c4
-            a = self.a0 + self.a4 * c4
-            r, c = np.divmod(lin, self.shape[1])
-            # the side by an exact point-in-polygon test, not from the nearest edge's normal:
-            # where the nearest point is a vertex (beside a fin root, or off a fin tip's
-            # corner) that sign flips with the slightest move of the outline
-            shape = shapely.Polygon(poly)
-            shapely.prepare(shape)
-            inside = shapely.contains_xy(shape, c.astype(float), r.astype(float))
-            d = np.where(inside, -np.abs(sd), np.abs(sd))
-            z = -d / s
-            zf = z / self.ratio
-            g[r, c] = _phi_cdf(z)
-            h[r, c] = a * (-zf * np.exp(-0.5 * zf * zf) / math.sqrt(2 * math.pi) / PHI1)
+
+        def c4(nrm):
+            return 1.0 - 8.0 * nrm[:, 0] ** 2 * nrm[:, 1] ** 2
+
+        g, h = blurred_polygon(poly, self.shape, lambda n: self.s0 + self.s4 * c4(n),
+                               lambda n: self.a0 + self.a4 * c4(n), self.ratio, reach=BAND_PX)
         return 1.0 - g + h, g
 
     def design(self, roll_rad: float, use=None) -> np.ndarray:
@@ -279,24 +263,6 @@ class ViewRollModel:
     def rss(self, roll_rad: float) -> float:
         return self.solve(roll_rad)[2]
 
-    def corner_free(self, roll_rad: float) -> np.ndarray:
-        """The model's pixels but the one holding each sharp corner of the outline at
-        ``roll_rad`` (fin tips, fin roots): there a blurred corner is farthest from the blurred
-        edge of the nearest side the model assumes (docs/stage1.md)."""
-        poly = self.outline_fn(roll_rad) - np.array([self.u0, self.v0], dtype=float)
-        d = np.roll(poly, -1, axis=0) - poly
-        keep = np.hypot(d[:, 0], d[:, 1]) > 1e-9
-        poly, d = poly[keep], d[keep]
-        ang = np.arctan2(d[:, 1], d[:, 0])
-        turn = np.abs(np.angle(np.exp(1j * (ang - np.roll(ang, 1)))))
-        mask = np.zeros(self.shape, bool)
-        corners = np.rint(poly[turn > CORNER_TURN_RAD]).astype(int)
-        ok = ((corners[:, 0] >= 0) & (corners[:, 0] < self.shape[1])
-              & (corners[:, 1] >= 0) & (corners[:, 1] < self.shape[0]))
-        mask[corners[ok, 1], corners[ok, 0]] = True
-        return self.use & ~mask
-
-
     def refine(self, roll0: float, iterations: int = 6, step_rad: float = math.radians(0.02),
                max_move_rad: float = math.radians(3.0), passes: int = 2) -> ViewRoll:
         """Gauss-Newton in roll from ``roll0`` with the linear levels projected out and the
@@ -304,16 +270,14 @@ class ViewRollModel:
         ``passes``); the sigma by the HAC score variance (module docstring, step 3). ``rss`` is
         that of the scan's model (a plane for the beam), comparable between candidates.
 
-        Only the pixel holding each corner of the outline is left out (:meth:`corner_free`):
-        leaving out 0.75, 1.5 or 3 px about the corners (as stage A does) doubled the roll's
-        error near a mirror fold, where the fin tips' corners carry much of what there is to
-        see; keeping those pixels doubled it away from the folds (docs/stage1.md)."""
+        Every pixel of the model is used, the outline's corners included: with the exact
+        corner model (:meth:`basis`) no pixel needs leaving out (docs/stage1.md)."""
         # stay on roll0's side of the mirror folds at multiples of 45 deg (module docstring)
         lo = math.floor(roll0 / FOLD_RAD) * FOLD_RAD + step_rad
         hi = lo - step_rad + FOLD_RAD - step_rad
         g = min(max(float(roll0), lo), hi)
         for _ in range(passes):
-            use = self.corner_free(g)
+            use = self.use
             self.B = self.background(g)
             for _ in range(iterations):
                 coef, r, rss, X = self.solve(g, use)
