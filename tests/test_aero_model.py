@@ -394,8 +394,9 @@ def test_a_path_is_a_path_never_the_bundled_model_of_its_stem(tmp_path, monkeypa
         assert "the bundled model 'm2_m070' is named without a directory or suffix" in msg
         assert isinstance(exc.value, KeyError) and isinstance(exc.value, ValueError)
     assert not is_model_path("m2_m070")
-    with pytest.raises(ModelNotFoundError, match=r"^no bundled aero model 'm2_m07' \(bundled: "
-                                                 r"basic_finner, cone_linear, linear_template_alpha_beta"):
+    with pytest.raises(ModelNotFoundError,
+                       match=r"^no bundled aero model 'm2_m07' \(bundled: "
+                             r"basic_finner, cone_linear, linear_template_alpha_beta"):
         resolve_model("m2_m07")
     with pytest.raises(KeyError, match="is a path, not a bundled model name"):
         load_bundled_model("models/m2_m070")

@@ -20,8 +20,10 @@ from test_roll_lockin import ALPHA, U, bearing, roll_history
 
 from cadra.aero import model_from_dict
 
+ONE_DEG = math.radians(1.0)
 
-def eq22_model(Cl_dA=0.02, dA_rad=math.radians(1.0), Cl_ga=-0.5, Clp=-3.0):
+
+def eq22_model(Cl_dA=0.02, dA_rad=ONE_DEG, Cl_ga=-0.5, Clp=-3.0):
     """Eq. 22 as forms: the fin-cant drive, the induced roll moment's tangent at the trim
     (C~_l_gamma_alpha gamma alpha: ``sigma`` is alpha on the bearing), linear damping."""
     return model_from_dict({
