@@ -224,3 +224,32 @@ def test_body_from_kind_when_no_body_given(fitted):
     assert generic and body.kind == "capsule" and body.diameter_m == sd.rigid.d_m
     body, generic = resolve_body(sd, fitted["bodies"])
     assert not generic and body is fitted["bodies"][sd.shot_id]
+
+
+def test_report_tables_have_as_many_cells_as_headings(written):
+    """Every markdown table of the report: each row has its header's number of cells (the
+    residual table once lacked the roll column its rows carry)."""
+    lines = (written / "report.md").read_text(encoding="utf-8").splitlines()
+    header = None
+    for line in lines:
+        if not line.startswith("|"):
+            header = None
+            continue
+        n = line.count("|")
+        if header is None:
+            header = n
+        assert n == header, line
+    assert "| φ (deg) |" in "\n".join(lines)
+
+
+def test_a_finned_body_is_drawn_as_its_body_of_revolution():
+    """The 3-D view's surface of a finned body (no ``arcs`` of its own) is its cone-cylinder:
+    the radius d/2 along the cylinder, the length the body's."""
+    from cadra.body import body_from_spec
+    from cadra.fitting.plots import body_surface
+
+    fb = body_from_spec({"kind": "finner", "preset": "basic_finner", "d_m": 0.007})
+    P = body_surface(fb)
+    r = np.hypot(P[..., 1], P[..., 2])
+    assert r.max() == pytest.approx(0.0035, rel=1e-9)
+    assert np.ptp(P[..., 0]) == pytest.approx(fb.length_m, rel=1e-9)

@@ -379,10 +379,13 @@ def resolve_body(shot: ShotData, bodies: Mapping | None = None):
 
 def body_surface(body, n_axial: int = 90, n_around: int = 48):
     """(n_axial, n_around + 1, 3) surface-of-revolution grid of ``body``: body axes (x nose,
-    y starboard, z down) from its reference point, m; the last azimuth repeats the first."""
+    y starboard, z down) from its reference point, m; the last azimuth repeats the first.
+    A finned body (:class:`cadra.body.FinnedBody`) is drawn as its body of revolution: its
+    fins (a few pixels at the 3-D view's model scale) are not drawn."""
     from cadra.body import meridian
 
-    s, r = meridian(body.arcs, int(n_axial))
+    revolution = getattr(body, "body", body)     # a finned body's cone-cylinder
+    s, r = meridian(revolution.arcs, int(n_axial))
     phi = np.linspace(0.0, 2.0 * np.pi, int(n_around) + 1)
     P = np.empty((len(s), len(phi), 3))
     P[..., 0] = s[:, None]

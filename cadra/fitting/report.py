@@ -453,9 +453,13 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
                  f"{r['mach']:.4f} |")
     L.append("")
 
+    # one column per channel of the registry, in the order ``cells`` writes them (the roll
+    # column shows "—" for a body whose roll is not measured)
+    heads = [f"{BY_NAME[ch].label} ({'µm' if BY_NAME[ch].kind == 'position' else 'deg'})"
+             for ch in CHANNELS]
     L += ["## Residual rms", "",
-          "| shot | n | χ² | x (µm) | y (µm) | z (µm) | θ (deg) | ψ (deg) |",
-          "|---|---|---|---|---|---|---|---|"]
+          "| shot | n | χ² | " + " | ".join(heads) + " |",
+          "|---|---|---|" + "---|" * len(heads)]
 
     def cells(rms: Mapping[str, float]) -> str:
         out = []
