@@ -27,7 +27,8 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    noisy, but biased by up to +-0.03 px depending on the sub-pixel phase, because the
    renderer's wires are not band-limited. The centroid's own phase bias, from the
    pixel-centre weighting of the wire's two partly covered pixels, is <= ~0.0075 px for the
-   1.97 px HFFAF wire and averages out along any wire that drifts across the pixel grid.)
+   1.97 px HFFAF wire and averages out along any wire that drifts across the pixel grid,
+   but not along one parallel to the grid: step 7.)
 5. **Rejection.** A profile is dropped when its window touches ``exclude`` (the model), another
    wire's predicted crossing or the scanner reference mark; when its depth is not that of an
    opaque wire (gaps, dust, a missing wire); when its centroid does not settle near the coarse
@@ -37,15 +38,23 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    least-squares line through the centres. The surviving centres give the wire's line.
 6. **Affine.** Each found wire contributes two points on its fitted line, at the centroid of
    its centres +- their rms spread along the line. For a least-squares line these two
-   "Gauss points" have uncorrelated errors of equal variance ``2 sigma^2 / n``, and they carry
-   the same first and second moments along the line as the n centres; with weights
-   ``1 / sigma_offset^2`` the affine from :func:`fit_affine_to_wires` is therefore the
-   generalized least-squares solution from all centres, and its residuals measure how well
-   the measured lines agree with the survey (not the profile noise). When the found wires
+   "Gauss points" have uncorrelated noise errors of equal variance ``2 sigma^2 / n``, and they
+   carry the same first and second moments along the line as the n centres; the affine
+   solved from them by generalized least squares (the equations of
+   :func:`~cadra.facility.reference.fit_affine_to_wires`, each wire's two points weighted by
+   the inverse of their covariance: the noise plus step 7's correlated term) is therefore
+   the solution from all centres, and its residuals measure how well the measured lines
+   agree with the survey (not the profile noise). When the found wires
    leave a direction poorly determined (three wires: two parallel ones give one scale, the
    third only an offset), the affine is solved with a prior that the image differs from the
    nominal map by a similarity (film placed with a shift, rotation and uniform scale, no
    shear or anisotropy); ``reason`` then says so (a warning, ``ok`` stays True).
+7. **Phase bias.** The centroid errs by a periodic function of the wire's sub-pixel phase
+   (step 4). A line that keeps one phase along its length keeps that error whole, ~0.004 px
+   rms, as large as its noise sigma; the affine's sigma without it was ~0.87 of its error at
+   the model. :mod:`cadra.measure.wire_phase` sizes the bias from the wires that sweep
+   phases in this image and adds, per wire, the covariance it leaves in the two Gauss points
+   (``WireFit.sigma_sys_px`` the offset's share; ``WireMeasurement.phase_gain`` the size).
 
 :func:`measure_wires` is a pure function of plain arrays; its results are frozen dataclasses of
 floats, tuples and numpy arrays (picklable, for a process pool). :func:`wire_mask` marks the
@@ -60,7 +69,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from cadra.facility.reference import View, fit_affine_to_wires
+from cadra.facility.reference import View
+from cadra.measure.wire_phase import line_phases, phase_gain, systematic_cov
 from cadra.optics.projection import Projection
 
 __all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_mask"]
@@ -107,6 +117,10 @@ class WireFit:
     sigma_offset_px : estimated 1-sigma of the line's perpendicular offset at ``point_px``.
     residual_m, residual_px : mean signed distance of the line's mapped points from the
         surveyed wire line (view plane, m; and in px at the image scale), after the affine.
+    profile_axis : image axis the profiles ran along (0: rows, sampling u; 1: columns).
+    sigma_sys_px : 1-sigma of the line's offset at ``point_px`` from the centroid's
+        sub-pixel phase bias (step 7 of the module docstring; 0 until the affine is solved).
+        The offset's total 1-sigma is ``hypot(sigma_offset_px, sigma_sys_px)``.
     """
 
     name: str
@@ -122,6 +136,8 @@ class WireFit:
     sigma_offset_px: float = math.nan
     residual_m: float = math.nan
     residual_px: float = math.nan
+    profile_axis: int = -1
+    sigma_sys_px: float = 0.0
 
     def distance_px(self, uv) -> np.ndarray:
         """Signed perpendicular distance (px) of points ``(N, 2)`` from the fitted line."""
@@ -149,6 +165,8 @@ class WireMeasurement:
     n_found : number of wires found.
     projection : the view's optics with the solved affine (:meth:`View.optics`; what the
         silhouette fit and the combination use), or None.
+    phase_gain : (g_hat, sigma_g, mean g^2): how much of the sharp wire's pixel-sampling
+        bias the image shows (step 7 of the module docstring); NaNs if no affine.
     """
 
     ok: bool
@@ -160,6 +178,7 @@ class WireMeasurement:
     affine_rms_px: float
     n_found: int
     projection: Projection | None = None
+    phase_gain: tuple[float, float, float] = (math.nan, math.nan, math.nan)
 
     def position_sigma_m(self, uv) -> np.ndarray:
         """1-sigma (a, b) (m) of the view-plane image of pixel ``uv`` from the affine's
@@ -367,7 +386,7 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
                    direction_px=(float(t[0]), float(t[1])), ends_px=ends,
                    centres_px=pts[keep].copy(), n_used=n_used,
                    n_rejected=int(inside.sum()) - n_used, rms_px=rms_px,
-                   sigma_offset_px=sigma_off)
+                   sigma_offset_px=sigma_off, profile_axis=ax)
 
 
 # --------------------------------------------------------------------------- affine
@@ -412,17 +431,24 @@ def _similarity_prior(view: View) -> tuple[np.ndarray, np.ndarray]:
     return R, np.zeros(2)
 
 
-def _solve(view: View, lines, sig_m: np.ndarray, prior: bool):
-    """Weighted least squares of the affine (with the similarity prior if ``prior``).
+def _solve(view: View, lines, cov_m, prior: bool):
+    """Generalized least squares of the affine (with the similarity prior if ``prior``).
+
+    ``cov_m``: per wire, the (2, 2) covariance (m^2) of its two Gauss points' perpendicular
+    errors (None for a wire not found); the systematic term makes the two correlated.
 
     Returns (M, cov, residuals per equation (m), wire index per equation) or None.
     """
     X, y, wire_of = _design(view, lines)
-    wt = 1.0 / sig_m[wire_of] ** 2
+    wire_of = np.asarray(wire_of)
     col = np.array([1e-3, 1e-3, 1.0, 1e-3, 1e-3, 1.0])  # u, v are ~1e3 px
     Xs = X * col
-    info = Xs.T @ (Xs * wt[:, None])
-    vec = Xs.T @ (wt * y)
+    info, vec = np.zeros((6, 6)), np.zeros(6)
+    for i in np.unique(wire_of):
+        rows = wire_of == i
+        Wi = np.linalg.inv(cov_m[i])
+        info += Xs[rows].T @ Wi @ Xs[rows]
+        vec += Xs[rows].T @ Wi @ y[rows]
     if prior:
         R, r0 = _similarity_prior(view)
         Rs = R * col
@@ -534,31 +560,37 @@ def _solve_affine(view: View, fits: list[WireFit]) -> WireMeasurement:
                     f"are needed for the image->plane map")
     scale = view.scale_m_per_px
     lines = [_gauss_points(f) if f.found else None for f in fits]
-    # each Gauss point's perpendicular error: sqrt(2) x the line's offset sigma (floored)
-    sig_px = np.array([math.sqrt(2.0) * max(f.sigma_offset_px, 1e-4) if f.found else 1.0
-                       for f in fits])
-    sig_m = sig_px * scale
+    # each Gauss point's perpendicular error: sqrt(2) x the line's offset sigma (floored),
+    # independent; plus the centroid's phase bias, common to the line's centres (step 7)
+    width_px = [w.diameter_m / scale for w in view.wires]
+    phases = [line_phases(f.centres_px, f.point_px, f.direction_px, f.profile_axis)
+              if f.found else None for f in fits]
+    gain = phase_gain([None if p is None else (*p, f.rms_px)
+                       for p, f in zip(phases, fits, strict=True)], width_px)
+    cov_px, fits = [], list(fits)
+    for i, (f, p) in enumerate(zip(fits, phases, strict=True)):
+        if p is None:
+            cov_px.append(None)
+            continue
+        sys_cov = systematic_cov(p[0], p[1], p[3], width_px[i], gain[2])
+        fits[i] = WireFit(**{**f.__dict__,
+                             "sigma_sys_px": 0.5 * math.sqrt(max(float(sys_cov.sum()), 0.0))})
+        cov_px.append(2.0 * max(f.sigma_offset_px, 1e-4) ** 2 * np.eye(2) + sys_cov)
+    cov_m = [None if c is None else c * scale ** 2 for c in cov_px]
     reason = ""
-    sol = _solve(view, lines, sig_m, prior=False)
-    if sol is not None and _corner_sigma_px(view, sol[1], scale) <= MAX_CORNER_SIGMA_PX:
-        # well determined by the wires alone: the facility's solver (same equations)
-        try:
-            af = fit_affine_to_wires(view, lines, weights=1.0 / sig_m ** 2)
-        except ValueError as exc:
-            return fail(str(exc))
-        M, cov, res = af.affine, sol[1], af.residuals_m
-        wire_of = sol[3]
-    else:
-        sol = _solve(view, lines, sig_m, prior=True)
+    sol = _solve(view, lines, cov_m, prior=False)
+    if sol is None or _corner_sigma_px(view, sol[1], scale) > MAX_CORNER_SIGMA_PX:
+        # the wires alone leave a direction poorly determined: the similarity prior
+        sol = _solve(view, lines, cov_m, prior=True)
         if sol is None:
             return fail(f"wires {[f.name for f in found]} cannot determine the image->plane map")
-        M, cov, res, wire_of = sol
-        if _corner_sigma_px(view, cov, scale) > 10 * MAX_CORNER_SIGMA_PX:
+        if _corner_sigma_px(view, sol[1], scale) > 10 * MAX_CORNER_SIGMA_PX:
             return fail(f"wires {[f.name for f in found]} leave the image->plane map "
                         f"undetermined even with the similarity prior")
         missing = ", ".join(repr(f.name) for f in fits if not f.found)
         reason = (f"wire(s) {missing} not found: the image->plane map uses the prior that the "
                   f"film differs from the nominal map by a similarity (no shear/anisotropy)")
+    M, cov, res, wire_of = sol
     px = math.sqrt(abs(np.linalg.det(M[:, :2])))
     wire_of = np.asarray(wire_of)
     out = []
@@ -569,7 +601,7 @@ def _solve_affine(view: View, fits: list[WireFit]) -> WireMeasurement:
         out.append(f)
     rms_m = float(np.sqrt(np.mean(res ** 2)))
     return WireMeasurement(True, reason, np.array(M, float), cov, tuple(out), rms_m, rms_m / px,
-                           n_found, view.optics(M))
+                           n_found, view.optics(M), phase_gain=gain)
 
 
 def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
