@@ -100,7 +100,13 @@ def finner_realisation(r: int, seed: int, work: Path) -> dict:
         true = sim.model.parameter(name).value
         pulls[name] = {"truth": true, "fit": res.value(name), "sigma": res.sigma(name),
                        "pull": (res.value(name) - true) / res.sigma(name)}
+    rr = res.residuals
+    dof_ch = res.dof_by_channel()
+    chi2nu_ch = {ch: float(np.sum((rr.loc[rr["channel"] == ch, "residual"]
+                                   / rr.loc[rr["channel"] == ch, "sigma"]) ** 2) / dof_ch[ch])
+                 for ch in dof_ch if dof_ch[ch] > 0}
     return {"realisation": r, "status": res.status, "reduced_chi2": res.reduced_chi2,
+            "chi2nu_by_channel": chi2nu_ch,
             "dof": res.dof, "roll_measured": int(np.isfinite(shot.meas[:, 5]).sum()),
             "stations": len(shot.t_s),
             "roll_error_rms_deg": float(np.sqrt(np.nanmean(phi_err ** 2))),
@@ -120,7 +126,9 @@ def finner_e2e(n: int, seed: int) -> dict:
             print(f"FINNER-1 realisation {r}: {row['status']}, chi2/nu "
                   f"{row['reduced_chi2']:.3f}, roll measured at {row['roll_measured']}/"
                   f"{row['stations']} stations, roll error rms {row['roll_error_rms_deg']:.4f}"
-                  f" deg (median sigma {row['roll_sigma_median_deg']:.4f}); "
+                  f" deg (median sigma {row['roll_sigma_median_deg']:.4f}); chi2/nu by channel "
+                  + " ".join(f"{c} {v:.2f}" for c, v in row["chi2nu_by_channel"].items())
+                  + "; "
                   + ", ".join(f"{k} {v['fit']:.4g} ± {v['sigma']:.2g} (truth {v['truth']:.4g},"
                               f" pull {v['pull']:+.2f})" for k, v in p.items()), flush=True)
     finally:
@@ -134,6 +142,9 @@ def finner_e2e(n: int, seed: int) -> dict:
             "finner_e2e_converged_frac": float(np.mean([row["status"] == "converged"
                                                          for row in rows])),
             "finner_e2e_chi2nu_median": float(np.median([row["reduced_chi2"] for row in rows])),
+            "finner_e2e_chi2nu_by_channel_median": {
+                ch: float(np.median([row["chi2nu_by_channel"][ch] for row in rows]))
+                for ch in rows[0]["chi2nu_by_channel"]},
             "finner_e2e_roll_error_rms_deg": float(np.sqrt(np.mean(
                 [row["roll_error_rms_deg"] ** 2 for row in rows]))),
             "finner_e2e_realisations": n,
