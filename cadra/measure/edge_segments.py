@@ -538,7 +538,6 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
                         noise_coef=np.asarray(coef), profile=prof, pixels=pixels)
 
 
-
 #: :func:`blurred_polygon`: beyond this many edge widths from both ends of an edge, its
 #: Gaussian mass is the straight edge's
 END_CLEAR = 9.0
@@ -547,11 +546,12 @@ SIMPLIFY_PX = 1e-4
 
 
 @numba.njit(cache=True)
-def _polygon_pairs(p0, dv, ell, reach, u_lo, v_lo, H, W, fill, pix, edge, c_out, t_out):
+def _polygon_pairs(p0, dv, ell, nrm, reach, u_lo, v_lo, H, W, fill, pix, edge, d_out, t_out):
     """The (pixel, edge) pairs of ROI pixels within ``reach`` px of an edge segment: the pixel's
-    linear ROI index, the edge, its cross product with the edge's unit tangent (``c``, + on the
-    left) and the foot's position along the edge from its start (``t``, px). With ``fill``
-    False only counts them (the arrays are not touched); returns the count."""
+    linear ROI index, the edge, its signed distance from the edge's line along the outward
+    normal ``nrm`` (``d``, + outside) and the foot's position along the edge from its start
+    (``t``, px). With ``fill`` False only counts them (the arrays are not touched); returns the
+    count."""
     n = 0
     r2 = reach * reach
     for e in range(p0.shape[0]):
@@ -568,17 +568,26 @@ def _polygon_pairs(p0, dv, ell, reach, u_lo, v_lo, H, W, fill, pix, edge, c_out,
             for c in range(u0, u1 + 1):
                 wx = float(c + u_lo) - ax
                 t = wx * tx + wy * ty
-                cr = tx * wy - ty * wx
+                d = wx * nrm[e, 0] + wy * nrm[e, 1]
                 tc = min(max(t, 0.0), L)
-                if (t - tc) * (t - tc) + cr * cr > r2:
+                if (t - tc) * (t - tc) + d * d > r2:
                     continue
                 if fill:
                     pix[n] = r * W + c
                     edge[n] = e
-                    c_out[n] = cr
+                    d_out[n] = d
                     t_out[n] = t
                 n += 1
     return n
+
+
+def pixel_centres_inside(poly: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(rows, cols) bool: the pixel centres (pixel (r, c) at (u, v) = (c, r)) inside the
+    polygon ``poly`` (N, 2), by cv2's fill with the vertices rounded to 1/256 px."""
+    mask = np.zeros((int(shape[0]), int(shape[1])), np.uint8)
+    pts = np.round(np.asarray(poly, float) * 256.0).astype(np.int32).reshape(-1, 1, 2)
+    cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=8)
+    return mask.astype(bool)
 
 
 def blurred_polygon(poly: np.ndarray, shape: tuple[int, int], width, fringe, fringe_ratio,
@@ -620,20 +629,15 @@ def blurred_polygon(poly: np.ndarray, shape: tuple[int, int], width, fringe, fri
                         geo.ell.shape)
     a = np.broadcast_to(np.asarray(fringe(geo.normal) if callable(fringe) else fringe, float),
                         geo.ell.shape)
-    sgn = 1.0 if np.sum(geo.p0[:, 0] * np.roll(geo.p0[:, 1], -1)
-                        - np.roll(geo.p0[:, 0], -1) * geo.p0[:, 1]) > 0 else -1.0
-    args = (geo.p0, geo.d, geo.ell, float(reach), 0, 0, H, W)
+    args = (geo.p0, geo.d, geo.ell, geo.normal, float(reach), 0, 0, H, W)
     n = _polygon_pairs(*args, False, np.empty(0, np.int64), np.empty(0, np.int64),
                        np.empty(0), np.empty(0))
     pix, edge = np.empty(n, np.int64), np.empty(n, np.int64)
-    cr, t = np.empty(n), np.empty(n)
-    _polygon_pairs(*args, True, pix, edge, cr, t)
+    d, t = np.empty(n), np.empty(n)
+    _polygon_pairs(*args, True, pix, edge, d, t)
     # inside or not: an exact point-in-polygon test on the pixels near the outline, a fill
     # elsewhere
-    mask = np.zeros((H, W), np.uint8)
-    pts = np.round(np.asarray(poly, float) * 256.0).astype(np.int32).reshape(-1, 1, 2)
-    cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=8)
-    g = mask.astype(float).ravel()
+    g = pixel_centres_inside(poly, (H, W)).astype(float).ravel()
     near = np.zeros(H * W, bool)
     near[pix] = True
     near = np.flatnonzero(near)
@@ -644,9 +648,8 @@ def blurred_polygon(poly: np.ndarray, shape: tuple[int, int], width, fringe, fri
     g[near] = inside_near
     inside_pair = g[pix] > 0.5
     # the pixel's side of the edge: + on the polygon's inner side
-    side = sgn * cr
-    side = np.where(side == 0.0, np.where(inside_pair, 1.0, -1.0), side)
-    rho = np.maximum(np.abs(cr), 1e-12)
+    side = np.where(d == 0.0, np.where(inside_pair, 1.0, -1.0), -d)
+    rho = np.maximum(np.abs(d), 1e-12)
     se, ae = s[edge], a[edge]
     tA, tB = -t, geo.ell[edge] - t
     # T(h, t / rho) - T(h, -t' / rho) is Phi(-rho / s) to double precision where both ends

@@ -58,7 +58,7 @@ import numpy as np
 from cadra.body import outline_polygon
 from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import VIEW_AXES
-from cadra.measure.edge_segments import blurred_polygon
+from cadra.measure.edge_segments import blurred_polygon, pixel_centres_inside
 
 __all__ = ["HAC_LAG_PX", "PERIOD_RAD", "TRACK_SIGMA_RAD", "RollCandidate", "StationRoll",
            "ViewRoll", "ViewRollModel", "measure_station_roll", "resolve_roll_track",
@@ -166,7 +166,7 @@ class ViewRollModel:
         shape = (int(hi[1] - lo[1] + 1), int(hi[0] - lo[0] + 1))
         # the pixels whose coverage changes with the roll (the fins' sweep), dilated by the
         # margin: the nose and most of the body drop out
-        masks = [self._inside(p - lo, shape) for p in outlines]
+        masks = [pixel_centres_inside(p - lo, shape) for p in outlines]
         changing = np.zeros(shape, bool)
         for m in masks[1:]:
             changing |= m != masks[0]
@@ -202,14 +202,6 @@ class ViewRollModel:
         self.dv = (vv - cv) / max(cv, 1.0)
         self.n = int(use.sum())
 
-    @staticmethod
-    def _inside(poly_roi, shape):
-        """Pixel centres inside the polygon (ROI coordinates), by cv2's sub-pixel fill."""
-        mask = np.zeros(shape, np.uint8)
-        pts = np.round(poly_roi * 256.0).astype(np.int32).reshape(-1, 1, 2)
-        cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=8)
-        return mask.astype(bool)
-
     def basis(self, roll_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """``(1 - g + a h, g)`` on the ROI at ``roll_rad``: the blurred-edge model of the whole
         outline, its corners included (:func:`~cadra.measure.edge_segments.blurred_polygon`),
@@ -243,7 +235,7 @@ class ViewRollModel:
         of roll (docs/stage1.md)."""
         shape = self.I_pad.shape
         poly = self.outline_fn(roll_rad) - np.array([self.pu0, self.pv0], dtype=float)
-        shadow = self._inside(poly, shape).astype(np.uint8)
+        shadow = pixel_centres_inside(poly, shape).astype(np.uint8)
         k = 2 * int(math.ceil(BACKGROUND_CLEAR_PX)) + 1
         shadow = cv2.dilate(shadow, np.ones((k, k), np.uint8)).astype(bool)
         w = (~shadow & self.ok_pad).astype(float)
