@@ -420,7 +420,7 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
         # a segment whose edge ran off or lost its contrast carries no information
         if abs(delta[q]) > 2.0 or contrast[q] < 0.3 * typical or not var_delta[q] > 0.0:
             var_delta[q] = np.inf
-    return L, D, delta, var_delta, prof, coef, w, chi2
+    return L, D, delta, var_delta, prof, coef, w, chi2, rc
 
 
 @dataclass(frozen=True, eq=False)
@@ -439,7 +439,189 @@ class EdgeSegments:
     resid_rms: float
     noise_coef: np.ndarray    # variance model v0 + v1 m + v2 m^2 (m = model intensity)
     profile: np.ndarray       # global edge profile (s0, a0, s4, a4), see _gn_accumulate
-    pixels: dict = field(default_factory=dict)   # per-pixel arrays for the centroid method
+    #: per-pixel arrays for the centroid method, and (``FitSettings.covariance`` =
+    #: "correlated") for :func:`offset_covariance`: ``lin_used, k_used, infl, m, w``
+    pixels: dict = field(default_factory=dict)
+
+
+@numba.njit(cache=True)
+def _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc):
+    """Each pixel's influence on its segment's offset at the final state of
+    :func:`_segment_fit`: ``d delta_q / d I_j`` (the offset row of the segment's Gauss-Newton
+    solve, image-wide unknowns held), and the model's intensity ``m_j`` there.
+    """
+    n = I.shape[0]
+    A = np.empty((K, 3, 3))
+    b = np.empty((K, 3))
+    ng = 6 if tied else 4
+    Hg = np.empty((ng, ng))
+    bg = np.empty(ng)
+    G = np.empty(n)
+    P = np.empty(n)
+    Hh = np.empty(n)
+    Hp = np.empty(n)
+    _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P, Hh, Hp,
+                   False, False, tied, rc)
+    rows = np.empty((K, 3))
+    for q in range(K):
+        for i in range(3):
+            e = np.zeros(3)
+            e[i] = 1.0
+            rows[q, i] = _solve3_ridge(A[q], e)[2]   # A symmetric: row 2 of A^-1
+    infl = np.empty(n)
+    m = np.empty(n)
+    for j in range(n):
+        kk = k[j]
+        s = prof[0] + prof[2] * c4[kk]
+        a = prof[1] + prof[3] * c4[kk]
+        g, p, h, hp = _edge_profile(delta[kk] - d[j], s, ratio)
+        Lk = L[kk]
+        Dk = D[kk]
+        c0 = 1.0 - g + a * h
+        c1 = g
+        if tied:
+            c0 += rc[0] * g
+            c1 = 0.0
+        c2 = ((Dk - Lk) * p + a * Lk * hp / ratio) / s
+        infl[j] = w[j] * (rows[kk, 0] * c0 + rows[kk, 1] * c1 + rows[kk, 2] * c2)
+        m[j] = Lk * (1.0 - g) + Dk * g + a * Lk * h
+    return infl, m
+
+
+#: :func:`noise_autocovariance`: pixel differences beyond this many of their sigmas are
+#: clutter, not noise (a Gaussian difference exceeds it with probability 2e-9)
+CLIP_SIGMA = 6.0
+
+
+#: :func:`noise_autocovariance`: lags (px) at which film grain and scanner blur are
+#: uncorrelated, for the local mean's share
+FAR_LAGS = [(9, 0), (0, 9), (6, 6), (-6, 6), (9, 3), (-3, 9)]
+
+
+def noise_lags(max_lag: int) -> list[tuple[int, int]]:
+    """The pixel lags ``(du, dv)`` of a half plane with ``0 < |lag| <= max_lag``."""
+    return [(du, dv) for dv in range(max_lag + 1) for du in range(-max_lag, max_lag + 1)
+            if (dv > 0 or du > 0) and du * du + dv * dv <= max_lag * max_lag]
+
+
+def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
+                         max_lag: int, inner_px: float = 5.0, outer_px: float = 20.0,
+                         smooth_px: float = 10.0):
+    """The image noise's autocovariance at lags up to ``max_lag`` px, as
+    ``acov(lag; m) = alpha + beta m^2`` (m the mean intensity), from the flat image on both
+    sides of the outline (``inner_px``-``outer_px`` px outside it: the beam; as far inside:
+    the shadow). Docs/stage1.md, step 5.
+
+    Per side: the pixels minus their local mean (a Gaussian of ``smooth_px`` over that side's
+    pixels only: illumination and mottle out, the noise in), those beyond ``CLIP_SIGMA``
+    robust sigmas left out (dust, scratches, flow lines); their correlation at each lag,
+    less that at ``FAR_LAGS`` (the local mean removes a nearly even share of the noise's
+    covariance at every short lag, ~0.02 in correlation for a 1.2 px grain, which summed over
+    the lags matters), times the fitted noise model's variance at the side's median level.
+    Additive correlated noise (a scanner's MTF) gives ``beta = 0``; film grain, which
+    modulates the beam, ``alpha = 0``. Returns ``(lags, alpha, beta)``, or None where a side
+    has too few pixels.
+    """
+    H, W = img.shape
+    lin, d, _, _ = band_pixels(geo, outer_px, img.shape)
+    keep = np.abs(d) >= inner_px
+    if exclude is not None:
+        keep &= ~exclude.ravel()[lin]
+    lags = noise_lags(max_lag)
+    v0, v1, v2 = (float(x) for x in noise_coef)
+    pad = max_lag + 1
+    out = []
+    for side in (d > 0, d < 0):
+        sel = lin[keep & side]
+        if len(sel) < 400:
+            return None
+        u, v = sel % W, sel // W
+        u0, v0_ = max(u.min() - pad, 0), max(v.min() - pad, 0)
+        roi = (slice(v0_, min(v.max() + pad + 1, H)), slice(u0, min(u.max() + pad + 1, W)))
+        M = np.zeros(img[roi].shape, np.float32)
+        M[v - v0_, u - u0] = 1.0
+        Iroi = img[roi].astype(np.float32)
+        num = cv2.GaussianBlur(Iroi * M, (0, 0), smooth_px)
+        den = cv2.GaussianBlur(M, (0, 0), smooth_px)
+        res = np.where(M > 0, Iroi - num / np.maximum(den, 1e-6), 0.0).astype(np.float64)
+        rv = res[M > 0]
+        mad = 1.4826 * float(np.median(np.abs(rv)))
+        ok = (M > 0) & (np.abs(res) <= CLIP_SIGMA * max(mad, 1e-12))
+        res = np.where(ok, res, 0.0)
+        var0 = float(np.sum(res**2)) / max(int(ok.sum()), 1)
+        hh, ww = res.shape
+        ac = []
+        for du, dv in lags + FAR_LAGS:
+            a0 = res[0:hh - dv, max(-du, 0):ww - max(du, 0)]
+            a1 = res[dv:hh, max(du, 0):ww - max(-du, 0)]
+            o0 = ok[0:hh - dv, max(-du, 0):ww - max(du, 0)]
+            o1 = ok[dv:hh, max(du, 0):ww - max(-du, 0)]
+            npair = int(np.sum(o0 & o1))
+            if npair < 200 or var0 <= 0.0:
+                return None
+            ac.append(float(np.sum(a0 * a1)) / npair / var0)
+        # the local mean took a nearly constant share of every short lag's covariance: the
+        # far lags, where the noise itself is uncorrelated, show it
+        far = float(np.mean(ac[len(lags):]))
+        rho = (np.array(ac[:len(lags)]) - far) / (1.0 - far)
+        lev = float(np.median(img.ravel()[sel]))
+        out.append((lev, rho * (v0 + v1 * lev + v2 * lev * lev)))
+    (mb, ab), (md, ad) = out
+    if mb * mb - md * md <= 1e-6:
+        return None
+    beta = (ab - ad) / (mb * mb - md * md)
+    alpha = ad - beta * md * md
+    return lags, alpha, beta
+
+
+def segment_correlation(seg: EdgeSegments, width: int, acov) -> np.ndarray:
+    """(K, K) correlation of ``seg``'s offset errors under the noise autocovariance ``acov``
+    (:func:`noise_autocovariance`; None: white noise, the identity)."""
+    p = seg.pixels
+    K = len(seg.delta_px)
+    if acov is None or "infl" not in p:
+        return np.eye(K)
+    cov = offset_covariance(p["lin_used"], width, p["k_used"], K, p["infl"], p["w"], p["m"],
+                            acov)
+    dg = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    corr = cov / np.outer(dg, dg)
+    np.fill_diagonal(corr, 1.0)
+    return corr
+
+
+def offset_covariance(lin: np.ndarray, width: int, k: np.ndarray, K: int,
+                      infl: np.ndarray, w: np.ndarray, m: np.ndarray, acov) -> np.ndarray:
+    """Covariance (K, K) of the segment offsets' errors when the image noise is correlated
+    between nearby pixels (film grain, a scanner's MTF): docs/stage1.md, step 5.
+
+    ``acov = (lags, alpha, beta)`` (:func:`noise_autocovariance`): pixels ``j, j'`` at lag
+    ``j' - j`` have noise covariance ``alpha + beta m_j m_j'``; a pixel's variance is
+    ``1 / w_j`` (the fitted noise model). With ``infl`` each pixel's influence on its
+    segment's offset, ``cov(delta_q, delta_r) = sum_j sum_j' infl_j infl_j' C_jj'`` over the
+    pixels of q and r (``lin`` their flat indices in an image ``width`` px wide). Segments
+    next to each other share the grain at their common end; a pose fit sums that.
+    """
+    K = int(K)
+    lin = np.asarray(lin, np.int64)
+    u, v = lin % width, lin // width
+    cov = np.zeros((K, K))
+    np.add.at(cov, (k, k), infl * infl / np.maximum(w, 1e-300))
+    if acov is None or len(lin) == 0:
+        return cov
+    lags = acov[0]
+    pad = max(max(abs(du), abs(dv)) for du, dv in lags)
+    u0, v0 = u.min() - pad, v.min() - pad
+    index = np.full((v.max() - v0 + pad + 1, u.max() - u0 + pad + 1), -1, np.int64)
+    index[v - v0, u - u0] = np.arange(len(lin))
+    for (du, dv), al, be in zip(*acov, strict=True):
+        j1 = index[v - v0 + dv, u - u0 + du]
+        hit = j1 >= 0
+        j0 = np.flatnonzero(hit)
+        j1 = j1[hit]
+        c = infl[j0] * infl[j1] * (al + be * m[j0] * m[j1])
+        np.add.at(cov, (k[j0], k[j1]), c)
+        np.add.at(cov, (k[j1], k[j0]), c)
+    return cov
 
 
 @numba.njit(cache=True)
@@ -519,7 +701,7 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     c4 = np.cos(4.0 * np.arctan2(np.bincount(k, geo.normal[e_u, 1], minlength=K),
                                  np.bincount(k, geo.normal[e_u, 0], minlength=K)))
     # a cold start (no noise model yet) needs more rounds for the global profile to settle
-    L, D, delta, var_delta, prof, coef, w, chi2 = _segment_fit(
+    L, D, delta, var_delta, prof, coef, w, chi2, rc = _segment_fit(
         np.ascontiguousarray(I_u, dtype=np.float64), np.ascontiguousarray(d_u), k, K, c4,
         np.asarray(profile0, float).copy(), float(settings.fringe_width_ratio), coef_in, has,
         settings.warm_rounds if has else settings.cold_rounds, L0, D0,
@@ -531,6 +713,13 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
                                             geo.normal, geo.p0, geo.d, kap_all[use])
     nn = np.hypot(nx, ny)
     pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
+    if settings.covariance == "correlated":
+        # what offset_covariance needs, kept for the final pose only (silhouette_lsq)
+        infl, m = _offset_influence(np.ascontiguousarray(I_u, dtype=np.float64),
+                                    np.ascontiguousarray(d_u), k, K, w, L, D, delta, prof, c4,
+                                    float(settings.fringe_width_ratio),
+                                    settings.dark_level == "tied", rc)
+        pixels.update(lin_used=lin[use], k_used=k, infl=infl, m=m, w=w)
     return EdgeSegments(delta_px=delta, var_px2=var_delta, normal=np.column_stack([nx / nn,
                                                                                   ny / nn]),
                         foot_px=np.column_stack([fx, fy]), kappa=kap, bright=L, dark=D,

@@ -52,7 +52,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from cadra.measure.centroid import centroid_pose
-from cadra.measure.edge_segments import outline_geometry, stage_a
+from cadra.measure.edge_segments import (
+    noise_autocovariance,
+    outline_geometry,
+    segment_correlation,
+    stage_a,
+)
 from cadra.measure.template import Template, outline_px, pose_px
 from cadra.optics.projection import Projection
 
@@ -74,9 +79,12 @@ class FitSettings:
     tol_px: float = 2e-4            # stop when the pose moves less than this (px at the rim)
     outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
     hac_lags: int = 3               # Newey-West lags over contour-ordered segments
-    #: "scaled": the formal covariance times the segment fit's reduced chi^2 (default);
-    #: "sandwich": Newey-West over the contour-ordered segments (the pre-issue-18 sigma)
-    covariance: str = "scaled"
+    #: "correlated": "scaled" with the offsets' correlation from the image's correlated
+    #: noise (edge_segments.segment_correlation; default); "scaled": the formal covariance
+    #: times the segment fit's reduced chi^2, offsets independent; "sandwich": Newey-West over
+    #: the contour-ordered segments (the pre-issue-18 sigma)
+    covariance: str = "correlated"
+    noise_lag_px: int = 5           # "correlated": pixel-noise correlation measured to this lag
     fit_curvature_bias: bool = True
     fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
@@ -84,9 +92,9 @@ class FitSettings:
     dark_level: str = "tied"        # "tied": D = r L + c image-wide; "segment": D per segment
 
     def __post_init__(self):
-        if self.covariance not in ("scaled", "sandwich"):
-            raise ValueError(f"FitSettings.covariance: expected 'scaled' or 'sandwich', got "
-                             f"{self.covariance!r}")
+        if self.covariance not in ("correlated", "scaled", "sandwich"):
+            raise ValueError(f"FitSettings.covariance: expected 'correlated', 'scaled' or "
+                             f"'sandwich', got {self.covariance!r}")
         if self.dark_level not in ("tied", "segment"):
             raise ValueError(f"FitSettings.dark_level: expected 'tied' or 'segment', got "
                              f"{self.dark_level!r}")
@@ -235,7 +243,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         ew = (y[keep] - X[keep] @ beta) * np.sqrt(wts[keep])
         bread = np.linalg.pinv(Xw.T @ Xw)
         n_k = int(keep.sum())
-        if settings.covariance == "scaled":
+        if settings.covariance in ("scaled", "correlated"):
+            # ("correlated" adds the offsets' correlation after the last iteration)
             cov_b = bread * float(ew @ ew) / max(n_k - npar, 1)
         else:
             meat = _newey_west(Xw, ew, settings.hac_lags)
@@ -267,6 +276,14 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         if move < max(settings.tol_px, 0.5 * sig_px):
             converged = True
             break
+    if settings.covariance == "correlated" and not diverged:
+        # the last iteration's offsets are correlated through the image's correlated noise
+        # (film grain): the same scaled covariance, with that correlation between segments
+        acov = noise_autocovariance(img, geo, exclude, seg.noise_coef, settings.noise_lag_px)
+        R = segment_correlation(seg, W, acov)[np.ix_(keep, keep)]
+        cov_b = bread @ (Xw.T @ R @ Xw) @ bread * float(ew @ ew) / max(n_k - npar, 1)
+        idx = [0, 1, 2] if fit_phi else [0, 1]
+        cov[np.ix_(idx, idx)] = cov_b[: len(idx), : len(idx)]
     ref_px, ang_px = pose_px(pose, projection)
     # pixel-space sigmas by linear propagation
     Jp = np.zeros((3, 3))
