@@ -21,7 +21,6 @@ import cv2
 import numba
 import numpy as np
 import shapely
-from scipy import fft as sfft
 from scipy.special import ndtr, owens_t
 
 SQRT2PI = math.sqrt(2.0 * math.pi)
@@ -499,6 +498,27 @@ CLIP_SIGMA = 6.0
 FAR_LAGS = [(9, 0), (0, 9), (6, 6), (-6, 6), (9, 3), (-3, 9)]
 
 
+@numba.njit(cache=True)
+def _lag_sums(res, ok, lags):
+    """For each lag ``(du, dv)``: the sum of ``res[p] res[p + lag]`` and the number of pairs
+    with both pixels ``ok``, over the ``ok`` pixels ``p``."""
+    H, W = res.shape
+    prod = np.zeros(lags.shape[0])
+    cnt = np.zeros(lags.shape[0])
+    for r in range(H):
+        for c in range(W):
+            if not ok[r, c]:
+                continue
+            x = res[r, c]
+            for q in range(lags.shape[0]):
+                r1 = r + lags[q, 1]
+                c1 = c + lags[q, 0]
+                if 0 <= r1 < H and 0 <= c1 < W and ok[r1, c1]:
+                    prod[q] += x * res[r1, c1]
+                    cnt[q] += 1.0
+    return prod, cnt
+
+
 def noise_lags(max_lag: int) -> list[tuple[int, int]]:
     """The pixel lags ``(du, dv)`` of a half plane with ``0 < |lag| <= max_lag``."""
     return [(du, dv) for dv in range(max_lag + 1) for du in range(-max_lag, max_lag + 1)
@@ -513,8 +533,8 @@ def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
     sides of the outline (``inner_px``-``outer_px`` px outside it: the beam; as far inside:
     the shadow). Docs/stage1.md, step 5.
 
-    Per side: the pixels minus their local mean (a Gaussian of ``smooth_px`` over that side's
-    pixels only: illumination and mottle out, the noise in), those beyond ``CLIP_SIGMA``
+    Per side: the pixels minus their local mean (a ``2 smooth_px + 1`` px box over that
+    side's pixels only: illumination and mottle out, the noise in), those beyond ``CLIP_SIGMA``
     robust sigmas left out (dust, scratches, flow lines); their correlation at each lag,
     less that at ``FAR_LAGS`` (the local mean removes a nearly even share of the noise's
     covariance at every short lag, ~0.02 in correlation for a 1.2 px grain, which summed over
@@ -545,9 +565,11 @@ def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
         M = np.zeros(img[roi].shape, np.float32)
         M[v - v0_, u - u0] = 1.0
         Iroi = img[roi].astype(np.float32)
-        num = cv2.GaussianBlur(Iroi * M, (0, 0), smooth_px)
-        den = cv2.GaussianBlur(M, (0, 0), smooth_px)
-        res = np.where(M > 0, Iroi - num / np.maximum(den, 1e-6), 0.0).astype(np.float64)
+        k = 2 * int(round(smooth_px)) + 1
+        both = cv2.boxFilter(np.dstack([Iroi * M, M]), -1, (k, k),
+                             borderType=cv2.BORDER_CONSTANT)
+        res = np.where(M > 0, Iroi - both[..., 0] / np.maximum(both[..., 1], 1e-6),
+                       0.0).astype(np.float64)
         rv = res[M > 0]
         mad = 1.4826 * float(np.median(np.abs(rv)))
         ok = (M > 0) & (np.abs(res) <= CLIP_SIGMA * max(mad, 1e-12))
@@ -555,18 +577,11 @@ def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
         var0 = float(np.sum(res**2)) / max(int(ok.sum()), 1)
         if var0 <= 0.0:
             return None
-        # every lag's sum of products and pair count at once (FFT, padded: no wrap-around)
-        reach = max(max(abs(a), abs(b)) for a, b in lags + FAR_LAGS)
-        shape = (sfft.next_fast_len(res.shape[0] + reach, real=True),
-                 sfft.next_fast_len(res.shape[1] + reach, real=True))
-        F = sfft.rfft2(np.stack([res, ok.astype(np.float64)]), shape)
-        prod, cnt = sfft.irfft2(F * np.conj(F), shape)
-        ac = []
-        for du, dv in lags + FAR_LAGS:
-            npair = cnt[dv % shape[0], du % shape[1]]
-            if npair < 199.5:
-                return None
-            ac.append(prod[dv % shape[0], du % shape[1]] / npair / var0)
+        all_lags = np.array(lags + FAR_LAGS, np.int64)
+        prod, cnt = _lag_sums(res, ok, all_lags)
+        if cnt.min() < 200:
+            return None
+        ac = list(prod / cnt / var0)
         # the local mean took a nearly constant share of every short lag's covariance: the
         # far lags, where the noise itself is uncorrelated, show it
         far = float(np.mean(ac[len(lags):]))

@@ -189,7 +189,10 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         pose0 = pose_from_coarse(coarse, template, wires.projection)
         mask = masks[view.name] = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
         # a quick first pass when a refit with better tilts follows
-        settings_used = settings if final else replace(settings, max_iter=2)
+        # (its sigma is not used: the offsets' correlation is left to the final fit)
+        settings_used = settings if final else replace(
+            settings, max_iter=2,
+            covariance="scaled" if settings.covariance == "correlated" else settings.covariance)
     else:
         wires, affine = prev.wires, prev.affine
         pose0 = prev.fit.pose
