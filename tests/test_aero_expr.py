@@ -311,7 +311,7 @@ def test_empty_and_zero_programs_and_cse():
 def test_callable_from_user_njit_code_both_dtypes():
     @njit
     def integrate_like(ops, args, starts, variables, params, n):
-        out = np.empty(9, dtype=variables.dtype)
+        out = np.zeros(9, dtype=variables.dtype)   # (np.empty: out[0] * 0.0 may be nan)
         stack = np.empty(16, dtype=variables.dtype)
         total = out[0] * 0.0
         for _ in range(n):

@@ -52,12 +52,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from cadra.measure.centroid import centroid_pose
-from cadra.measure.edge_segments import (
-    noise_autocovariance,
-    outline_geometry,
-    segment_correlation,
-    stage_a,
-)
+from cadra.measure.edge_segments import outline_geometry, stage_a
+from cadra.measure.noise_correlation import noise_autocovariance, segment_correlation
 from cadra.measure.template import Template, outline_px, pose_px
 from cadra.optics.projection import Projection
 
@@ -80,7 +76,7 @@ class FitSettings:
     outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
     hac_lags: int = 3               # Newey-West lags over contour-ordered segments
     #: "correlated": "scaled" with the offsets' correlation from the image's correlated
-    #: noise (edge_segments.segment_correlation; default); "scaled": the formal covariance
+    #: noise (measure.noise_correlation; default); "scaled": the formal covariance
     #: times the segment fit's reduced chi^2, offsets independent; "sandwich": Newey-West over
     #: the contour-ordered segments (the pre-issue-18 sigma)
     covariance: str = "correlated"
