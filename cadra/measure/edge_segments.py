@@ -188,6 +188,30 @@ def _edge_profile(x, s, ratio):
 
 
 @numba.njit(cache=True)
+def gn_workspace(n, K, tied):
+    """The arrays :func:`_gn_accumulate` fills: per-segment normal equations ``A, b``, the
+    global profile's ``Hg, bg`` (6 unknowns with a tied dark level, else 4) and the pixels'
+    profile values ``G, P, Hh, Hp``."""
+    ng = 6 if tied else 4
+    return (np.empty((K, 3, 3)), np.empty((K, 3)), np.empty((ng, ng)), np.empty(ng),
+            np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+
+
+@numba.njit(cache=True)
+def pixel_terms(Lk, Dk, g, p, h, hp, a, s, ratio, tied, r):
+    """One pixel's edge model ``m = L (1 - g) + D g + a L h`` and its derivatives
+    ``(c0, c1, c2)`` by the segment's L, D and offset (``tied``: D = r L + c is no unknown,
+    ``c1 = 0``); ``g, p, h, hp`` from :func:`_edge_profile` at width ``s``."""
+    c0 = 1.0 - g + a * h
+    c1 = g
+    if tied:
+        c0 += r * g
+        c1 = 0.0
+    c2 = ((Dk - Lk) * p + a * Lk * hp / ratio) / s
+    return Lk * (1.0 - g) + Dk * g + a * Lk * h, c0, c1, c2
+
+
+@numba.njit(cache=True)
 def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P, Hh, Hp,
                    reuse, want_global, tied, rc):
     """Gauss-Newton normal equations per segment for (L, D, delta), and for the image's
@@ -213,14 +237,8 @@ def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P,
         else:
             g, p, h, hp = _edge_profile(x, s, ratio)
         Lk = L[kk]
-        Dk = D[kk]
-        r = I[j] - (Lk * (1.0 - g) + Dk * g + a * Lk * h)
-        c0 = 1.0 - g + a * h
-        c1 = g
-        if tied:
-            c0 += rc[0] * g
-            c1 = 0.0
-        c2 = ((Dk - Lk) * p + a * Lk * hp / ratio) / s
+        mj, c0, c1, c2 = pixel_terms(Lk, D[kk], g, p, h, hp, a, s, ratio, tied, rc[0])
+        r = I[j] - mj
         ww = w[j]
         A[kk, 0, 0] += ww * c0 * c0
         A[kk, 0, 1] += ww * c0 * c1
@@ -342,15 +360,7 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
             m0 = min(max(I[j], 0.0), 1.0)
             w[j] = 1.0 / max(coef[0] + coef[1] * m0 + coef[2] * m0 * m0,
                              0.2 * max(coef[0] + 0.5 * coef[1] + 0.25 * coef[2], 1e-12))
-    A = np.empty((K, 3, 3))
-    b = np.empty((K, 3))
-    ng = 6 if tied else 4
-    Hg = np.empty((ng, ng))
-    bg = np.empty(ng)
-    G = np.empty(n)
-    P = np.empty(n)
-    Hh = np.empty(n)
-    Hp = np.empty(n)
+    A, b, Hg, bg, G, P, Hh, Hp = gn_workspace(n, K, tied)
     reuse = False   # G, P, Hh, Hp hold the current state's profile (after a noise-model pass)
     chi2 = 0.0
     for outer in range(n_outer):

@@ -23,7 +23,9 @@ from cadra.measure.edge_segments import (
     _gn_accumulate,
     _solve3_ridge,
     band_pixels,
+    gn_workspace,
     outline_geometry,
+    pixel_terms,
 )
 
 __all__ = ["noise_autocovariance", "noise_lags", "offset_covariance", "segment_correlation"]
@@ -159,15 +161,7 @@ def _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc):
     solve, image-wide unknowns held), and the model's intensity ``m_j`` there.
     """
     n = I.shape[0]
-    A = np.empty((K, 3, 3))
-    b = np.empty((K, 3))
-    ng = 6 if tied else 4
-    Hg = np.empty((ng, ng))
-    bg = np.empty(ng)
-    G = np.empty(n)
-    P = np.empty(n)
-    Hh = np.empty(n)
-    Hp = np.empty(n)
+    A, b, Hg, bg, G, P, Hh, Hp = gn_workspace(n, K, tied)
     _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P, Hh, Hp,
                    False, False, tied, rc)
     rows = np.empty((K, 3))
@@ -183,16 +177,8 @@ def _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc):
         s = prof[0] + prof[2] * c4[kk]
         a = prof[1] + prof[3] * c4[kk]
         g, p, h, hp = _edge_profile(delta[kk] - d[j], s, ratio)
-        Lk = L[kk]
-        Dk = D[kk]
-        c0 = 1.0 - g + a * h
-        c1 = g
-        if tied:
-            c0 += rc[0] * g
-            c1 = 0.0
-        c2 = ((Dk - Lk) * p + a * Lk * hp / ratio) / s
+        m[j], c0, c1, c2 = pixel_terms(L[kk], D[kk], g, p, h, hp, a, s, ratio, tied, rc[0])
         infl[j] = w[j] * (rows[kk, 0] * c0 + rows[kk, 1] * c1 + rows[kk, 2] * c2)
-        m[j] = Lk * (1.0 - g) + Dk * g + a * Lk * h
     return infl, m
 
 
