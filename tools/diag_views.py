@@ -126,6 +126,14 @@ def main() -> int:
         print(f"  {v:4s} pose u {out[f'{v}_pose_u']:.3f}  v {out[f'{v}_pose_v']:.3f}  angle "
               f"{out[f'{v}_pose_angle']:.3f} | affine a {out[f'{v}_affine_a']:.3f} | plane "
               f"a {out[f'{v}_plane_a']:.3f}  b {out[f'{v}_plane_b']:.3f}")
+    # which parts of the two views' x errors move together (pose u in px, affine along x)
+    parts = {"top pose u": df.top_eu, "top affine a": df.top_eaff,
+             "side pose u": df.side_eu, "side affine a": df.side_eaff}
+    corr = pd.DataFrame(parts).corr()
+    print("  correlations of the x parts:")
+    print("\n".join("    " + line for line in corr.round(2).to_string().splitlines()))
+    out["corr_parts"] = {f"{a} / {b}": float(corr.loc[a, b]) for i, a in enumerate(parts)
+                         for b in list(parts)[i + 1:]}
     print(json.dumps(out))
     return 0
 
