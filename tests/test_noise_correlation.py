@@ -12,11 +12,7 @@ import pytest
 
 from cadra.body import capsule
 from cadra.measure.edge_segments import outline_geometry, stage_a
-from cadra.measure.noise_correlation import (
-    _offset_influence,
-    noise_autocovariance,
-    offset_covariance,
-)
+from cadra.measure.noise_correlation import noise_autocovariance, segment_covariance
 from cadra.measure.silhouette_lsq import FitSettings
 from cadra.measure.template import make_template, outline_px
 from cadra.synthetic.cases import random_view_case
@@ -102,16 +98,13 @@ def test_offset_covariance_matches_a_monte_carlo_of_the_renderer_grain():
         seg = stage_a(img.astype(float), geo, st, None, np.array([0.75, 0.09, 0.0, 0.0]))
         deltas.append(seg.delta_px)
         if i < 2:
-            lin, I, d, k, w, L, D, delta, prof, c4, ratio, tied, rc = seg.pixels["state"]
-            infl, m = _offset_influence(I, d, k, len(seg.delta_px), w, L, D, delta, prof, c4,
-                                        ratio, tied, rc)
-            var = (cfg.read_noise_sigma**2 + cfg.shot_noise_sigma**2 * m
-                   + (cfg.film_grain_sigma * m) ** 2 + 1.0 / (12 * full**2))
             acov = (lags, np.zeros(len(lags)),
                     np.array([cfg.film_grain_sigma**2 * a[h + du] * a[h + dv]
                               for du, dv in lags]))
-            c = offset_covariance(lin, img.shape[1], k, len(seg.delta_px), infl, 1.0 / var,
-                                  m, acov)
+            c = segment_covariance(
+                seg, img.shape[1], acov,
+                pixel_var=lambda m: (cfg.read_noise_sigma**2 + cfg.shot_noise_sigma**2 * m
+                                     + (cfg.film_grain_sigma * m) ** 2 + 1.0 / (12 * full**2)))
             pred = c if pred is None else 0.5 * (pred + c)
     emp = np.cov(np.array(deltas).T)
     ratio = np.diag(emp) / np.diag(pred)

@@ -530,9 +530,11 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     e_u = e[use]
     c4 = np.cos(4.0 * np.arctan2(np.bincount(k, geo.normal[e_u, 1], minlength=K),
                                  np.bincount(k, geo.normal[e_u, 0], minlength=K)))
+    I_u = np.ascontiguousarray(I_u, dtype=np.float64)
+    d_u = np.ascontiguousarray(d_u)
     # a cold start (no noise model yet) needs more rounds for the global profile to settle
     L, D, delta, var_delta, prof, coef, w, chi2, rc = _segment_fit(
-        np.ascontiguousarray(I_u, dtype=np.float64), np.ascontiguousarray(d_u), k, K, c4,
+        I_u, d_u, k, K, c4,
         np.asarray(profile0, float).copy(), float(settings.fringe_width_ratio), coef_in, has,
         settings.warm_rounds if has else settings.cold_rounds, L0, D0,
         settings.dark_level == "tied")
@@ -545,8 +547,7 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
     if settings.covariance == "correlated":
         # the final state, for measure.noise_correlation (the final pose's sigma only)
-        pixels["state"] = (lin[use], np.ascontiguousarray(I_u, dtype=np.float64),
-                           np.ascontiguousarray(d_u), k, w, L, D, delta, prof, c4,
+        pixels["state"] = (lin[use], I_u, d_u, k, w, L, D, delta, prof, c4,
                            float(settings.fringe_width_ratio), settings.dark_level == "tied",
                            rc)
     return EdgeSegments(delta_px=delta, var_px2=var_delta, normal=np.column_stack([nx / nn,

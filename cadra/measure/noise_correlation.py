@@ -6,7 +6,8 @@ Neighbouring segments share the grain at their common end; a pose fit, which sum
 offset, sees that correlation, and the offsets' residuals cannot show it (the pose absorbs
 it). :func:`noise_autocovariance` measures the noise, :func:`offset_covariance` propagates it
 through each pixel's influence on its segment's offset (``EdgeSegments.pixels``, kept by
-:func:`cadra.measure.edge_segments.stage_a`), :func:`segment_correlation` normalizes it.
+:func:`cadra.measure.edge_segments.stage_a`); :func:`segment_covariance` applies it to a
+stage-A result and :func:`segment_correlation` normalizes that.
 Pure functions of arrays (picklable inputs).
 """
 
@@ -28,7 +29,8 @@ from cadra.measure.edge_segments import (
     pixel_terms,
 )
 
-__all__ = ["noise_autocovariance", "noise_lags", "offset_covariance", "segment_correlation"]
+__all__ = ["noise_autocovariance", "noise_lags", "offset_covariance", "segment_correlation",
+           "segment_covariance"]
 
 
 #: :func:`noise_autocovariance`: pixel differences beyond this many of their sigmas are
@@ -139,15 +141,26 @@ def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
     return lags, alpha, beta
 
 
+def segment_covariance(seg: EdgeSegments, width: int, acov, pixel_var=None) -> np.ndarray:
+    """(K, K) covariance of ``seg``'s offset errors (:func:`offset_covariance`) under the
+    noise autocovariance ``acov`` (:func:`noise_autocovariance`; None: white noise), from
+    stage A's final state (``seg.pixels["state"]``, kept when ``FitSettings.covariance`` is
+    "correlated"). ``pixel_var(m)``: the pixels' noise variance at model intensity ``m``
+    (default: the fitted noise model, ``1 / w``)."""
+    lin, I, d, k, w, L, D, delta, prof, c4, ratio, tied, rc = seg.pixels["state"]
+    K = len(seg.delta_px)
+    infl, m = _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc)
+    w_noise = w if pixel_var is None else 1.0 / pixel_var(m)
+    return offset_covariance(lin, width, k, K, infl, w_noise, m, acov)
+
+
 def segment_correlation(seg: EdgeSegments, width: int, acov) -> np.ndarray:
     """(K, K) correlation of ``seg``'s offset errors under the noise autocovariance ``acov``
     (:func:`noise_autocovariance`; None: white noise, the identity)."""
     K = len(seg.delta_px)
     if acov is None or "state" not in seg.pixels:
         return np.eye(K)
-    lin, I, d, k, w, L, D, delta, prof, c4, ratio, tied, rc = seg.pixels["state"]
-    infl, m = _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc)
-    cov = offset_covariance(lin, width, k, K, infl, w, m, acov)
+    cov = segment_covariance(seg, width, acov)
     dg = np.sqrt(np.maximum(np.diag(cov), 1e-300))
     corr = cov / np.outer(dg, dg)
     np.fill_diagonal(corr, 1.0)
