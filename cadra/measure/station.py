@@ -222,6 +222,9 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     for w in wires.wires:
         if not w.found:
             warn.append(w.reason or f"wire {w.name!r} not found")
+        elif w.dropped_px > 0.0:
+            warn.append(f"wire {w.name!r}: {w.dropped_px:.0f} px of it left out, its centres "
+                        f"there off its line together (a shock or flow line along it?)")
     crossing = _wire_crossings(fit, template, wires.projection, wires)
     if crossing:
         warn.append(f"model crosses wire(s) {', '.join(repr(c) for c in crossing)}: "
