@@ -1,4 +1,4 @@
-"""A bow shock along a fiducial wire (cadra.measure.wires, step 5's straightness test).
+"""A bow shock along a fiducial wire (cadra.measure.wire_straightness).
 
 In a supersonic shot the bow shock's shadowgraph line (a dark/bright pair, ~10 % contrast)
 stands ahead of the model and, near its vertex, runs almost parallel to a wire across the
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from test_wires import FAC, affine_error_m, circle, make_image, true_affine, true_offset_px
 
-import cadra.measure.wires as wires_mod
+import cadra.measure.wire_straightness as straightness
 from cadra.geometry import apply_affine
 from cadra.measure.wires import measure_wires
 from cadra.synthetic.render import RenderConfig, Scene, render
@@ -68,7 +68,7 @@ def test_shock_biases_the_wire_without_the_test(shocked, monkeypatch):
     """The cases are real ones: with the straightness test off, the x+ line is off by many
     of its sigmas, and the map along the range with it."""
     view, M, cases = shocked
-    monkeypatch.setattr(wires_mod, "MAX_STRETCHES", 0)
+    monkeypatch.setattr(straightness, "MAX_STRETCHES", 0)
     for img, exclude in cases:
         res = measure_wires(img, view, exclude=exclude)
         f = res.wires[1]

@@ -38,8 +38,8 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    least-squares line through the centres. Last, a stretch whose centres stray from the line
    together (a shock wave running close along the wire biases hundreds of centres by a
    fraction of their noise each, which no single profile shows) is found by the mean residual
-   of blocks of 12 centres and left out (:func:`_drop_bent_stretches`). The surviving centres
-   give the wire's line.
+   of blocks of 12 centres and left out (:mod:`cadra.measure.wire_straightness`). The
+   surviving centres give the wire's line.
 6. **Affine.** Each found wire contributes two points on its fitted line, at the centroid of
    its centres +- their rms spread along the line. For a least-squares line these two
    "Gauss points" have uncorrelated noise errors of equal variance ``2 sigma^2 / n``, and they
@@ -75,6 +75,7 @@ import numpy as np
 
 from cadra.facility.reference import View
 from cadra.measure.wire_phase import line_phases, phase_gain, systematic_cov
+from cadra.measure.wire_straightness import drop_bent_stretches, tls_line
 from cadra.optics.projection import Projection
 
 __all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_mask"]
@@ -100,15 +101,6 @@ SIMILARITY_PRIOR_REL = 2e-5
 #: A wire-only solution is "poorly determined" when the propagated 1-sigma position error at
 #: an image corner exceeds this (px).
 MAX_CORNER_SIGMA_PX = 0.02
-#: Profiles per block of the along-wire straightness test (step 5, last paragraph).
-BLOCK_PROFILES = 12
-#: A block's mean residual beyond this many of its sigmas: the wire is not straight there.
-BLOCK_T_MAX = 4.0
-#: A block's sigma also allows the centroid's sub-pixel phase bias, which a slowly drifting
-#: wire keeps over a block (<= ~0.0075 px, step 4), so noise-free images pass.
-BLOCK_SYS_PX = 0.0075
-#: Stretches left out of one wire at most (:func:`_drop_bent_stretches`).
-MAX_STRETCHES = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -259,21 +251,6 @@ def _centroids(P: np.ndarray, S: np.ndarray, c0: np.ndarray, half_core: float,
     return c, area, width, b0, bg_rms
 
 
-def _tls_line(pts: np.ndarray):
-    """Total least-squares line: centroid, unit direction, unit normal, signed residuals."""
-    m = pts.mean(axis=0)
-    q = pts - m
-    suu, svv, suv = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
-    ang = 0.5 * math.atan2(2.0 * suv, suu - svv)  # direction of largest spread
-    t = np.array([math.cos(ang), math.sin(ang)])
-    if abs(t[0]) >= abs(t[1]):  # a stable sign: +u, or +v for a line running down the image
-        t = t if t[0] > 0 else -t
-    else:
-        t = t if t[1] > 0 else -t
-    n = np.array([-t[1], t[0]])
-    return m, t, n, q @ n
-
-
 def _not_found(name: str, why: str, n_rejected: int = 0) -> WireFit:
     return WireFit(name, False, f"wire {name!r} not found: {why}", n_rejected=n_rejected)
 
@@ -381,15 +358,15 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
     pts[:, other] = fixed
     keep = use.copy()
     for _ in range(8):
-        m, t, nrm, _ = _tls_line(pts[keep])
+        m, t, nrm, _ = tls_line(pts[keep])
         res_all = (pts - m) @ nrm
         sig = 1.4826 * float(np.median(np.abs(res_all[keep])))
         new = use & (np.abs(res_all) <= max(3.0 * sig, 1e-3))
         if new.sum() < MIN_PROFILES or np.array_equal(new, keep):
             break
         keep = new
-    keep, dropped = _drop_bent_stretches(pts, keep, fixed, step_px)
-    m, t, nrm, res = _tls_line(pts[keep])
+    keep, dropped = drop_bent_stretches(pts, keep, fixed, step_px)
+    m, t, nrm, res = tls_line(pts[keep])
     n_used = int(keep.sum())
     rms_px = float(np.sqrt(np.sum(res ** 2) / max(n_used - 2, 1)))
     if rms_px > MAX_LINE_RMS_PX:
@@ -404,64 +381,6 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
                    centres_px=pts[keep].copy(), n_used=n_used,
                    n_rejected=int(inside.sum()) - n_used, rms_px=rms_px,
                    sigma_offset_px=sigma_off, profile_axis=ax, dropped_px=dropped)
-
-
-def _block_t(pts: np.ndarray, mask: np.ndarray, blocks: list, s: float) -> np.ndarray:
-    """Each block's (index arrays inside ``mask``) mean residual about the total least-squares
-    line of ``pts[mask]``, in its sigma; ``s`` the sigma of one centre."""
-    m, _, nrm, _ = _tls_line(pts[mask])
-    r = (pts - m) @ nrm
-    return np.array([float(r[b].mean()) / math.sqrt(s * s / len(b) + BLOCK_SYS_PX**2)
-                     for b in blocks if mask[b[0]]])
-
-
-def _drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
-                         step_px: float) -> tuple[np.ndarray, float]:
-    """Leave out the stretches of a wire whose centres stray from its line together.
-
-    One profile's clipping cannot see a bias of a fraction of its noise that a whole stretch
-    shares: a shock wave or flow line running close along the wire over hundreds of pixels
-    (0.1 px over 600 px of a 1,200-px wire, 10 sigma of the line, in a supersonic shot; with
-    weaker lobes either side). The kept centres, ordered along the wire, are cut into blocks
-    of :data:`BLOCK_PROFILES`, each with its mean residual ``t`` in its sigma (one centre's
-    noise from neighbours' differences, so blind to the shared bias, plus
-    :data:`BLOCK_SYS_PX`). When a block is beyond :data:`BLOCK_T_MAX`, the contiguous run of
-    blocks is removed whose removal minimizes ``sum t^2`` of the rest plus 2 per block
-    removed (a block of pure noise is worth keeping), at least two blocks staying; up to
-    :data:`MAX_STRETCHES` times. A straight wire passes untouched (a block beyond 4 sigma by
-    chance: about one image in 150). Returns the new ``keep`` and the length left out (px).
-    """
-    keep = keep.copy()
-    dropped = 0
-    for _ in range(MAX_STRETCHES):
-        idx = np.flatnonzero(keep)
-        idx = idx[np.argsort(along[idx])]
-        nb = len(idx) // BLOCK_PROFILES
-        if nb < 3:
-            break
-        blocks = np.array_split(idx, nb)
-        _, _, nrm, _ = _tls_line(pts[keep])
-        s = max(1.4826 / math.sqrt(2.0) * float(np.median(np.abs(np.diff(pts[idx] @ nrm)))),
-                1e-6)
-        t = _block_t(pts, keep, blocks, s)
-        if np.max(np.abs(t)) <= BLOCK_T_MAX:
-            break
-        best = (float(t @ t), 0, 0)  # (cost, first block, length)
-        for length in range(1, nb - 1):
-            for i in range(nb - length + 1):
-                mask = keep.copy()
-                mask[np.concatenate(blocks[i:i + length])] = False
-                t = _block_t(pts, mask, blocks, s)
-                cost = float(t @ t) + 2.0 * length
-                if cost < best[0]:
-                    best = (cost, i, length)
-        _, i, length = best
-        if length == 0:
-            break
-        gone = np.concatenate(blocks[i:i + length])
-        keep[gone] = False
-        dropped += len(gone)
-    return keep, dropped * step_px
 
 
 # --------------------------------------------------------------------------- affine
