@@ -295,6 +295,16 @@ def _solve3_ridge(A, b):
     return out
 
 
+#: Bounds on the edge profile's cos(4 theta) terms, which model the pixel's footprint (a box
+#: across an axis-aligned edge, a triangle across a diagonal one: the same variance, so a
+#: small width change). Width: |s4| <= S4_MAX s0 (fitted: <= 0.045 s0 down to 0.3 px blur).
+#: Fringe: |a4| <= max(|a0|, A4_FLOOR), so the fringe does not change sign with direction.
+#: Looser (0.2 s0, 0.5) they let sharp optics (0.4 px blur) fall into a false minimum: width
+#: ~0.35 px, no fringe, both terms at their bounds, pose errors up to 7 sigma (docs/stage1.md).
+S4_MAX = 0.05
+A4_FLOOR = 0.02
+
+
 @numba.njit(cache=True)
 def _profile_step(prof, Hg, bg, rc):
     """Damped, bounded Gauss-Newton step of the global edge profile ``(s0, a0, s4, a4)``
@@ -318,8 +328,9 @@ def _profile_step(prof, Hg, bg, rc):
     s = prof[0]
     prof[0] = min(max(s + 0.5 * st[0], max(0.8 * s, 0.2)), min(1.25 * s, 5.0))
     prof[1] = min(max(prof[1] + 0.5 * st[1], -0.5), 0.5)
-    prof[2] = min(max(prof[2] + 0.5 * st[2], -0.2 * prof[0]), 0.2 * prof[0])
-    prof[3] = min(max(prof[3] + 0.5 * st[3], -0.5), 0.5)
+    prof[2] = min(max(prof[2] + 0.5 * st[2], -S4_MAX * prof[0]), S4_MAX * prof[0])
+    a4 = max(abs(prof[1]), A4_FLOOR)
+    prof[3] = min(max(prof[3] + 0.5 * st[3], -a4), a4)
 
 
 @numba.njit(cache=True)
