@@ -488,15 +488,16 @@ def _segment_geometry(d, k, K, w, L, D, delta, s, e, t, normal, p0, dv, kap_px):
 
 
 def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
-            noise_coef=None) -> EdgeSegments | None:
+            noise_coef=None, band_px: float | None = None) -> EdgeSegments | None:
     """Stage A at one trial outline: every usable segment's edge offset with its variance.
 
     ``img`` float (H, W); ``geo`` the outline (:func:`outline_geometry`); ``settings`` the
     :class:`cadra.measure.silhouette_lsq.FitSettings`; ``exclude`` True on pixels not to use;
     ``profile0`` the starting edge profile ``(s0, a0, s4, a4)``; ``noise_coef`` a previous
-    noise model (a warm start: fewer rounds). None when fewer than 8 segments are usable.
-    """
-    lin, d, e, t = band_pixels(geo, settings.band_px, img.shape)
+    noise model (a warm start: fewer rounds); ``band_px`` overrides ``settings.band_px``
+    (``FitSettings.band_for``). None when fewer than 8 segments are usable."""
+    lin, d, e, t = band_pixels(geo, settings.band_px if band_px is None else band_px,
+                              img.shape)
     if len(lin) == 0:
         return None
     # the true outline bulges beyond each chord of a curved stretch by kappa l^2 t (1 - t) / 2

@@ -67,7 +67,10 @@ MAX_LATE_STEP_PX = 0.3
 class FitSettings:
     """Knobs of the silhouette fit (docs/stage1.md); defaults suit ~1 px blur."""
 
-    band_px: float = 3.5            # half-width of the pixel band about the outline
+    band_px: float = 3.5            # half-width of the pixel band about the outline, at least
+    #: ... and at least this many fitted edge widths: a wide edge (2 px optics blur) in a
+    #: 3.5 px band left its sigma 2-3x too large (docs/stage1.md, "Wide edges")
+    band_widths: float = 3.3
     segment_px: float = 8.0         # contour segment length
     corner_clear_px: float = 3.0    # segments this close to a sharp corner are not used
     min_fill: float = 0.6           # a segment needs this fraction of its expected pixels
@@ -86,6 +89,10 @@ class FitSettings:
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
     warm_rounds: int = 2            # stage-A outer rounds warm-started from the last pose
     dark_level: str = "tied"        # "tied": D = r L + c image-wide; "segment": D per segment
+
+    def band_for(self, edge_width_px: float) -> float:
+        """The band's half-width (px) for an edge of this fitted width (px)."""
+        return max(self.band_px, self.band_widths * edge_width_px)
 
     def __post_init__(self):
         if self.covariance not in ("correlated", "scaled", "sandwich"):
@@ -188,18 +195,28 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     it = 0
     outside = 0.0
     diverged = False
+    band = settings.band_for(float(profile[0]))
     A_lin = projection.from_plane_jacobian(pose[:2])   # plane (m) -> pixel displacement
     for it in range(1, settings.max_iter + 1):  # noqa: B007 (it is reported)
         A_lin = projection.from_plane_jacobian(pose[:2])
         poly = outline_px(template, pose, projection)
-        inside = ((poly[:, 0] >= settings.band_px) & (poly[:, 0] <= W - 1 - settings.band_px)
-                  & (poly[:, 1] >= settings.band_px) & (poly[:, 1] <= H - 1 - settings.band_px))
+        b0 = settings.band_px
+        inside = ((poly[:, 0] >= b0) & (poly[:, 0] <= W - 1 - b0)
+                  & (poly[:, 1] >= b0) & (poly[:, 1] <= H - 1 - b0))
         outside = 1.0 - float(inside.mean())
         if outside > 0.5:
             return _failed(f"model mostly out of frame ({outside:.0%} of its outline)", pose,
                            outside)
+        # the band follows the fitted edge width, trusted only with the whole outline in frame
+        # (cut by the frame's edge, a fit's width can be anything); a band widened for a wider
+        # edge than the start's: stage A cold again (its noise model and profile settle on the
+        # new band's pixels), and not converged on this pass
+        band_prev, band = band, (settings.band_for(float(profile[0])) if outside == 0.0
+                                 else b0)
+        widened = band > 1.1 * band_prev
         geo = outline_geometry(poly, settings.corner_clear_px)
-        seg = stage_a(img, geo, settings, exclude, profile, noise_coef)
+        seg = stage_a(img, geo, settings, exclude, profile, None if widened else noise_coef,
+                      band_px=band)
         if seg is None:
             return _failed("too few usable edge segments", pose, outside)
         profile = seg.profile
@@ -269,7 +286,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         # converged: the step is below the tolerance or a small fraction of the pose's own
         # sigma (re-banding at a new pose re-draws the noise; steps below that are jitter)
         sig_px = math.sqrt(max(np.trace(A_lin @ cov[:2, :2] @ A_lin.T), 0.0))
-        if move < max(settings.tol_px, 0.5 * sig_px):
+        if move < max(settings.tol_px, 0.5 * sig_px) and not widened:
             converged = True
             break
     if settings.covariance == "correlated" and not diverged:
