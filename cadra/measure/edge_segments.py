@@ -273,7 +273,6 @@ def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P,
     return chi2
 
 
-
 @numba.njit(cache=True)
 def _solve3_ridge(A, b):
     """Solve a symmetric 3x3 system (Cramer's rule) with a tiny relative ridge: a one-sided
@@ -295,12 +294,9 @@ def _solve3_ridge(A, b):
     return out
 
 
-#: Bounds on the edge profile's cos(4 theta) terms, which model the pixel's footprint (a box
-#: across an axis-aligned edge, a triangle across a diagonal one: the same variance, so a
-#: small width change). Width: |s4| <= S4_MAX s0 (fitted: <= 0.045 s0 down to 0.3 px blur).
-#: Fringe: |a4| <= max(|a0|, A4_FLOOR), so the fringe does not change sign with direction.
-#: Looser (0.2 s0, 0.5) they let sharp optics (0.4 px blur) fall into a false minimum: width
-#: ~0.35 px, no fringe, both terms at their bounds, pose errors up to 7 sigma (docs/stage1.md).
+#: Bounds on the profile's cos(4 theta) terms (the pixel's footprint: a box or a triangle of
+#: one variance, so small): |s4| <= S4_MAX s0, |a4| <= max(|a0|, A4_FLOOR). Looser, sharp
+#: optics fell into a false minimum (docs/stage1.md, "Sharp optics").
 S4_MAX = 0.05
 A4_FLOOR = 0.02
 
@@ -367,10 +363,15 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
     w = np.ones(n)
     coef = coef_in.copy()
     if has_coef:
+        # warm start: floored at a fifth of the model's mean variance, as in the noise pass
+        # (its quadratic can dip below 0 mid-range: docs/stage1.md, "A strong fringe")
+        vbar = 0.0
         for j in range(n):
             m0 = min(max(I[j], 0.0), 1.0)
-            w[j] = 1.0 / max(coef[0] + coef[1] * m0 + coef[2] * m0 * m0,
-                             0.2 * max(coef[0] + 0.5 * coef[1] + 0.25 * coef[2], 1e-12))
+            w[j] = coef[0] + coef[1] * m0 + coef[2] * m0 * m0
+            vbar += w[j] / n
+        for j in range(n):
+            w[j] = 1.0 / max(w[j], 0.2 * vbar, 1e-12)
     A, b, Hg, bg, G, P, Hh, Hp = gn_workspace(n, K, tied)
     reuse = False   # G, P, Hh, Hp hold the current state's profile (after a noise-model pass)
     chi2 = 0.0
@@ -496,8 +497,7 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     ``profile0`` the starting edge profile ``(s0, a0, s4, a4)``; ``noise_coef`` a previous
     noise model (a warm start: fewer rounds); ``band_px`` overrides ``settings.band_px``
     (``FitSettings.band_for``). None when fewer than 8 segments are usable."""
-    lin, d, e, t = band_pixels(geo, settings.band_px if band_px is None else band_px,
-                              img.shape)
+    lin, d, e, t = band_pixels(geo, band_px or settings.band_px, img.shape)
     if len(lin) == 0:
         return None
     # the true outline bulges beyond each chord of a curved stretch by kappa l^2 t (1 - t) / 2
