@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cadra.body import capsule
+from cadra.body import capsule, sphere
 from cadra.measure.edge_segments import outline_geometry, stage_a
 from cadra.measure.noise_correlation import noise_autocovariance, segment_covariance
 from cadra.measure.silhouette_lsq import FitSettings
@@ -124,13 +124,14 @@ def test_pose_sigma_covers_the_scatter_under_coarse_grain():
     """One M2 view rendered 40 times with coarse grain (sigma 0.03 of the intensity, 3 px
     correlation): the reported sigmas against the errors' scatter about their mean. Offsets
     taken as independent ("scaled") report sigmas ~20-30 % small; with the measured
-    correlation ("correlated", the default) within 0.85-1.2 (the scatter's own 1 sigma is
+    correlation ("correlated"), and with the offsets' covariance predicted from the image's
+    noise ("predicted", the default), within 0.85-1.2 (the scatter's own 1 sigma is
     ~0.11)."""
     cfg = RenderConfig(film_grain_sigma=0.03, film_grain_length_px=3.0)
     case = random_view_case(M2, np.random.default_rng(3), cfg)
     full = float((1 << case.config.bit_depth) - 1)
     ratio = {}
-    for cov in ("scaled", "correlated"):
+    for cov in ("scaled", "correlated", "predicted"):
         st = FitSettings(covariance=cov)
         E, S = [], []
         for i in range(40):
@@ -141,6 +142,30 @@ def test_pose_sigma_covers_the_scatter_under_coarse_grain():
             E.append(e)
             S.append(s)
         ratio[cov] = np.std(E, axis=0) / np.mean(S, axis=0)
-    assert np.all((ratio["correlated"] > 0.85) & (ratio["correlated"] < 1.2)), ratio
+    for cov in ("correlated", "predicted"):
+        assert np.all((ratio[cov] > 0.85) & (ratio[cov] < 1.2)), ratio
     assert ratio["scaled"].max() > 1.25, ratio   # the case does test the correlation
     assert math.isfinite(ratio["correlated"].sum())
+
+
+def test_predicted_sigma_keeps_a_small_model_honest():
+    """A 6 mm sphere (~47 px across, ~19 edge segments): the offsets' reduced chi^2 over so
+    few segments scatters widely, and a sigma scaled by it ("correlated") fell to 0.43 of its
+    median on one view, 4.2 sigma off; over these 60 views the errors were 1.22 of their
+    sigma. The covariance predicted from the image's noise, scaled only up ("predicted", the
+    default): 1.05, the smallest sigma 0.80 of the median."""
+    body = sphere(0.006)
+    rng = np.random.default_rng(3)
+    out = {"correlated": ([], []), "predicted": ([], [])}
+    for _ in range(60):
+        case = random_view_case(body, rng, RenderConfig())
+        for cov, (Z, S) in out.items():
+            fit = measure_case(case, body, settings=FitSettings(covariance=cov))
+            e, s = case_errors(case, fit, body)
+            Z.append(np.divide(e, s))
+            S.append(s[0])
+    z = {cov: float(np.sqrt(np.mean(np.square(Z)))) for cov, (Z, _) in out.items()}
+    low = {cov: min(S) / float(np.median(S)) for cov, (_, S) in out.items()}
+    assert z["correlated"] > 1.15 and low["correlated"] < 0.5, (z, low)  # the case is a test
+    assert 0.85 < z["predicted"] < 1.12, z
+    assert low["predicted"] > 0.7, low

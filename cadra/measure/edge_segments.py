@@ -462,7 +462,7 @@ class EdgeSegments:
     noise_coef: np.ndarray    # variance model v0 + v1 m + v2 m^2 (m = model intensity)
     profile: np.ndarray       # global edge profile (s0, a0, s4, a4), see _gn_accumulate
     #: per-pixel arrays for the centroid method, and (``FitSettings.covariance`` =
-    #: "correlated") ``state``, stage A's final state for measure.noise_correlation
+    #: "correlated" or "predicted") ``state``, stage A's final state for noise_correlation
     pixels: dict = field(default_factory=dict)
 
 
@@ -557,7 +557,7 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
                                             geo.normal, geo.p0, geo.d, kap_all[use])
     nn = np.hypot(nx, ny)
     pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
-    if settings.covariance == "correlated":
+    if settings.covariance in ("correlated", "predicted"):
         # the final state, for measure.noise_correlation (the final pose's sigma only)
         pixels["state"] = (lin[use], I_u, d_u, k, w, L, D, delta, prof, c4,
                            float(settings.fringe_width_ratio), settings.dark_level == "tied",

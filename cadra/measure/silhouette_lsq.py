@@ -53,7 +53,11 @@ from scipy.spatial import cKDTree
 
 from cadra.measure.centroid import centroid_pose
 from cadra.measure.edge_segments import outline_geometry, stage_a
-from cadra.measure.noise_correlation import noise_autocovariance, segment_correlation
+from cadra.measure.noise_correlation import (
+    noise_autocovariance,
+    segment_correlation,
+    segment_covariance,
+)
 from cadra.measure.template import Template, outline_px, pose_px
 from cadra.optics.projection import Projection
 
@@ -78,12 +82,13 @@ class FitSettings:
     tol_px: float = 2e-4            # stop when the pose moves less than this (px at the rim)
     outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
     hac_lags: int = 3               # Newey-West lags over contour-ordered segments
-    #: "correlated": "scaled" with the offsets' correlation from the image's correlated
-    #: noise (measure.noise_correlation; default); "scaled": the formal covariance
-    #: times the segment fit's reduced chi^2, offsets independent; "sandwich": Newey-West over
-    #: the contour-ordered segments (the pre-issue-18 sigma)
-    covariance: str = "correlated"
-    noise_lag_px: int = 5           # "correlated": pixel-noise correlation measured to this lag
+    #: "predicted" (default): the offsets' covariance predicted from the image's measured
+    #: noise (measure.noise_correlation), scaled up, never down, by their reduced chi^2
+    #: about it; "correlated": the formal covariance times the offsets' reduced chi^2, with
+    #: the predicted correlation between segments; "scaled": that without the correlation;
+    #: "sandwich": Newey-West over the contour-ordered segments (the pre-issue-18 sigma)
+    covariance: str = "predicted"
+    noise_lag_px: int = 5           # pixel-noise correlation measured to this lag
     fit_curvature_bias: bool = True
     fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
@@ -95,9 +100,9 @@ class FitSettings:
         return max(self.band_px, self.band_widths * edge_width_px)
 
     def __post_init__(self):
-        if self.covariance not in ("correlated", "scaled", "sandwich"):
-            raise ValueError(f"FitSettings.covariance: expected 'correlated', 'scaled' or "
-                             f"'sandwich', got {self.covariance!r}")
+        if self.covariance not in ("predicted", "correlated", "scaled", "sandwich"):
+            raise ValueError(f"FitSettings.covariance: expected 'predicted', 'correlated', "
+                             f"'scaled' or 'sandwich', got {self.covariance!r}")
         if self.dark_level not in ("tied", "segment"):
             raise ValueError(f"FitSettings.dark_level: expected 'tied' or 'segment', got "
                              f"{self.dark_level!r}")
@@ -256,8 +261,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         ew = (y[keep] - X[keep] @ beta) * np.sqrt(wts[keep])
         bread = np.linalg.pinv(Xw.T @ Xw)
         n_k = int(keep.sum())
-        if settings.covariance in ("scaled", "correlated"):
-            # ("correlated" adds the offsets' correlation after the last iteration)
+        if settings.covariance != "sandwich":
+            # ("correlated" and "predicted" are computed after the last iteration)
             cov_b = bread * float(ew @ ew) / max(n_k - npar, 1)
         else:
             meat = _newey_west(Xw, ew, settings.hac_lags)
@@ -289,12 +294,21 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         if move < max(settings.tol_px, 0.5 * sig_px) and not widened:
             converged = True
             break
-    if settings.covariance == "correlated" and not diverged:
+    if settings.covariance in ("correlated", "predicted") and not diverged:
         # the last iteration's offsets are correlated through the image's correlated noise
         # (film grain): the same scaled covariance, with that correlation between segments
         acov = noise_autocovariance(img, geo, exclude, seg.noise_coef, settings.noise_lag_px)
-        R = segment_correlation(seg, W, acov)[np.ix_(keep, keep)]
-        cov_b = bread @ (Xw.T @ R @ Xw) @ bread * float(ew @ ew) / max(n_k - npar, 1)
+        if settings.covariance == "correlated":
+            R = segment_correlation(seg, W, acov)[np.ix_(keep, keep)]
+            cov_b = bread @ (Xw.T @ R @ Xw) @ bread * float(ew @ ew) / max(n_k - npar, 1)
+        else:
+            # the offsets' covariance predicted from the image's noise (variances and
+            # correlations), scaled up, never down, by the offsets' reduced chi^2 about it
+            C = segment_covariance(seg, W, acov)[np.ix_(keep, keep)]
+            XV = X[keep] * wts[keep][:, None]
+            e_k = y[keep] - X[keep] @ beta
+            chi2p = float(np.sum(e_k ** 2 / np.maximum(np.diag(C), 1e-300)))
+            cov_b = bread @ (XV.T @ C @ XV) @ bread * max(1.0, chi2p / max(n_k - npar, 1))
         idx = [0, 1, 2] if fit_phi else [0, 1]
         cov[np.ix_(idx, idx)] = cov_b[: len(idx), : len(idx)]
     ref_px, ang_px = pose_px(pose, projection)

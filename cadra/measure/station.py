@@ -192,7 +192,8 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         # (its sigma is not used: the offsets' correlation is left to the final fit)
         settings_used = settings if final else replace(
             settings, max_iter=2,
-            covariance="scaled" if settings.covariance == "correlated" else settings.covariance)
+            covariance=("scaled" if settings.covariance in ("correlated", "predicted")
+                        else settings.covariance))
     else:
         wires, affine = prev.wires, prev.affine
         pose0 = prev.fit.pose
