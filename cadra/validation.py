@@ -21,7 +21,7 @@ from cadra.measure.template import make_template
 from cadra.synthetic.cases import ViewCase
 from cadra.synthetic.render_config import RenderConfig
 
-__all__ = ["NO_INVERSE_CRIME", "case_errors", "measure_case"]
+__all__ = ["IMAGE_FORMATION", "NO_INVERSE_CRIME", "case_errors", "measure_case"]
 
 #: Render settings the measurement does not model (no "inverse crime"): Airy-like and disk
 #: PSFs, twice the diffraction fringe, coarser film grain, heavy clutter (docs/stage1.md).
@@ -32,6 +32,16 @@ NO_INVERSE_CRIME: dict[str, RenderConfig] = {
     "coarse_grain": RenderConfig(film_grain_sigma=0.02, film_grain_length_px=2.0),
     "heavy_clutter": RenderConfig(scratches=20, dust=300, bow_shock_contrast=0.2,
                                   wake_contrast=0.1),
+}
+
+
+#: Image formations away from the default that stage one does model (it fits the edge width
+#: and the fringe), each of which once broke it (docs/stage1.md, "Sharp optics", "Wide
+#: edges", "A strong fringe"): 0.4 px and 2 px optics blur, 2.5x the diffraction fringe.
+IMAGE_FORMATION: dict[str, RenderConfig] = {
+    "sharp_optics": RenderConfig(optics_blur_sigma_px=0.4),
+    "wide_blur": RenderConfig(optics_blur_sigma_px=2.0),
+    "strong_fringe": RenderConfig(diffraction_fringe=0.25),
 }
 
 

@@ -15,6 +15,9 @@ Sections (all on the M2 capsule, 3.556 cm = 280 px across, and a sphere of the s
    same images, and its error over CADRA's;
 3. "no inverse crime": renders with settings the measurement does not model (Airy-like and
    disk PSFs, a stronger diffraction fringe, coarser film grain, heavy clutter);
+   image formations it does model but away from the default (cadra.validation.IMAGE_FORMATION:
+   0.4 px and 2 px optics blur, 2.5x the fringe) and a small model (a 6 mm sphere, ~47 px),
+   each once broken; their sigma / rms in ``formation_sigma_ratio_min/max``;
 4. speed: one 16-station two-view shot (32 images of 1600x1200) measured on one core, against
    a plain read + cv2.GaussianBlur pass over the same files.
 
@@ -116,11 +119,11 @@ def _ratio_se(B, E, n_boot=400, seed=0):
 def accuracy(n_default, n_variant, n_crb):
     from cadra.body import capsule, sphere
     from cadra.synthetic.render import RenderConfig
-    from cadra.validation import NO_INVERSE_CRIME
+    from cadra.validation import IMAGE_FORMATION, NO_INVERSE_CRIME
 
     bodies = {"sphere": sphere(0.03556), "capsule": capsule("M2")}
     out = {}
-    variants = NO_INVERSE_CRIME
+    variants = {**NO_INVERSE_CRIME, **IMAGE_FORMATION}
     for name, body in bodies.items():
         t0 = time.perf_counter()
         E, S, B, T, kept = _cases(body, n_default, RenderConfig(),
@@ -141,6 +144,11 @@ def accuracy(n_default, n_variant, n_crb):
             r["variants"][vname] = {"bias": VE.mean(axis=0).tolist(), "rms": _rms(VE).tolist(),
                                     "sigma_ratio": (_rms(VS) / _rms(VE)).tolist()}
         out[name] = r
+    # a small model: a 6 mm sphere, ~47 px across, ~19 edge segments
+    VE, VS, *_ = _cases(sphere(0.006), n_variant, RenderConfig(), seed=23)
+    out["sphere"]["variants"]["small_6mm"] = {
+        "bias": VE.mean(axis=0).tolist(), "rms": _rms(VE).tolist(),
+        "sigma_ratio": (_rms(VS) / _rms(VE)).tolist()}
     return out
 
 
@@ -231,6 +239,10 @@ def main() -> int:
     s, c = acc["sphere"], acc["capsule"]
     variant_rms = {f"{b}_{k}_rms_max": max(v["rms"]) for b, r in acc.items()
                    for k, v in r["variants"].items()}
+    from cadra.validation import IMAGE_FORMATION
+
+    formation = [x for r in acc.values() for k, v in r["variants"].items()
+                 if k in IMAGE_FORMATION or k == "small_6mm" for x in v["sigma_ratio"]]
     result = {
         "sphere_center_rms_px": max(s["rms"]),
         "sphere_center_bias_px": max(abs(x) for x in s["bias"]),
@@ -249,6 +261,8 @@ def main() -> int:
         "sigma_ratio_max": max(s["sigma_ratio"] + c["sigma_ratio"]),
         "renders_per_body": s["n"],
         **{k: round(v, 6) for k, v in variant_rms.items()},
+        "formation_sigma_ratio_min": min(formation),
+        "formation_sigma_ratio_max": max(formation),
         "shot_seconds_one_core": spd["shot_seconds_one_core"],
         "shot_seconds_one_core_median": spd["shot_seconds_one_core_median"],
         "shot_seconds_one_core_with_outputs": spd["shot_seconds_one_core_with_outputs"],
