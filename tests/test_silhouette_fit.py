@@ -129,9 +129,9 @@ def test_sharp_optics_one_edge_width_and_honest_errors():
 
 def test_wide_edges_band_follows_the_width():
     """A wide edge (2 px optics blur, fitted width ~1.8 px) in the default 3.5 px band was
-    truncated and its sigma came out ~1.9x the errors (sigma / rms 0.53-0.58 on 200 renders);
-    the band now spans >= 3.3 fitted widths (0.85-0.92 on the same renders). Pooled over u, v
-    and the axis of these 60 renders (sampling error ~5 %): 0.50 before, 0.82 now."""
+    truncated and its sigma came out ~1.9x the errors (errors / sigma 0.53-0.58 on 200
+    renders); the band now spans >= 3.3 fitted widths (0.85-0.92 on the same renders). Pooled
+    over u, v and the axis of these 60 renders (sampling error ~5 %): 0.50 before, 0.82 now."""
     assert FitSettings().band_for(0.76) == 3.5 and FitSettings().band_for(2.0) == 6.6
     E, S = _run(M2, RenderConfig(optics_blur_sigma_px=2.0), 60, seed=606)
     z = np.sqrt(np.mean(np.square(E / S)))
