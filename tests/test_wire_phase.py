@@ -76,7 +76,7 @@ def quiet_lines():
         station, name = VIEWS[k % 2]
         view = FAC.view(station, name)
         M = true_affine(view, 100 * station + 1000 + k)
-        res = measure_wires(make_image(view, M, QUIET, seed=1000 + k), view)
+        res = measure_wires(make_image(view, M, QUIET, seed=1000 + k), view, profile_model=False)
         assert res.ok and res.n_found == 4
         out += zip(true_offset_px(view, res, M), [f.sigma_sys_px for f in res.wires],
                    drift_px(view, M), strict=True)

@@ -75,6 +75,11 @@ def quality_rows(results) -> pd.DataFrame:
                            wire_residuals_px="; ".join(
                                f"{x.name}={x.residual_px:+.4f}" if x.found else f"{x.name}=missing"
                                for x in w.wires))
+                fm = w.formation   # the wires' image formation (profile model), or centroids
+                row.update(wire_centres="profile model" if fm is not None else "centroid",
+                           wire_blur_before_px=fm.sigma_c if fm is not None else math.nan,
+                           wire_blur_after_px=fm.sigma_d if fm is not None else math.nan,
+                           wire_fringe_width_px=fm.fringe_w if fm is not None else math.nan)
             f = v.fit
             if f is not None and f.ok:
                 row.update(

@@ -22,6 +22,9 @@ BLOCK_T_MAX = 4.0
 #: wire keeps over a block (<= ~0.0075 px, :mod:`cadra.measure.wires` step 4), so that
 #: noise-free images pass.
 BLOCK_SYS_PX = 0.0075
+#: ... and for the profile model's centres (:mod:`cadra.measure.wire_profile`), which carry
+#: no phase bias: their formation's error, <= ~0.0015 px on a line (docs/stage1.md).
+MODEL_BLOCK_SYS_PX = 0.0015
 #: Stretches left out of one wire at most (:func:`drop_bent_stretches`).
 MAX_STRETCHES = 2
 
@@ -41,17 +44,20 @@ def tls_line(pts: np.ndarray):
     return m, t, n, q @ n
 
 
-def _block_t(pts: np.ndarray, mask: np.ndarray, blocks: list, s: float) -> np.ndarray:
+def _block_t(pts: np.ndarray, mask: np.ndarray, blocks: list, s: float,
+             sys_px: float) -> np.ndarray:
     """Each block's (index arrays inside ``mask``) mean residual about the total least-squares
-    line of ``pts[mask]``, in its sigma; ``s`` the sigma of one centre."""
+    line of ``pts[mask]``, in its sigma; ``s`` the sigma of one centre, ``sys_px`` a bias
+    a block may share."""
     m, _, nrm, _ = tls_line(pts[mask])
     r = (pts - m) @ nrm
-    return np.array([float(r[b].mean()) / math.sqrt(s * s / len(b) + BLOCK_SYS_PX**2)
+    return np.array([float(r[b].mean()) / math.sqrt(s * s / len(b) + sys_px**2)
                      for b in blocks if mask[b[0]]])
 
 
 def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
-                         step_px: float) -> tuple[np.ndarray, float]:
+                         step_px: float, sys_px: float = BLOCK_SYS_PX
+                         ) -> tuple[np.ndarray, float]:
     """Leave out the stretches of a wire whose centres stray from its line together.
 
     One profile's clipping cannot see a bias of a fraction of its noise that a whole stretch
@@ -59,13 +65,15 @@ def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
     (0.1 px over 600 px of a 1,200-px wire, 10 sigma of the line, in a supersonic shot; with
     weaker lobes either side). The kept centres, ordered along the wire, are cut into blocks
     of :data:`BLOCK_PROFILES`, each with its mean residual ``t`` in its sigma (one centre's
-    noise from neighbours' differences, so blind to the shared bias, plus
-    :data:`BLOCK_SYS_PX`). When a block is beyond :data:`BLOCK_T_MAX`, the contiguous run of
-    blocks is removed whose removal minimizes ``sum t^2`` of the rest plus 2 per block
-    removed (a block of pure noise is worth keeping), at least two blocks staying; up to
-    :data:`MAX_STRETCHES` times. A straight wire passes untouched (no wire cut in 24
-    default-realism views, ``tests/test_wire_shock.py``; ``tools/validate_wire_sigma.py``'s
-    400 renders unchanged). Returns the new ``keep`` and the length left out (px).
+    noise from neighbours' differences, so blind to the shared bias, plus ``sys_px``, the
+    centres' own bias a block may share: :data:`BLOCK_SYS_PX` for centroids,
+    :data:`MODEL_BLOCK_SYS_PX` for the profile model's centres). When a block is beyond
+    :data:`BLOCK_T_MAX`, the contiguous run of blocks is removed whose removal minimizes
+    ``sum t^2`` of the rest plus 2 per block removed (a block of pure noise is worth
+    keeping), at least two blocks staying; up to :data:`MAX_STRETCHES` times. A straight
+    wire passes untouched (no wire cut in 24 default-realism views,
+    ``tests/test_wire_shock.py``; ``tools/validate_wire_sigma.py``'s 400 renders
+    unchanged). Returns the new ``keep`` and the length left out (px).
     """
     keep = keep.copy()
     dropped = 0
@@ -79,7 +87,7 @@ def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
         _, _, nrm, _ = tls_line(pts[keep])
         s = max(1.4826 / math.sqrt(2.0) * float(np.median(np.abs(np.diff(pts[idx] @ nrm)))),
                 1e-6)
-        t = _block_t(pts, keep, blocks, s)
+        t = _block_t(pts, keep, blocks, s, sys_px)
         if np.max(np.abs(t)) <= BLOCK_T_MAX:
             break
         best = (float(t @ t), 0, 0)  # (cost, first block, length)
@@ -87,7 +95,7 @@ def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
             for i in range(nb - length + 1):
                 mask = keep.copy()
                 mask[np.concatenate(blocks[i:i + length])] = False
-                t = _block_t(pts, mask, blocks, s)
+                t = _block_t(pts, mask, blocks, s, sys_px)
                 cost = float(t @ t) + 2.0 * length
                 if cost < best[0]:
                     best = (cost, i, length)

@@ -23,12 +23,10 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    half-width ``h + 2`` re-centred on the estimate (fractional end weights) until it settles,
    all profiles at once (vectorized). Any normalized symmetric blur, continuous or discrete,
    and the diffraction fringe (a Laplacian) leave this centroid unchanged, so no model of the
-   line's profile is needed. (A least-squares fit of a blurred-bar model was tried: ~4x less
-   noisy, but biased by up to +-0.03 px depending on the sub-pixel phase, because the
-   renderer's wires are not band-limited. The centroid's own phase bias, from the
-   pixel-centre weighting of the wire's two partly covered pixels, is <= ~0.0075 px for the
-   1.97 px HFFAF wire and averages out along any wire that drifts across the pixel grid,
-   but not along one parallel to the grid: step 7.)
+   line's profile is needed. Its own phase bias, from the pixel-centre weighting of the
+   wire's two partly covered pixels, is <= ~0.0075 px for the 1.97 px HFFAF wire and averages
+   out along any wire that drifts across the pixel grid, but not along one parallel to the
+   grid (step 7). These centroids find the wires (steps 5-6); step 8 then replaces them.
 5. **Rejection.** A profile is dropped when its window touches ``exclude`` (the model), another
    wire's predicted crossing or the scanner reference mark; when its depth is not that of an
    opaque wire (gaps, dust, a missing wire); when its centroid does not settle near the coarse
@@ -53,12 +51,24 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    third only an offset), the affine is solved with a prior that the image differs from the
    nominal map by a similarity (film placed with a shift, rotation and uniform scale, no
    shear or anisotropy); ``reason`` then says so (a warning, ``ok`` stays True).
-7. **Phase bias.** The centroid errs by a periodic function of the wire's sub-pixel phase
-   (step 4). A line that keeps one phase along its length keeps that error whole, ~0.004 px
-   rms, as large as its noise sigma; the affine's sigma without it was ~0.87 of its error at
-   the model. :mod:`cadra.measure.wire_phase` sizes the bias from the wires that sweep
-   phases in this image and adds, per wire, the covariance it leaves in the two Gauss points
-   (``WireFit.sigma_sys_px`` the offset's share; ``WireMeasurement.phase_gain`` the size).
+7. **Phase bias (centroids).** The centroid errs by a periodic function of the wire's
+   sub-pixel phase (step 4). A line that keeps one phase along its length keeps that error
+   whole, ~0.004 px rms, as large as its noise sigma; the affine's sigma without it was
+   ~0.87 of its error at the model. :mod:`cadra.measure.wire_phase` sizes the bias from the
+   wires that sweep phases in this image and adds, per wire, the covariance it leaves in the
+   two Gauss points (``WireFit.sigma_sys_px`` the offset's share;
+   ``WireMeasurement.phase_gain`` the size).
+8. **Profile model** (``profile_model=True``, the default). A least-squares fit of a
+   blurred-bar model is ~2.7x less noisy than the centroid, but biased by up to +-0.035 px
+   with the sub-pixel phase unless the model forms the profile as the image did: blur before
+   the pixel integration, the pixel, blur after it (:mod:`cadra.measure.wire_profile`). The
+   image's formation and each wire's width are fitted from the clean profiles the centroid
+   lines kept; every clean profile's centre is then fitted with it and steps 5-6 run again on
+   those centres (the straightness test allowing the model's ~0.0015 px instead of the
+   centroid's 0.0075 px). The formation's covariance, through each wire's centre
+   sensitivity, is added to the affine's covariance; no phase term is. Sharp wires (fitted
+   total blur < :data:`MIN_MODEL_BLUR_PX`) keep the centroids. ``WireMeasurement.formation``
+   says which (None: centroids).
 
 :func:`measure_wires` is a pure function of plain arrays; its results are frozen dataclasses of
 floats, tuples and numpy arrays (picklable, for a process pool). :func:`wire_mask` marks the
@@ -74,12 +84,23 @@ import cv2
 import numpy as np
 
 from cadra.facility.reference import View
+from cadra.measure.wire_affine import corner_sigma_px, formation_cov, solve_affine_gls
 from cadra.measure.wire_phase import line_phases, phase_gain, systematic_cov
-from cadra.measure.wire_straightness import drop_bent_stretches, tls_line
+from cadra.measure.wire_profile import Formation, WireProfiles, fit_centres, fit_formation
+from cadra.measure.wire_straightness import (
+    BLOCK_SYS_PX,
+    MODEL_BLOCK_SYS_PX,
+    drop_bent_stretches,
+    tls_line,
+)
 from cadra.optics.projection import Projection
 
 __all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_mask"]
 
+#: Below this total blur (px) of the wires' fitted formation the profile model is not used
+#: (the centroid and its phase term are): at 0.4 px optics blur a few per cent error in the
+#: fitted blur moved lines by several sigma (docs/stage1.md, "The wires' profile model").
+MIN_MODEL_BLUR_PX = 0.55
 #: Fewest clean profiles for a wire to count as found.
 MIN_PROFILES = 10
 #: ... and at least this fraction of its usable profiles (inside the image, not excluded).
@@ -95,9 +116,6 @@ _DETECT_ARM = 4
 CROSSING_CLEARANCE_PX = 18.0
 #: Extra clearance (px) around the scanner reference mark.
 MARK_CLEARANCE_PX = 6.0
-#: Prior 1-sigma of the non-similarity part (anisotropy, shear; relative) of the map from
-#: the nominal image to this image, used only when the wires leave a direction undetermined.
-SIMILARITY_PRIOR_REL = 2e-5
 #: A wire-only solution is "poorly determined" when the propagated 1-sigma position error at
 #: an image corner exceeds this (px).
 MAX_CORNER_SIGMA_PX = 0.02
@@ -175,6 +193,7 @@ class WireMeasurement:
         silhouette fit and the combination use), or None.
     phase_gain : (g_hat, sigma_g, mean g^2): how much of the sharp wire's pixel-sampling
         bias the image shows (step 7 of the module docstring); NaNs if no affine.
+    formation : the wires' image formation fitted with ``profile_model`` (else None).
     """
 
     ok: bool
@@ -187,6 +206,7 @@ class WireMeasurement:
     n_found: int
     projection: Projection | None = None
     phase_gain: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    formation: Formation | None = None
 
     def position_sigma_m(self, uv) -> np.ndarray:
         """1-sigma (a, b) (m) of the view-plane image of pixel ``uv`` from the affine's
@@ -256,8 +276,10 @@ def _not_found(name: str, why: str, n_rejected: int = 0) -> WireFit:
 
 
 def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
-                 exclude, search_px: float, step_px: float, half_window: int) -> WireFit:
-    """Find one wire near its predicted segment ``seg``; see the module docstring."""
+                 exclude, search_px: float, step_px: float, half_window: int,
+                 collect=None) -> WireFit:
+    """Find one wire near its predicted segment ``seg``; see the module docstring.
+    ``collect``, if given, receives the found wire's clean profiles (:class:`_Profiles`)."""
     H, W = img.shape
     p0, p1 = np.asarray(seg[0], float), np.asarray(seg[1], float)
     d = p1 - p0
@@ -353,6 +375,35 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
                                 f"{max(MIN_PROFILES, math.ceil(MIN_USED_FRACTION * n_cand))}; "
                                 f"no wire-like dark line along {frac:.0%} of its predicted "
                                 f"path)", n_rejected=int(inside.sum()) - n_use)
+    fit, keep = _line_from_centres(name, c, fixed, ax, use, step_px, int(inside.sum()))
+    if collect is not None and fit.found:
+        collect.append(_Profiles(WireProfiles(P[use], widx[use, 0].astype(float), c[use], h,
+                                              slope, cos_t), fixed[use], keep[use], ax,
+                                 int(inside.sum())))
+    return fit
+
+
+@dataclass(frozen=True, eq=False)
+class _Profiles:
+    """A found wire's clean profiles from the first pass (for the profile model): the
+    profiles, their fixed coordinates, which of them the centroid line kept, the profile
+    axis and the number of profiles inside the image."""
+
+    wp: WireProfiles
+    fixed: np.ndarray
+    kept: np.ndarray
+    ax: int
+    n_inside: int
+
+
+def _line_from_centres(name: str, c: np.ndarray, fixed: np.ndarray, ax: int,
+                       use: np.ndarray, step_px: float, n_inside: int,
+                       sys_px: float = BLOCK_SYS_PX):
+    """The wire's line from its profile centres ``c`` (profile axis ``ax``; ``use``: the
+    clean ones): iterative 3-sigma clipping, the bent stretches left out (step 5; ``sys_px``
+    the bias a stretch of centres may share without being bent). Returns
+    (WireFit, the centres kept)."""
+    other = 1 - ax
     pts = np.empty((len(c), 2))
     pts[:, ax] = c
     pts[:, other] = fixed
@@ -365,22 +416,22 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
         if new.sum() < MIN_PROFILES or np.array_equal(new, keep):
             break
         keep = new
-    keep, dropped = drop_bent_stretches(pts, keep, fixed, step_px)
+    keep, dropped = drop_bent_stretches(pts, keep, fixed, step_px, sys_px)
     m, t, nrm, res = tls_line(pts[keep])
     n_used = int(keep.sum())
     rms_px = float(np.sqrt(np.sum(res ** 2) / max(n_used - 2, 1)))
     if rms_px > MAX_LINE_RMS_PX:
         return _not_found(name, f"no straight dark line along its predicted path (centres "
                                 f"scatter {rms_px:.2f} px > {MAX_LINE_RMS_PX} px)",
-                          n_rejected=int(inside.sum()) - n_used)
+                          n_rejected=n_inside - n_used), keep
     along = (pts[keep] - m) @ t
     ends = (tuple(map(float, m + along.min() * t)), tuple(map(float, m + along.max() * t)))
     sigma_off = rms_px / math.sqrt(n_used)
     return WireFit(name=name, found=True, reason="", point_px=(float(m[0]), float(m[1])),
                    direction_px=(float(t[0]), float(t[1])), ends_px=ends,
                    centres_px=pts[keep].copy(), n_used=n_used,
-                   n_rejected=int(inside.sum()) - n_used, rms_px=rms_px,
-                   sigma_offset_px=sigma_off, profile_axis=ax, dropped_px=dropped)
+                   n_rejected=n_inside - n_used, rms_px=rms_px,
+                   sigma_offset_px=sigma_off, profile_axis=ax, dropped_px=dropped), keep
 
 
 # --------------------------------------------------------------------------- affine
@@ -394,85 +445,9 @@ def _gauss_points(f: WireFit) -> np.ndarray:
     return np.array([m - spread * t, m + spread * t])
 
 
-def _design(view: View, lines) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """Equations ``n . (M [u, v, 1]) = n . a0`` as in :func:`fit_affine_to_wires`."""
-    rows, rhs, wire_of = [], [], []
-    for i, ((a0, a1), pts) in enumerate(zip(view.wire_lines_plane(), lines, strict=True)):
-        if pts is None:
-            continue
-        d = a1 - a0
-        n = np.array([-d[1], d[0]]) / math.hypot(d[0], d[1])
-        for u, v in pts:
-            rows.append([n[0] * u, n[0] * v, n[0], n[1] * u, n[1] * v, n[1]])
-            rhs.append(float(n @ a0))
-            wire_of.append(i)
-    return np.array(rows).reshape(-1, 6), np.array(rhs), wire_of
-
-
-def _similarity_prior(view: View) -> tuple[np.ndarray, np.ndarray]:
-    """Rows ``R`` (2, 6), rhs: ``M = M0 @ A``, A's linear part a similarity: A00 = A11 and
-    A01 = -A10, expressed linearly in M's entries (``A = M0_lin^-1 M_lin``)."""
-    M0 = np.asarray(view.image_to_plane, float)
-    Li = np.linalg.inv(M0[:, :2])  # A_lin = Li @ M_lin, M_lin = [[m0, m1], [m3, m4]]
-
-    def coeff(r, col):  # row vector over m (6,) giving A_lin[r, col]
-        out = np.zeros(6)
-        out[col] = Li[r, 0]       # M_lin[0, col] = m[col]
-        out[3 + col] = Li[r, 1]   # M_lin[1, col] = m[3 + col]
-        return out
-
-    R = np.array([coeff(0, 0) - coeff(1, 1), coeff(0, 1) + coeff(1, 0)])
-    return R, np.zeros(2)
-
-
-def _solve(view: View, lines, cov_m, prior: bool):
-    """Generalized least squares of the affine (with the similarity prior if ``prior``).
-
-    ``cov_m``: per wire, the (2, 2) covariance (m^2) of its two Gauss points' perpendicular
-    errors (None for a wire not found); the systematic term makes the two correlated.
-
-    Returns (M, cov, residuals per equation (m), wire index per equation) or None.
-    """
-    X, y, wire_of = _design(view, lines)
-    wire_of = np.asarray(wire_of)
-    col = np.array([1e-3, 1e-3, 1.0, 1e-3, 1e-3, 1.0])  # u, v are ~1e3 px
-    Xs = X * col
-    info, vec = np.zeros((6, 6)), np.zeros(6)
-    for i in np.unique(wire_of):
-        rows = wire_of == i
-        Wi = np.linalg.inv(cov_m[i])
-        info += Xs[rows].T @ Wi @ Xs[rows]
-        vec += Xs[rows].T @ Wi @ y[rows]
-    if prior:
-        R, r0 = _similarity_prior(view)
-        Rs = R * col
-        wp = (1.0 / SIMILARITY_PRIOR_REL) ** 2
-        info = info + wp * Rs.T @ Rs
-        vec = vec + wp * Rs.T @ r0
-    ev = np.linalg.eigvalsh(info)
-    if not np.all(np.isfinite(ev)) or ev[0] <= 1e-12 * ev[-1]:
-        return None
-    cov_s = np.linalg.inv(info)
-    m = (cov_s @ vec) * col
-    cov = cov_s * np.outer(col, col)
-    return m.reshape(2, 3), cov, X @ m - y, wire_of
-
-
-def _corner_sigma_px(view: View, cov: np.ndarray, scale_m: float) -> float:
-    """Largest propagated 1-sigma position error (px) at the image corners."""
-    W, H = view.width_px - 1.0, view.height_px - 1.0
-    worst = 0.0
-    for u, v in ((0, 0), (W, 0), (0, H), (W, H)):
-        J = np.zeros((2, 6))
-        J[0, :3] = (u, v, 1.0)
-        J[1, 3:] = (u, v, 1.0)
-        worst = max(worst, float(np.sqrt(np.max(np.diag(J @ cov @ J.T)))))
-    return worst / scale_m
-
-
 def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
                   search_px: float = 30.0, step_px: float = 4.0,
-                  half_window: int = 8) -> WireMeasurement:
+                  half_window: int = 8, profile_model: bool = True) -> WireMeasurement:
     """Find every wire of ``view`` in ``image`` and solve the image->plane affine.
 
     Parameters
@@ -485,6 +460,9 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
     step_px : spacing of the profiles along each wire (px; an integer number of rows or
         columns).
     half_window : half-width (samples) of the window each profile's centre is fitted in.
+    profile_model : fit each profile's centre with a model of the image formation
+        (:mod:`cadra.measure.wire_profile`, fitted per image) instead of the centroid; no
+        phase-bias term is then added (experimental, off by default: see docs/stage1.md).
 
     Returns
     -------
@@ -512,10 +490,11 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
     mark = view.reference_mark
     mark_r = mark.arm_px + MARK_CLEARANCE_PX
 
-    fits = []
+    fits: list = [None] * len(view.wires)
+    jobs = []
     for i, (w, seg) in enumerate(zip(view.wires, segs, strict=True)):
         if seg is None:
-            fits.append(_not_found(w.name, "its predicted path misses the image"))
+            fits[i] = _not_found(w.name, "its predicted path misses the image")
             continue
         others = []
         for j, sj in enumerate(segs):
@@ -535,12 +514,39 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
             out |= (d[:, ax] < mark_r + search) & (d[:, 1 - ax] < mark_r)
             return out
 
-        fits.append(_measure_one(img, w.name, seg, 0.5 * w.diameter_m / view.scale_m_per_px,
-                                 blocked, exclude, search_px, step_px, half_window))
-    return _solve_affine(view, fits)
+        jobs.append((i, w.name, seg, 0.5 * w.diameter_m / view.scale_m_per_px, blocked))
+    collected = {}
+    for i, name, seg, half, blocked in jobs:
+        got = [] if profile_model else None
+        fits[i] = _measure_one(img, name, seg, half, blocked, exclude, search_px, step_px,
+                               half_window, collect=got)
+        if got:
+            collected[i] = got[0]
+    formation, sens = None, None
+    if profile_model and collected:
+        # the formation from the profiles the centroid lines kept; then every clean
+        # profile's centre with it, and the lines again from those
+        try:
+            formation, hs = fit_formation([WireProfiles(
+                g.wp.P[g.kept], g.wp.s0[g.kept], g.wp.c0[g.kept], g.wp.h, g.wp.t, g.wp.cos_t)
+                for g in collected.values()])
+        except (ValueError, np.linalg.LinAlgError):
+            formation = None
+        if formation is not None and math.hypot(formation.sigma_c,
+                                                formation.sigma_d) < MIN_MODEL_BLUR_PX:
+            formation = None   # sharp wires: the centres hang on the exact shape (below)
+        if formation is not None:
+            for k, (i, g) in enumerate(collected.items()):
+                c = fit_centres(g.wp, hs[k], formation)
+                fits[i], _ = _line_from_centres(fits[i].name, c, g.fixed, g.ax,
+                                                np.isfinite(c), step_px, g.n_inside,
+                                                MODEL_BLOCK_SYS_PX)
+            sens = {i: formation.sens[k] for k, i in enumerate(collected)}
+    return _solve_affine(view, fits, formation, sens)
 
 
-def _solve_affine(view: View, fits: list[WireFit]) -> WireMeasurement:
+def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None = None,
+                  sens: dict | None = None) -> WireMeasurement:
     found = [f for f in fits if f.found]
     n_found = len(found)
 
@@ -566,25 +572,28 @@ def _solve_affine(view: View, fits: list[WireFit]) -> WireMeasurement:
         if p is None:
             cov_px.append(None)
             continue
-        sys_cov = systematic_cov(p[0], p[1], p[3], width_px[i], gain[2])
+        sys_cov = (np.zeros((2, 2)) if formation is not None else
+                   systematic_cov(p[0], p[1], p[3], width_px[i], gain[2]))
         fits[i] = WireFit(**{**f.__dict__,
                              "sigma_sys_px": 0.5 * math.sqrt(max(float(sys_cov.sum()), 0.0))})
         cov_px.append(2.0 * max(f.sigma_offset_px, 1e-4) ** 2 * np.eye(2) + sys_cov)
     cov_m = [None if c is None else c * scale ** 2 for c in cov_px]
     reason = ""
-    sol = _solve(view, lines, cov_m, prior=False)
-    if sol is None or _corner_sigma_px(view, sol[1], scale) > MAX_CORNER_SIGMA_PX:
+    sol = solve_affine_gls(view, lines, cov_m, prior=False)
+    if sol is None or corner_sigma_px(view, sol[1], scale) > MAX_CORNER_SIGMA_PX:
         # the wires alone leave a direction poorly determined: the similarity prior
-        sol = _solve(view, lines, cov_m, prior=True)
+        sol = solve_affine_gls(view, lines, cov_m, prior=True)
         if sol is None:
             return fail(f"wires {[f.name for f in found]} cannot determine the image->plane map")
-        if _corner_sigma_px(view, sol[1], scale) > 10 * MAX_CORNER_SIGMA_PX:
+        if corner_sigma_px(view, sol[1], scale) > 10 * MAX_CORNER_SIGMA_PX:
             return fail(f"wires {[f.name for f in found]} leave the image->plane map "
                         f"undetermined even with the similarity prior")
         missing = ", ".join(repr(f.name) for f in fits if not f.found)
         reason = (f"wire(s) {missing} not found: the image->plane map uses the prior that the "
                   f"film differs from the nominal map by a similarity (no shear/anisotropy)")
     M, cov, res, wire_of = sol
+    if formation is not None and formation.cov is not None and sens:
+        cov = cov + formation_cov(view, fits, lines, cov_m, bool(reason), M, formation, sens)
     px = math.sqrt(abs(np.linalg.det(M[:, :2])))
     wire_of = np.asarray(wire_of)
     out = []
@@ -595,7 +604,7 @@ def _solve_affine(view: View, fits: list[WireFit]) -> WireMeasurement:
         out.append(f)
     rms_m = float(np.sqrt(np.mean(res ** 2)))
     return WireMeasurement(True, reason, np.array(M, float), cov, tuple(out), rms_m, rms_m / px,
-                           n_found, view.optics(M), phase_gain=gain)
+                           n_found, view.optics(M), phase_gain=gain, formation=formation)
 
 
 def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],

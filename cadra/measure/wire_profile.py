@@ -1,0 +1,482 @@
+"""A wire's cross-section modelled as the image forms it: the centres without a phase bias.
+
+A wire's centroid (:func:`cadra.measure.wires._centroids`) needs no model of the profile, but
+it errs by a periodic function of the wire's sub-pixel phase (up to ~0.007 px for a 2 px wire)
+and its darkness weights carry the noise of every sample in its window. This module fits each
+profile, sampled through pixel centres along an image axis, with a model of how the image was
+formed, so the sampling is modelled rather than averaged:
+
+``I(x) = b0 + b1 x + b2 x^2 / 2 + A O(x - c) + F L(x - c)``, in the profile's coordinate
+``x`` (px), with
+
+* ``O = g_d * [box_1 * box_t * G_c * band_h]`` the wire's opacity: a band of half-width ``h``
+  blurred by a continuous Gaussian ``G_c`` (sigma ``sigma_c``: optics, film, anything before
+  the pixel integrates the light), integrated over the pixel (``box_1``) and over the wire's
+  drift across the pixel's other side (``box_t``, ``t`` the wire's slope against the profile
+  axis; 3-point Gauss-Legendre, above |t| = 0.02), then blurred by a discrete Gaussian ``g_d``
+  (sigma ``sigma_d``) on the pixel grid (a scanner's or a renderer's filter of the sampled
+  image);
+* ``L`` the second difference of ``O`` blurred by a discrete Gaussian of sigma ``fringe_w``
+  (the diffraction fringe, a Laplacian of the blurred shadow);
+* the background ``b0, b1, b2`` (the beam's slope and mottle), ``A`` and ``F`` linear per
+  profile, ``c`` the centre, nonlinear per profile (Gauss-Newton from the centroid, compiled
+  with numba). Samples darker than :data:`CLIP_FRACTION` of the bright level are left out (a
+  fringe deeper than the shadow is clipped at zero transmission).
+
+The order matters: the same total blur applied before or after the pixel integration gives
+profiles whose centres differ by up to ~0.035 px at some phases. The image formation
+(``sigma_c``, ``sigma_d``, ``fringe_w``) and each wire's half-width are fitted per image from
+:data:`FORMATION_PROFILES` profiles per found wire (:func:`fit_formation`: the best of a few
+starts in each order, refined by Levenberg-Marquardt on the blurs' variances), then every
+profile's centre is fitted with them (:func:`fit_centres`). The formation's covariance and
+each wire's centre shift per unit of each parameter come with it, so the caller can carry the
+formation's uncertainty into the lines (:func:`cadra.measure.wire_affine.formation_cov`).
+
+Measured (``tests/test_wire_profile.py``): on the renderer's own wires (coverage, then a
+discrete PSF) and on wires formed in the physical order (PSF, then the pixel), noise-free,
+lines within 5e-4 px at every phase; a model of the wrong order errs by up to 0.035 px; with
+the default noise the centres scatter ~2.7x less than the centroid's. At 0.4 px optics blur a
+few per cent error of the fitted blur moved lines by several sigma, so sharp wires are left to
+the centroid (:data:`cadra.measure.wires.MIN_MODEL_BLUR_PX`). All lengths in pixels.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numba
+import numpy as np
+
+__all__ = ["Formation", "WireProfiles", "fit_centres", "fit_formation"]
+
+_INV_SQRT2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_INV_SQRT2 = 1.0 / math.sqrt(2.0)
+#: Bounds of the formation's blurs (px).
+SIGMA_MAX = 4.0
+FRINGE_W_MIN = 0.05
+#: Profiles per wire used to fit the formation (evenly picked; all are used for the centres).
+FORMATION_PROFILES = 30
+#: Most Gauss-Newton iterations of each profile's centre (from the centroid, ~0.05 px off;
+#: a sharp wire's profile needs up to ~5; each profile stops when its step is < 1e-7 px).
+CENTRE_ITERATIONS = 8
+#: A profile's centre is rejected when it moves more than this (px) from its start.
+MAX_CENTRE_SHIFT_PX = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class Formation:
+    """How one image formed its wires (px): blur before the pixel integration (continuous),
+    after it (discrete, on the pixel grid), the fringe's width; the fit's rms residual
+    (fraction of the background); the covariance ``cov`` of ``(sigma_c^2, sigma_d^2,
+    fringe_w, h_1..h_m)`` and ``sens`` (m, 3 + m), each wire's mean centre shift (px along
+    its profiles) per unit of each (None for a formation not fitted)."""
+
+    sigma_c: float
+    sigma_d: float
+    fringe_w: float
+    rms: float = math.nan
+    cov: np.ndarray | None = None
+    sens: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class WireProfiles:
+    """One wire's profiles: intensities ``P`` (n, k) at consecutive integer positions starting
+    at ``s0`` (n,) along the profile axis, start centres ``c0`` (n,), the wire's half-width
+    ``h`` along the profile, its slope ``t`` against the profile axis (d profile coordinate per
+    pixel along the other axis) and ``cos_t`` (cosine of its angle to the other axis)."""
+
+    P: np.ndarray
+    s0: np.ndarray
+    c0: np.ndarray
+    h: float
+    t: float
+    cos_t: float
+
+
+def _kernel(sigma: float) -> np.ndarray:
+    if sigma < 1e-3:
+        return np.ones(1)
+    half = int(math.ceil(4.0 * sigma))
+    x = np.arange(-half, half + 1)
+    k = np.exp(-0.5 * (x / sigma) ** 2)
+    return k / k.sum()
+
+
+#: Gauss-Legendre nodes and weights on [-1/2, 1/2] for the drift box.
+_GL_X = np.array([-math.sqrt(0.15), 0.0, math.sqrt(0.15)])
+_GL_W = np.array([5.0, 8.0, 5.0]) / 18.0
+#: Below this slope the drift box (variance t^2 / 12) is left out.
+_DRIFT_MIN = 0.02
+#: Samples darker than this fraction of the profile's bright level are left out: a fringe
+#: deeper than the shadow is clipped at zero transmission there, which no linear term models.
+CLIP_FRACTION = 0.03
+
+
+@dataclass(frozen=True, eq=False)
+class _Rows:
+    """Profiles of one or more wires stacked, with their per-row geometry and sample mask."""
+
+    P: np.ndarray      # (n, k), masked samples zeroed
+    s0: np.ndarray     # (n,)
+    c0: np.ndarray     # (n,)
+    t: np.ndarray      # (n,)
+    cos_t: np.ndarray  # (n,)
+    m: np.ndarray      # (n, k) 1 used, 0 clipped
+    wire: np.ndarray   # (n,) index of the wire each row belongs to
+
+    @staticmethod
+    def of(wires: list[WireProfiles], picks=None) -> _Rows:
+        picks = [slice(None)] * len(wires) if picks is None else picks
+        P = np.concatenate([w.P[p] for w, p in zip(wires, picks, strict=True)]).astype(float)
+        m = (P > CLIP_FRACTION * np.max(P, axis=1, keepdims=True)).astype(float)
+        n = [len(w.P[p]) for w, p in zip(wires, picks, strict=True)]
+
+        def col(name):
+            return np.concatenate([np.broadcast_to(np.asarray(getattr(w, name), float), (k,))
+                                   [np.arange(k)] if np.ndim(getattr(w, name)) == 0 else
+                                   np.asarray(getattr(w, name), float)[p]
+                                   for w, p, k in zip(wires, picks, n, strict=True)])
+        return _Rows(np.ascontiguousarray(P * m), col("s0"), col("c0"), col("t"), col("cos_t"), m,
+                     np.repeat(np.arange(len(wires)), n))
+
+
+@numba.njit(cache=True)
+def _pixel_profile(x0, ne, h, s, cov, dcov, F, N):
+    """``cov[j]``: the band ``|y| < h`` blurred by N(0, s^2) and integrated over the pixel
+    ``[x0 + j - 1/2, x0 + j + 1/2]``, ``dcov[j]`` its derivative in ``x0``, j < ne (added to
+    the arrays). Each edge's antiderivative is evaluated once per pixel boundary (``F``,
+    ``N`` scratch of ne + 1)."""
+    for sg, e in ((1.0, h), (-1.0, -h)):
+        for j in range(ne + 1):
+            u = (x0 + j - 0.5 + e) / s
+            N[j] = 0.5 * math.erfc(-u * _INV_SQRT2)
+            F[j] = u * N[j] + math.exp(-0.5 * u * u) * _INV_SQRT2PI
+        for j in range(ne):
+            cov[j] += sg * s * (F[j + 1] - F[j])
+            dcov[j] += sg * (N[j + 1] - N[j])
+
+
+@numba.njit(cache=True)
+def _row_basis(s0i, c, h, sc, at, mrow, kd, kw, A, O, dO, G, dG, cov, dcov, F, Nb):
+    """Fill ``A[:, :5]`` with one profile's basis at centre ``c`` (and ``dO``, ``dG`` with the
+    opacity's and the blurred opacity's derivatives in ``c``)."""
+    k = A.shape[0]
+    hd = (kd.shape[0] - 1) // 2
+    hw = (kw.shape[0] - 1) // 2
+    pad = hd + hw + 1
+    ne = k + 2 * pad
+    cov[:] = 0.0
+    dcov[:] = 0.0
+    x0 = s0i - pad - c
+    if at > _DRIFT_MIN:
+        for g in range(3):
+            cov_g = np.zeros(ne)
+            dcov_g = np.zeros(ne)
+            _pixel_profile(x0 + _GL_X[g] * at, ne, h, sc, cov_g, dcov_g, F, Nb)
+            cov += _GL_W[g] * cov_g
+            dcov += _GL_W[g] * dcov_g
+    else:
+        _pixel_profile(x0, ne, h, sc, cov, dcov, F, Nb)
+    for j in range(hd, ne - hd):  # discrete blur after the pixel
+        o = 0.0
+        do = 0.0
+        for q in range(-hd, hd + 1):
+            o += kd[q + hd] * cov[j + q]
+            do -= kd[q + hd] * dcov[j + q]
+        O[j] = o
+        dO[j] = do
+    for j in range(pad - 1, pad + k + 1):  # the fringe's blur
+        g_ = 0.0
+        dg = 0.0
+        for q in range(-hw, hw + 1):
+            g_ += kw[q + hw] * O[j + q]
+            dg += kw[q + hw] * dO[j + q]
+        G[j] = g_
+        dG[j] = dg
+    for j in range(k):
+        x = s0i + j - c
+        jj = j + pad
+        w = mrow[j]
+        A[j, 0] = w
+        A[j, 1] = w * x
+        A[j, 2] = w * 0.5 * x * x
+        A[j, 3] = w * O[jj]
+        A[j, 4] = w * (G[jj - 1] - 2.0 * G[jj] + G[jj + 1])
+
+
+@numba.njit(cache=True)
+def _linear_rss(Prow, A, M, rhs, r):
+    """Least squares of the profile on the basis; residuals into ``r``; returns beta, rss."""
+    beta = _normal_solve(A, Prow, 5, M, rhs)
+    rss = 0.0
+    for j in range(A.shape[0]):
+        acc = Prow[j]
+        for q in range(5):
+            acc -= A[j, q] * beta[q]
+        r[j] = acc
+        rss += acc * acc
+    return beta, rss
+
+
+#: Start offsets (px) scanned about the centroid when the formation is sharp (total blur
+#: below :data:`SCAN_BLUR_PX`): a sharp profile's least squares has minima a fraction of a
+#: pixel apart, and Gauss-Newton from the centroid can land in the wrong one.
+_SCAN = np.array([-0.4, -0.2, 0.0, 0.2, 0.4])
+SCAN_BLUR_PX = 0.6
+
+
+@numba.njit(cache=True)
+def _fit_rows(P, m, s0, t, cos_t, h, c0, sigma_c, sigma_d, kd, kw, n_iter, want_r, scan,
+              out_c, out_r):
+    """Per profile: Gauss-Newton of the centre with the linear terms (background 1, x,
+    x^2 / 2; opacity O; fringe L), ``n_iter`` steps from ``c0`` (0: the linear fit at ``c0``;
+    ``scan``: from the best of ``c0 +`` :data:`_SCAN`). Writes the centres to ``out_c`` and,
+    if ``want_r``, the residuals at them (masked samples 0) to ``out_r``."""
+    n, k = P.shape
+    hd = (kd.shape[0] - 1) // 2
+    hw = (kw.shape[0] - 1) // 2
+    pad = hd + hw + 1
+    ne = k + 2 * pad
+    cov = np.empty(ne)
+    dcov = np.empty(ne)
+    F = np.empty(ne + 1)
+    Nb = np.empty(ne + 1)
+    O = np.zeros(ne)
+    dO = np.zeros(ne)
+    G = np.zeros(ne)
+    dG = np.zeros(ne)
+    A = np.empty((k, 6))
+    M = np.empty((6, 6))
+    rhs = np.empty(6)
+    r = np.empty(k)
+    for i in range(n):
+        sc = max(math.hypot(sigma_c / cos_t[i], sigma_d * t[i]), 1e-3)
+        at = abs(t[i])
+        c = c0[i]
+        if scan and n_iter > 0:
+            best = np.inf
+            for d in _SCAN:
+                _row_basis(s0[i], c0[i] + d, h[i], sc, at, m[i], kd, kw, A, O, dO, G, dG,
+                           cov, dcov, F, Nb)
+                _, rss = _linear_rss(P[i], A, M, rhs, r)
+                if rss < best:
+                    best = rss
+                    c = c0[i] + d
+        for it in range(n_iter + 1):
+            _row_basis(s0[i], c, h[i], sc, at, m[i], kd, kw, A, O, dO, G, dG, cov, dcov, F,
+                       Nb)
+            beta, _ = _linear_rss(P[i], A, M, rhs, r)
+            if it == n_iter:
+                out_r[i, :] = r
+                break
+            for j in range(k):
+                x = s0[i] + j - c
+                jj = j + pad
+                A[j, 5] = m[i, j] * (-beta[1] - beta[2] * x + beta[3] * dO[jj]
+                                     + beta[4] * (dG[jj - 1] - 2.0 * dG[jj] + dG[jj + 1]))
+            step = _normal_solve(A, r, 6, M, rhs)
+            if abs(step[5]) < 1e-7:   # converged: r is the residual at c
+                out_r[i, :] = r
+                break
+            c += min(max(step[5], -0.5), 0.5)
+            if it == n_iter - 1 and not want_r:
+                break
+        out_c[i] = c
+
+
+@numba.njit(cache=True)
+def _normal_solve(A, y, p, M, rhs):
+    """Least squares of ``y`` on the first ``p`` columns of ``A`` by the normal equations
+    (a tiny ridge keeps an all-zero column solvable)."""
+    k = A.shape[0]
+    for a in range(p):
+        acc = 0.0
+        for j in range(k):
+            acc += A[j, a] * y[j]
+        rhs[a] = acc
+        for b in range(a, p):
+            acc = 0.0
+            for j in range(k):
+                acc += A[j, a] * A[j, b]
+            M[a, b] = acc
+            M[b, a] = acc
+        M[a, a] += 1e-12 * (M[a, a] + 1.0)
+    # Cholesky in place (M symmetric positive definite), then the two triangular solves
+    for a in range(p):
+        d = M[a, a]
+        for q in range(a):
+            d -= M[a, q] * M[a, q]
+        d = math.sqrt(max(d, 1e-300))
+        M[a, a] = d
+        for b in range(a + 1, p):
+            acc = M[b, a]
+            for q in range(a):
+                acc -= M[b, q] * M[a, q]
+            M[b, a] = acc / d
+    z = np.empty(p)
+    for a in range(p):
+        acc = rhs[a]
+        for q in range(a):
+            acc -= M[a, q] * z[q]
+        z[a] = acc / M[a, a]
+    for a in range(p - 1, -1, -1):
+        acc = z[a]
+        for q in range(a + 1, p):
+            acc -= M[q, a] * z[q]
+        z[a] = acc / M[a, a]
+    return z
+
+
+def _fit(rows: _Rows, h: np.ndarray, f: Formation, n_iter: int = CENTRE_ITERATIONS,
+         want_r: bool = True):
+    """Gauss-Newton fit of each profile's centre (and linear terms) from ``rows.c0``;
+    returns the centres and (if ``want_r``) the residuals (n, k) at them."""
+    c = np.empty(len(rows.c0))
+    r = np.zeros(rows.P.shape)
+    _fit_rows(rows.P, rows.m, rows.s0, rows.t, rows.cos_t, np.asarray(h, float), rows.c0,
+              f.sigma_c, f.sigma_d, _kernel(f.sigma_d), _kernel(f.fringe_w), n_iter,
+              want_r or n_iter == 0, math.hypot(f.sigma_c, f.sigma_d) < SCAN_BLUR_PX, c, r)
+    return c, r
+
+
+def _linear_resid(rows: _Rows, c: np.ndarray, h: np.ndarray, f: Formation) -> np.ndarray:
+    """Residuals (n, k) of each profile's linear least squares at fixed centres ``c``."""
+    held = _Rows(rows.P, rows.s0, c, rows.t, rows.cos_t, rows.m, rows.wire)
+    return _fit(held, h, f, 0)[1]
+
+
+#: Starting formations tried (sigma_c, sigma_d, fringe_w), before and after the pixel; the
+#: best of each order is refined.
+_STARTS = [(s, 0.0, 0.5) for s in (0.4, 0.7, 1.0, 1.5, 2.2)] + \
+          [(0.0, s, 0.5) for s in (0.4, 0.7, 1.0, 1.5, 2.2)]
+#: Levenberg-Marquardt rounds of the formation (each: centres at the current formation,
+#: then one damped step of the formation and the half-widths with the centres held).
+FORMATION_ROUNDS = 5
+
+
+def fit_formation(wires: list[WireProfiles]) -> tuple[Formation, list[float]]:
+    """The image's formation and each wire's half-width along its profiles, by least squares
+    over up to :data:`FORMATION_PROFILES` profiles per wire.
+
+    The centres and the linear terms are profile-wise; the formation and half-widths are
+    shared. They are fitted in alternation: every profile's centre at the current formation,
+    then one Levenberg-Marquardt step of ``(sigma_c, sigma_d, fringe_w, h_1..h_m)`` with the
+    centres held (the centres are antisymmetric in the profile, the rest symmetric, so the
+    two hardly couple). The start is the best of :data:`_STARTS` in each order (before or
+    after the pixel), each refined; the better wins. Raises ``ValueError`` if the profiles
+    give no fit.
+    """
+    picks = [np.unique(np.linspace(0, len(w.P) - 1, min(FORMATION_PROFILES, len(w.P)))
+                       .astype(int)) for w in wires]
+    rows = _Rows.of(wires, picks)
+    scale = float(np.sum(rows.P) / max(np.sum(rows.m), 1.0))
+    if not np.isfinite(scale) or scale <= 0:
+        raise ValueError("wire profiles have no positive background")
+    hs0 = np.array([w.h for w in wires], float)
+    # parameters: the two blurs' variances (smooth at 0, where a sigma's derivative
+    # vanishes), the fringe width, the half-widths
+    lo = np.array([0.0, 0.0, FRINGE_W_MIN, *(0.5 * hs0)])
+    hi = np.array([SIGMA_MAX ** 2, SIGMA_MAX ** 2, SIGMA_MAX, *(2.0 * hs0)])
+
+    def form(q):
+        return Formation(math.sqrt(q[0]), math.sqrt(q[1]), q[2])
+
+    def centres(q, start=None):
+        """Every row's centre at ``q``, from the centroids or from ``start`` (converged
+        centres of a nearby formation: a few steps each)."""
+        rs = rows if start is None else replace(rows, c0=start)
+        return _fit(rs, q[3:][rows.wire], form(q), CENTRE_ITERATIONS, False)[0]
+
+    def resid(q, c):
+        return _linear_resid(rows, c, q[3:][rows.wire], form(q)).ravel() / scale
+
+    def refine(cost, q, c):
+        lam = 1e-3
+        for _ in range(FORMATION_ROUNDS):
+            r0 = resid(q, c)
+            J = np.empty((len(r0), len(q)))
+            for j in range(len(q)):
+                dq = q.copy()
+                dq[j] = q[j] + 1e-4 if q[j] + 1e-4 <= hi[j] else q[j] - 1e-4
+                J[:, j] = (resid(dq, c) - r0) / (dq[j] - q[j])
+            JtJ, Jtr = J.T @ J, J.T @ r0
+            improved = False
+            for _ in range(6):
+                step = np.linalg.solve(JtJ + lam * np.diag(np.diag(JtJ) + 1e-12), -Jtr)
+                qn = np.clip(q + step, lo, hi)
+                cn_ = centres(qn, c)
+                cn = float(np.sum(resid(qn, cn_) ** 2))
+                if np.isfinite(cn) and cn <= cost:
+                    gain = (cost - cn) / max(cost, 1e-300)
+                    q, c, cost, lam = qn, cn_, cn, max(lam / 10.0, 1e-6)
+                    improved = True
+                    break
+                lam *= 10.0
+            if not improved or gain < 1e-4 or np.max(np.abs(step)) < 1e-4:
+                break
+        return cost, q, c
+
+    with np.errstate(all="ignore"):
+        best = {}
+        sub = _Rows.of(wires, [p[::3] for p in picks])   # the starts on a third of the rows
+        for start in _STARTS:
+            before = start[0] > 0.0
+            q = np.array([start[0] ** 2, start[1] ** 2, start[2], *hs0])
+            try:
+                c = _fit(sub, q[3:][sub.wire], form(q), CENTRE_ITERATIONS, False)[0]
+                cost = float(np.sum(_linear_resid(sub, c, q[3:][sub.wire], form(q)) ** 2))
+            except np.linalg.LinAlgError:
+                continue
+            if np.isfinite(cost) and (before not in best or cost < best[before][0]):
+                best[before] = (cost, q)
+        if not best:
+            raise ValueError("no wire formation fits the profiles")
+        # an order whose best start fits 1.2x worse than the other's is not refined
+        low = min(b[0] for b in best.values())
+        runs = []
+        for cost_sub, q in best.values():
+            if cost_sub <= 1.2 * low:
+                c = centres(q)
+                runs.append(refine(float(np.sum(resid(q, c) ** 2)), q, c))
+        cost, q, _ = min(runs, key=lambda t: t[0])
+        cov, sens = _uncertainty(q, cost, rows, len(wires), centres, resid, hi)
+    rms = math.sqrt(cost / max(float(np.sum(rows.m)), 1.0))
+    return (Formation(math.sqrt(q[0]), math.sqrt(q[1]), float(q[2]), rms, cov, sens),
+            [float(v) for v in q[3:]])
+
+
+def _uncertainty(q, cost, rows: _Rows, n_wires: int, centres, resid, hi):
+    """The formation's covariance (Gauss-Newton, the residuals' own variance) and each wire's
+    mean centre shift per unit of each parameter (the centres refitted)."""
+    c = centres(q)
+    r0 = resid(q, c)
+    p = len(q)
+    J = np.empty((len(r0), p))
+    S = np.zeros((n_wires, p))
+    for j in range(p):
+        dq = q.copy()
+        dq[j] = q[j] + 1e-3 if q[j] + 1e-3 <= hi[j] else q[j] - 1e-3
+        step = dq[j] - q[j]
+        J[:, j] = (resid(dq, c) - r0) / step
+        dc = (centres(dq, c) - c) / step
+        for w in range(n_wires):
+            S[w, j] = float(np.nanmean(dc[rows.wire == w]))
+    dof = max(float(np.sum(rows.m)) - 6.0 * len(rows.P) - p, 1.0)
+    cov = np.linalg.pinv(J.T @ J) * (cost / dof)
+    return cov, S
+
+
+def fit_centres(wp: WireProfiles, h: float, f: Formation) -> np.ndarray:
+    """Each profile's centre (profile coordinate, px) under formation ``f``; NaN where the
+    fit fails or moves more than :data:`MAX_CENTRE_SHIFT_PX` from the start."""
+    rows = _Rows.of([wp])
+    with np.errstate(all="ignore"):
+        try:
+            c, _ = _fit(rows, np.full(len(wp.c0), h), f, want_r=False)
+        except np.linalg.LinAlgError:
+            return np.full(len(wp.c0), np.nan)
+    bad = ~np.isfinite(c) | (np.abs(c - wp.c0) > MAX_CENTRE_SHIFT_PX)
+    c[bad] = np.nan
+    return c
