@@ -67,8 +67,10 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    those centres (the straightness test allowing the model's ~0.0015 px instead of the
    centroid's 0.0075 px). The formation's covariance, through each wire's centre
    sensitivity, is added to the affine's covariance; no phase term is. Sharp wires (fitted
-   total blur < :data:`MIN_MODEL_BLUR_PX`) keep the centroids. ``WireMeasurement.formation``
-   says which (None: centroids).
+   total blur < :data:`MIN_MODEL_BLUR_PX`) keep the centroids, and so does an image whose
+   model lines disagree with its centroid lines beyond chance (:data:`MODEL_AGREEMENT_P`: a
+   formation the model cannot describe, e.g. a disk PSF; a warning says so).
+   ``WireMeasurement.formation`` says which (None: centroids).
 
 :func:`measure_wires` is a pure function of plain arrays; its results are frozen dataclasses of
 floats, tuples and numpy arrays (picklable, for a process pool). :func:`wire_mask` marks the
@@ -78,10 +80,11 @@ pixels near the wires for later fits to ignore.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
+from scipy.stats import chi2
 
 from cadra.facility.reference import View
 from cadra.measure.wire_affine import corner_sigma_px, formation_cov, solve_affine_gls
@@ -536,13 +539,45 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
                                                 formation.sigma_d) < MIN_MODEL_BLUR_PX:
             formation = None   # sharp wires: the centres hang on the exact shape (below)
         if formation is not None:
+            model = list(fits)
             for k, (i, g) in enumerate(collected.items()):
                 c = fit_centres(g.wp, hs[k], formation)
-                fits[i], _ = _line_from_centres(fits[i].name, c, g.fixed, g.ax,
-                                                np.isfinite(c), step_px, g.n_inside,
-                                                MODEL_BLOCK_SYS_PX)
+                model[i], _ = _line_from_centres(fits[i].name, c, g.fixed, g.ax,
+                                                 np.isfinite(c), step_px, g.n_inside,
+                                                 MODEL_BLOCK_SYS_PX)
             sens = {i: formation.sens[k] for k, i in enumerate(collected)}
+            centroid = _solve_affine(view, fits)
+            t2, n_lines = _disagreement(model, centroid.wires)
+            if t2 <= chi2.ppf(1.0 - MODEL_AGREEMENT_P, max(n_lines, 1)):
+                return _solve_affine(view, model, formation, sens)
+            # the formation does not describe these wires (a PSF far from Gaussian?)
+            note = (f"wire profile model disagrees with the wires' centroids (chi2 {t2:.0f} "
+                    f"over {n_lines} lines): centroids used")
+            return replace(centroid, reason="; ".join(x for x in (centroid.reason, note) if x))
     return _solve_affine(view, fits, formation, sens)
+
+
+#: The profile model's lines are used unless their offsets from the centroid lines, in the
+#: centroid lines' sigmas (noise and phase term, with the model's noise), sum in squares
+#: beyond chi2's upper quantile at this probability (degrees of freedom: the lines).
+MODEL_AGREEMENT_P = 1e-3
+
+
+def _disagreement(model: list[WireFit], centroid) -> tuple[float, int]:
+    """Sum over the wires found both ways of the squared offset of the model's line from the
+    centroid's (at the model line's point), each in the two lines' combined sigma. The
+    centroid needs no model of the image formation; a formation that does not describe the
+    wires moves the model's lines by many of those sigmas (a disk PSF: ~0.03 px). Returns
+    the sum and the number of lines."""
+    t2, n = 0.0, 0
+    for m, c in zip(model, centroid, strict=True):
+        if not (m.found and c.found):
+            continue
+        n += 1
+        d = float(c.distance_px(np.atleast_2d(m.point_px))[0])
+        var = c.sigma_offset_px ** 2 + c.sigma_sys_px ** 2 + m.sigma_offset_px ** 2
+        t2 += d * d / max(var, 1e-12)
+    return t2, n
 
 
 def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None = None,
