@@ -11,6 +11,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from test_wires import FAC, make_image, true_affine
 
 from cadra.measure.wire_profile import Formation, WireProfiles, fit_centres, fit_formation
 from cadra.measure.wires import _centroids, measure_wires
@@ -102,11 +103,6 @@ def test_centres_scatter_less_than_the_centroid():
 def test_sharp_wires_fall_back_to_the_centroid():
     """At 0.4 px optics blur the model is not used (MIN_MODEL_BLUR_PX): the measurement says
     so by ``formation`` None, and the centroid's phase term is in the sigma."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_wires import FAC, make_image, true_affine
-
     view = FAC.view(1, "top")
     M = true_affine(view, 1100)
     sharp = dataclasses.replace(RenderConfig(), optics_blur_sigma_px=0.4)
@@ -122,11 +118,6 @@ def test_a_formation_it_cannot_describe_falls_back_to_the_centroid():
     model's lines move by ~0.03 px, many of the centroid lines' sigmas, and the measurement
     keeps the centroids and says why (measured: 17 of 20 renders of both views fall back, 5
     of these 8; the rest disagree by less than the test can see)."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).parent))
-    from test_wires import FAC, make_image, true_affine
-
     view = FAC.view(1, "top")
     disk = dataclasses.replace(RenderConfig(), psf_shape="disk")
     fell_back = 0

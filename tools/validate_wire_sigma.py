@@ -86,7 +86,9 @@ def main(argv=None) -> dict:
            "sigma_median_um_ab": [round(float(x), 4) for x in np.median(sig, axis=0) * 1e6],
            "sigma_sys_px_median": round(float(np.median(sig_sys)), 5),
            "sigma_sys_px_max": round(float(np.max(sig_sys)), 5),
-           "phase_gain_median": [round(float(x), 3) for x in np.nanmedian(gains, axis=0)]}
+           # the centroids' phase gain (NaN with the profile model, which has none)
+           "phase_gain_median": ([round(float(x), 3) for x in np.nanmedian(gains, axis=0)]
+                                 if np.isfinite(gains).any() else None)}
     print(f"{out['centres']}: error / sigma at the image centre, {out['n']} renders: rms a "
           f"{out['z_rms_ab'][0]}, b {out['z_rms_ab'][1]}; noise-free "
           f"{out['z_rms_noise_free_ab']}; error rms {out['error_rms_um_ab']} um; sigma "

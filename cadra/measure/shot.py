@@ -76,10 +76,10 @@ def quality_rows(results) -> pd.DataFrame:
                                f"{x.name}={x.residual_px:+.4f}" if x.found else f"{x.name}=missing"
                                for x in w.wires))
                 fm = w.formation   # the wires' image formation (profile model), or centroids
-                row.update(wire_centres="profile model" if fm is not None else "centroid",
-                           wire_blur_before_px=fm.sigma_c if fm is not None else math.nan,
-                           wire_blur_after_px=fm.sigma_d if fm is not None else math.nan,
-                           wire_fringe_width_px=fm.fringe_w if fm is not None else math.nan)
+                blur = (math.nan,) * 3 if fm is None else (fm.sigma_c, fm.sigma_d, fm.fringe_w)
+                row.update(wire_centres="centroid" if fm is None else "profile model",
+                           **dict(zip(("wire_blur_before_px", "wire_blur_after_px",
+                                       "wire_fringe_width_px"), blur, strict=True)))
             f = v.fit
             if f is not None and f.ok:
                 row.update(

@@ -133,11 +133,10 @@ class _Rows:
         m = (P > CLIP_FRACTION * np.max(P, axis=1, keepdims=True)).astype(float)
         n = [len(w.P[p]) for w, p in zip(wires, picks, strict=True)]
 
-        def col(name):
-            return np.concatenate([np.broadcast_to(np.asarray(getattr(w, name), float), (k,))
-                                   [np.arange(k)] if np.ndim(getattr(w, name)) == 0 else
-                                   np.asarray(getattr(w, name), float)[p]
-                                   for w, p, k in zip(wires, picks, n, strict=True)])
+        def col(name):   # a per-profile array, or one value per wire
+            return np.concatenate([
+                np.broadcast_to(np.asarray(getattr(w, name), float), (len(w.P),))[p]
+                for w, p in zip(wires, picks, strict=True)])
         return _Rows(np.ascontiguousarray(P * m), col("s0"), col("c0"), col("t"), col("cos_t"), m,
                      np.repeat(np.arange(len(wires)), n))
 
@@ -343,8 +342,7 @@ def _fit(rows: _Rows, h: np.ndarray, f: Formation, n_iter: int = CENTRE_ITERATIO
 
 def _linear_resid(rows: _Rows, c: np.ndarray, h: np.ndarray, f: Formation) -> np.ndarray:
     """Residuals (n, k) of each profile's linear least squares at fixed centres ``c``."""
-    held = _Rows(rows.P, rows.s0, c, rows.t, rows.cos_t, rows.m, rows.wire)
-    return _fit(held, h, f, 0)[1]
+    return _fit(replace(rows, c0=c), h, f, 0)[1]
 
 
 #: Starting formations tried (sigma_c, sigma_d, fringe_w), before and after the pixel; the
@@ -424,11 +422,8 @@ def fit_formation(wires: list[WireProfiles]) -> tuple[Formation, list[float]]:
         for start in _STARTS:
             before = start[0] > 0.0
             q = np.array([start[0] ** 2, start[1] ** 2, start[2], *hs0])
-            try:
-                c = _fit(sub, q[3:][sub.wire], form(q), CENTRE_ITERATIONS, False)[0]
-                cost = float(np.sum(_linear_resid(sub, c, q[3:][sub.wire], form(q)) ** 2))
-            except np.linalg.LinAlgError:
-                continue
+            c = _fit(sub, q[3:][sub.wire], form(q), CENTRE_ITERATIONS, False)[0]
+            cost = float(np.sum(_linear_resid(sub, c, q[3:][sub.wire], form(q)) ** 2))
             if np.isfinite(cost) and (before not in best or cost < best[before][0]):
                 best[before] = (cost, q)
         if not best:
@@ -471,12 +466,7 @@ def _uncertainty(q, cost, rows: _Rows, n_wires: int, centres, resid, hi):
 def fit_centres(wp: WireProfiles, h: float, f: Formation) -> np.ndarray:
     """Each profile's centre (profile coordinate, px) under formation ``f``; NaN where the
     fit fails or moves more than :data:`MAX_CENTRE_SHIFT_PX` from the start."""
-    rows = _Rows.of([wp])
-    with np.errstate(all="ignore"):
-        try:
-            c, _ = _fit(rows, np.full(len(wp.c0), h), f, want_r=False)
-        except np.linalg.LinAlgError:
-            return np.full(len(wp.c0), np.nan)
+    c, _ = _fit(_Rows.of([wp]), np.full(len(wp.c0), h), f, want_r=False)
     bad = ~np.isfinite(c) | (np.abs(c - wp.c0) > MAX_CENTRE_SHIFT_PX)
     c[bad] = np.nan
     return c

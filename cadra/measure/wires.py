@@ -196,7 +196,8 @@ class WireMeasurement:
         silhouette fit and the combination use), or None.
     phase_gain : (g_hat, sigma_g, mean g^2): how much of the sharp wire's pixel-sampling
         bias the image shows (step 7 of the module docstring); NaNs if no affine.
-    formation : the wires' image formation fitted with ``profile_model`` (else None).
+    formation : the wires' image formation fitted with ``profile_model`` (None: centroids
+        used; ``phase_gain`` is then set, else NaNs).
     """
 
     ok: bool
@@ -464,8 +465,8 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
         columns).
     half_window : half-width (samples) of the window each profile's centre is fitted in.
     profile_model : fit each profile's centre with a model of the image formation
-        (:mod:`cadra.measure.wire_profile`, fitted per image) instead of the centroid; no
-        phase-bias term is then added (experimental, off by default: see docs/stage1.md).
+        (:mod:`cadra.measure.wire_profile`, fitted per image) instead of the centroid (step 8;
+        False: the centroids and their phase term, ~3x faster, ~3x less accurate).
 
     Returns
     -------
@@ -525,7 +526,6 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
                                half_window, collect=got)
         if got:
             collected[i] = got[0]
-    formation, sens = None, None
     if profile_model and collected:
         # the formation from the profiles the centroid lines kept; then every clean
         # profile's centre with it, and the lines again from those
@@ -554,7 +554,7 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
             note = (f"wire profile model disagrees with the wires' centroids (chi2 {t2:.0f} "
                     f"over {n_lines} lines): centroids used")
             return replace(centroid, reason="; ".join(x for x in (centroid.reason, note) if x))
-    return _solve_affine(view, fits, formation, sens)
+    return _solve_affine(view, fits)
 
 
 #: The profile model's lines are used unless their offsets from the centroid lines, in the
@@ -598,25 +598,28 @@ def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None =
     # each Gauss point's perpendicular error: sqrt(2) x the line's offset sigma (floored),
     # independent; plus the centroid's phase bias, common to the line's centres (step 7)
     width_px = [w.diameter_m / scale for w in view.wires]
+    # (the profile model's centres carry no phase bias: no phase term, step 8)
     phases = [line_phases(f.centres_px, f.point_px, f.direction_px, f.profile_axis)
-              if f.found else None for f in fits]
-    gain = phase_gain([None if p is None else (*p, f.rms_px)
-                       for p, f in zip(phases, fits, strict=True)], width_px)
+              if f.found and formation is None else None for f in fits]
+    gain = ((math.nan,) * 3 if formation is not None else
+            phase_gain([None if p is None else (*p, f.rms_px)
+                        for p, f in zip(phases, fits, strict=True)], width_px))
     cov_px, fits = [], list(fits)
     for i, (f, p) in enumerate(zip(fits, phases, strict=True)):
-        if p is None:
+        if not f.found:
             cov_px.append(None)
             continue
-        sys_cov = (np.zeros((2, 2)) if formation is not None else
+        sys_cov = (np.zeros((2, 2)) if p is None else
                    systematic_cov(p[0], p[1], p[3], width_px[i], gain[2]))
         fits[i] = WireFit(**{**f.__dict__,
                              "sigma_sys_px": 0.5 * math.sqrt(max(float(sys_cov.sum()), 0.0))})
         cov_px.append(2.0 * max(f.sigma_offset_px, 1e-4) ** 2 * np.eye(2) + sys_cov)
     cov_m = [None if c is None else c * scale ** 2 for c in cov_px]
-    reason = ""
+    reason, prior = "", False
     sol = solve_affine_gls(view, lines, cov_m, prior=False)
     if sol is None or corner_sigma_px(view, sol[1], scale) > MAX_CORNER_SIGMA_PX:
         # the wires alone leave a direction poorly determined: the similarity prior
+        prior = True
         sol = solve_affine_gls(view, lines, cov_m, prior=True)
         if sol is None:
             return fail(f"wires {[f.name for f in found]} cannot determine the image->plane map")
@@ -628,7 +631,7 @@ def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None =
                   f"film differs from the nominal map by a similarity (no shear/anisotropy)")
     M, cov, res, wire_of = sol
     if formation is not None and formation.cov is not None and sens:
-        cov = cov + formation_cov(view, fits, lines, cov_m, bool(reason), M, formation, sens)
+        cov = cov + formation_cov(view, fits, lines, cov_m, prior, M, formation, sens)
     px = math.sqrt(abs(np.linalg.det(M[:, :2])))
     wire_of = np.asarray(wire_of)
     out = []
