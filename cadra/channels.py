@@ -2,7 +2,7 @@
 
 Each channel stage one measures per station and stage two fits is one :class:`Channel`
 entry of :data:`OBSERVED`; the order of that tuple is the order of the columns of
-:class:`cadra.fitting.data.ShotData`'s ``meas`` and ``sigma`` and of every prediction
+:class:`cadra.flight.data.ShotData`'s ``meas`` and ``sigma`` and of every prediction
 (``(n, N_CHANNELS)`` arrays). Code that needs "the angles" or "the positions" asks the
 registry (:func:`indices`) instead of slicing ``[:, 3:]``, so a channel added later (a roll
 angle ``phi``, the spark time as an observed channel) is one more entry here plus the

@@ -172,7 +172,7 @@ def test_bad_trajectory_cell_names_station_and_column(tmp_path, column, value, w
 
 
 def test_all_sigmas_zero_is_refused_naming_the_first(tmp_path):
-    from cadra.fitting.data import FitDataError, load_shot_data
+    from cadra.flight.data import FitDataError, load_shot_data
 
     def zero(t):
         for c in ("sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_theta_deg", "sigma_psi_deg"):
@@ -185,7 +185,7 @@ def test_all_sigmas_zero_is_refused_naming_the_first(tmp_path):
 
 
 def test_nan_still_means_not_measured(tmp_path):
-    from cadra.fitting.data import load_shot_data
+    from cadra.flight.data import load_shot_data
 
     def lose(t):
         t.loc[1, "theta_deg"] = np.nan
@@ -201,7 +201,7 @@ def test_nan_still_means_not_measured(tmp_path):
                                          (1, "1 measured station(s) with a position"),
                                          (2, "2 measured station(s) with a position")])
 def test_too_few_stations_is_a_clear_error(tmp_path, n, what):
-    from cadra.fitting.data import FitDataError, load_shot_data
+    from cadra.flight.data import FitDataError, load_shot_data
 
     p = _trajectory(tmp_path, n=n)
     with pytest.raises(FitDataError, match=re.escape(f"{p}: {what}")):

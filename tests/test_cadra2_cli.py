@@ -355,8 +355,8 @@ def test_trajectory_and_shot_from_a_folder_or_a_file(shots, tmp_path):
     trajectory names unless given; what is missing is said."""
     import shutil
 
-    from cadra.fitting import FitDataError
-    from cadra.fitting.inputs import load_shots, trajectory_and_shot
+    from cadra.flight import FitDataError
+    from cadra.flight.load import load_shots, trajectory_and_shot
 
     sim, shot_file, traj = shots["m2_2429"]
     folder = tmp_path / "cadra1"

@@ -17,7 +17,8 @@ from cadra.calibration.sphere import (
     apply_bias_table,
     estimate_station_biases,
 )
-from cadra.fitting import fit_shots, shot_data_from_truth
+from cadra.fitting import fit_shots
+from cadra.flight import shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SPECS = "sample_shots/specs"

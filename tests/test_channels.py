@@ -43,8 +43,8 @@ def test_registry_matches_the_documented_channels():
 
 
 def test_old_names_are_aliases_of_the_registry():
-    from cadra.fitting import data
     from cadra.fitting.report import CHANNEL_OUTPUT_UNITS
+    from cadra.flight import data
     from cadra.io.trajectory import COLUMNS
 
     assert data.CHANNELS == C.NAMES and data.N_CHANNELS == 6

@@ -22,8 +22,8 @@ import pytest
 from cadra.aero import resolve_model
 from cadra.cli import cadra2
 from cadra.cli._motion_output import write_outputs
-from cadra.cli.motion import analyse_shot
-from cadra.fitting.inputs import load_shots
+from cadra.flight.classic import analyse_shot
+from cadra.flight.load import load_shots
 from cadra.io.trajectory import COLUMNS, write_trajectory
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_shots" / "cone_1"

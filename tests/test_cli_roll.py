@@ -20,7 +20,7 @@ from cadra.dynamics.modes import TestMode
 from cadra.dynamics.observe import observe
 from cadra.dynamics.setup import propagate_states
 from cadra.dynamics.trajectory import Launch
-from cadra.fitting.data import rigid_body_from_shot
+from cadra.flight.data import rigid_body_from_shot
 from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, save_shot
 from cadra.io.trajectory import COLUMNS, write_trajectory
 

@@ -27,9 +27,9 @@ from cadra.dynamics.integrate import inverse3
 from cadra.dynamics.layout import P_CG_OFFSET, P_INERTIA, P_WIND, P_WIND_GRAD
 from cadra.dynamics.setup import plane_code
 from cadra.fitting.baseline import baseline_fit, derivative_python, trajectory_ivp
-from cadra.fitting.data import FILM_SIGMAS, rigid_body_from_shot, shot_data_from_truth
 from cadra.fitting.sensitivity import apply_local, observables, predict
 from cadra.fitting.solver import fit
+from cadra.flight.data import FILM_SIGMAS, rigid_body_from_shot, shot_data_from_truth
 from cadra.io.shotfile import load_shot
 
 SHOT_DIR = "sample_shots/m2_2429"

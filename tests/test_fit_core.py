@@ -12,15 +12,10 @@ import pytest
 
 from cadra.aero import model_from_dict
 from cadra.dynamics.setup import propagate_states
-from cadra.fitting import (
-    FitOptions,
-    Integration,
-    fit,
-    fit_shots,
-    shot_data_from_truth,
-)
+from cadra.fitting import FitOptions, Integration, fit, fit_shots
 from cadra.fitting.sensitivity import apply_local, observables, predict, predict_with_jacobian
 from cadra.fitting.solver import _blocks, _normal_equations, _scales, _step
+from cadra.flight import shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SPECS = "sample_shots/specs"
@@ -186,7 +181,7 @@ def test_fit_keeps_its_jacobian_and_leverages(m2_2429):
     channel's noise floor; the leverages sum to the free parameters."""
     from dataclasses import replace
 
-    from cadra.fitting.data import CHANNELS
+    from cadra.flight.data import CHANNELS
 
     shot = m2_2429
     exact = _data(shot, sp=1e-5, sa=np.radians(0.01))
@@ -367,7 +362,7 @@ def test_steps_won_on_the_two_evaluations_difference_end_as_convergence():
     must end converged, at the minimum."""
     from pathlib import Path
 
-    from cadra.fitting.data import ShotData, rigid_body_from_shot
+    from cadra.flight.data import ShotData, rigid_body_from_shot
     from cadra.io.shotfile import load_shot
 
     arrays = np.load(Path(__file__).parent / "data" / "e2e_m2_m070_stage1.npz")

@@ -16,10 +16,10 @@ import pytest
 from cadra.channels import residual
 from cadra.dynamics.effects import Effects
 from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET
-from cadra.fitting import shot_data_from_truth
 from cadra.fitting.extras import Extra
 from cadra.fitting.sensitivity import predict, predict_with_jacobian
 from cadra.fitting.solver import fit
+from cadra.flight import shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 CG_Z = 2e-4          # m, body z

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from cadra.dynamics.effects import Effects
-from cadra.fitting import fit_shots, shot_data_from_truth
+from cadra.fitting import fit_shots
 from cadra.fitting.extras import Extra
 from cadra.fitting.profile import profile_parameter
+from cadra.flight import shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 BIAS_Z = 3e-6        # m, station 9

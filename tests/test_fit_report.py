@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cadra.fitting.data import CHANNELS, FILM_SIGMAS, shot_data_from_truth
 from cadra.fitting.report import write_fit_outputs
 from cadra.fitting.solver import fit
+from cadra.flight.data import CHANNELS, FILM_SIGMAS, shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 FREE = ("CD_A1", "Cm_A1", "Cmq_A1")

@@ -22,7 +22,6 @@ import pytest
 
 from cadra.aero import load_bundled_model
 from cadra.dynamics.setup import propagate_states
-from cadra.fitting.data import FILM_SIGMAS, shot_data_from_truth
 from cadra.fitting.solver import fit
 from cadra.fitting.studies import (
     aero_angle_history,
@@ -34,6 +33,7 @@ from cadra.fitting.studies import (
     single_fit,
     single_fits,
 )
+from cadra.flight.data import FILM_SIGMAS, shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, rigid_body, simulate_shot, spec_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]

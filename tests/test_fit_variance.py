@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cadra.fitting import CHANNELS, fit_shots, shot_data_from_truth
+from cadra.fitting import fit_shots
+from cadra.flight import CHANNELS, shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SPECS = "sample_shots/specs"

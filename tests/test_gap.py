@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from cadra.dynamics.effects import Effects
-from cadra.fitting import fit_shots, shot_data_from_truth
+from cadra.fitting import fit_shots
+from cadra.flight import shot_data_from_truth
 from cadra.gap.score import diagnose_gap
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 

@@ -16,7 +16,8 @@ from scipy import stats
 
 from cadra.aero import load_bundled_model
 from cadra.dynamics.effects import Effects
-from cadra.fitting import FitOptions, fit_shots, shot_data_from_truth
+from cadra.fitting import FitOptions, fit_shots
+from cadra.flight import shot_data_from_truth
 from cadra.gap import verdict as vd
 from cadra.gap.candidates import library, same_term
 from cadra.gap.score import diagnose_gap

@@ -97,7 +97,7 @@ def _roll_record(rng, *, phi0_deg=70.0, n=400, rate_hz=200.0, sigma_deg=0.05):
     from test_roll_lockin import bearing, lockin_model, roll_history
 
     from cadra.dynamics.trajectory import truth_table
-    from cadra.fitting.data import shot_data_from_truth
+    from cadra.flight.data import shot_data_from_truth
 
     model = lockin_model()
     t = np.arange(n) / rate_hz
@@ -147,8 +147,8 @@ def test_fit_of_a_roll_bearing_record_recovers_the_roll_coefficients():
 def test_roll_only_record_without_the_axis_asks_for_a_starting_state():
     from dataclasses import replace
 
-    from cadra.fitting.data import FitDataError
     from cadra.fitting.start import state_candidates
+    from cadra.flight.data import FitDataError
 
     sd, _, states = _roll_record(np.random.default_rng(2), n=50)
     meas = sd.meas.copy()
@@ -172,8 +172,9 @@ def test_finned_range_shot_fits_its_roll_coefficients_and_plots_the_roll():
     import matplotlib
 
     matplotlib.use("Agg")
-    from cadra.fitting import fit_shots, shot_data_from_truth
+    from cadra.fitting import fit_shots
     from cadra.fitting.plots import plot_angle_histories
+    from cadra.flight import shot_data_from_truth
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     sim = simulate_shot(load_shot_spec("sample_shots/specs/finner_1.toml"))

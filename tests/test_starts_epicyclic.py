@@ -1,5 +1,5 @@
 """cadra2 fit's starting values: from an all-zero model, and from the epicyclic fit's arms for a
-spinning body (cadra.fitting.start, cadra.cli.motion.start_estimates; issue 19 deliverable 5).
+spinning body (cadra.fitting.start, cadra.flight.starts.start_estimates; issue 19 deliverable 5).
 
 Truth: the simulator's CONE-1 (10 deg cone, bundled ``cone_linear``) with its spin and C_m_alpha
 changed, flown by the same dynamics, measured as truth + Gaussian noise (20 um, 0.05 deg)."""
@@ -11,11 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cadra.cli.motion import epicyclic_estimates, start_estimates
-from cadra.fitting import fit_shots, shot_data_from_truth, starting_model
+from cadra.fitting import fit_shots, starting_model
 from cadra.fitting.sensitivity import Integration
 from cadra.fitting.solver import FitOptions
-from cadra.fitting.start import estimate_motion
+from cadra.flight import shot_data_from_truth
+from cadra.flight.estimates import estimate_motion
+from cadra.flight.starts import epicyclic_estimates, start_estimates
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 SPEC = Path(__file__).resolve().parents[1] / "sample_shots" / "specs" / "cone_1.toml"
@@ -104,7 +105,7 @@ def test_tunnel_release_of_a_spinning_model_gives_its_moment_slope_and_spin():
     from cadra.dynamics.observe import observe
     from cadra.dynamics.setup import RigidBody, propagate_states
     from cadra.dynamics.trajectory import Launch
-    from cadra.fitting.data import ShotData
+    from cadra.flight.data import ShotData
 
     body = RigidBody(mass_kg=0.0277, inertia_body_kg_m2=np.diag([1.0, 0.69, 0.69]) * 1e-6,
                      d_m=0.0381, cg_from_ref_body_m=[0.0, 0.0, 0.0], density_kg_m3=0.0372,

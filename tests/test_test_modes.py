@@ -17,10 +17,10 @@ from cadra.dynamics.modes import TestMode
 from cadra.dynamics.observe import observe
 from cadra.dynamics.setup import RigidBody, propagate_states
 from cadra.dynamics.trajectory import Launch
-from cadra.fitting.data import ShotData
 from cadra.fitting.problem import default_local_free
 from cadra.fitting.sensitivity import LOCAL_NAMES
 from cadra.fitting.solver import fit
+from cadra.flight.data import ShotData
 
 # seed 004 M1 (shot 2384): mass properties; tunnel air at the range's density
 M1 = dict(mass_kg=0.096563, inertia_body_kg_m2=np.diag([104.208, 81.024, 81.024]) * 1e-7,
@@ -223,7 +223,7 @@ def test_pitch_pivot_record_from_files_through_cadra2_fit(tmp_path):
     assert back.test_mode == mode
     assert "[test_mode]" in (tmp_path / "shot.toml").read_text()
 
-    from cadra.fitting.data import rigid_body_from_shot
+    from cadra.flight.data import rigid_body_from_shot
 
     body = rigid_body_from_shot(back)
     truth = model(CD=1.0, CLa=1.5, Cma=-0.117, Cmq=-2.0)

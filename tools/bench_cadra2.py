@@ -11,7 +11,7 @@ Problems (synthetic data from the sample-shot specs; truth = the simulator's tru
 single fit of M2-2429 (model m2_m070, all its free parameters) and the 7-shot M2 M0.70
 multi-fit (2425 2426 2427 2428 2429 2431 2433); the 7-shot M1 M1.10 multi-fit (m1_m110;
 2366 2379 2380 2384 2386 2388 2393) for accuracy and pulls. Film noise
-(:data:`cadra.fitting.data.FILM_SIGMAS`: 0.1 mm, 0.1 deg, 10 ns timing). The "perturbed"
+(:data:`cadra.flight.data.FILM_SIGMAS`: 0.1 mm, 0.1 deg, 10 ns timing). The "perturbed"
 start is the true epoch state moved by ~1 mm, 0.5 m/s, 0.5 deg, 0.5 rad/s (Gaussian, per
 component) and every free aero value by 5-10 % (random sign); the "auto" start is
 :mod:`cadra.fitting.start` (linear theory from the data, seeded with the perturbed model as
@@ -115,8 +115,8 @@ def _sim(name):
 
 def make_problem(names, rng, sigmas, *, noise=True, exact=False):
     """Shot data, true epoch states, the truth model and a perturbed start (model, states)."""
-    from cadra.fitting.data import shot_data_from_truth
     from cadra.fitting.sensitivity import apply_local
+    from cadra.flight.data import shot_data_from_truth
 
     sds, truth_states, starts = [], [], []
     model = None
@@ -179,9 +179,9 @@ PYTHON_MULTIFIT_LIMIT_S = 600.0
 
 
 def speed_and_baseline(seed, skip_baseline, quick):
-    from cadra.fitting.data import FILM_SIGMAS
     from cadra.fitting.sensitivity import Integration
     from cadra.fitting.solver import FitOptions, fit
+    from cadra.flight.data import FILM_SIGMAS
 
     out = {}
     python_ms = None                        # plain-Python baseline ms per trajectory (single)
@@ -307,7 +307,7 @@ import json, math, sys, time
 t0 = time.perf_counter()
 import numpy as np, pandas as pd
 from cadra.aero import load_bundled_model
-from cadra.fitting.data import FILM_SIGMAS, rigid_body_from_shot, shot_data_from_truth
+from cadra.flight.data import FILM_SIGMAS, rigid_body_from_shot, shot_data_from_truth
 from cadra.fitting.sensitivity import apply_local
 from cadra.fitting.solver import fit
 from cadra.io.shotfile import load_shot
@@ -362,9 +362,9 @@ def cold_start():
 # --- 4: noise-free ------------------------------------------------------------------------
 
 def noise_free(seed):
-    from cadra.fitting.data import FILM_SIGMAS
     from cadra.fitting.sensitivity import Integration
     from cadra.fitting.solver import FitOptions, fit
+    from cadra.flight.data import FILM_SIGMAS
 
     tight = FitOptions(step_tol_sigma=1e-4,
                        integration=Integration(tol_position_m=1e-10, tol_angle_rad=1e-10))
@@ -403,9 +403,9 @@ def noise_free(seed):
 def _one_realisation(job):
     """Worker: one noisy multi-fit; returns (set, sigmas label, names, values, sigmas, status,
     truth values)."""
-    from cadra.fitting.data import FILM_SIGMAS
     from cadra.fitting.sensitivity import Integration
     from cadra.fitting.solver import FitOptions, fit
+    from cadra.flight.data import FILM_SIGMAS
 
     set_label, sig_label, seed, i = job
     names = M2_SET if set_label == "m2_m070" else M1_SET

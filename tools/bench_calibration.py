@@ -39,7 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _measure(sim, bias, sigma, rng, kind=None):
-    from cadra.fitting import shot_data_from_truth
+    from cadra.flight import shot_data_from_truth
 
     sd = shot_data_from_truth(sim.truth, sim.rigid, sim.spec.shot_id, kind or sim.body.kind,
                               sigma_position_m=sigma, sigma_angle_rad=np.radians(0.0012),
@@ -119,7 +119,7 @@ def end_to_end() -> dict:
     import pandas as pd
 
     from cadra.calibration.sphere import estimate_station_biases
-    from cadra.fitting import load_shot_data
+    from cadra.flight import load_shot_data
     from cadra.measure.shot import measure_shot
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

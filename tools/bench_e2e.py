@@ -70,7 +70,7 @@ def measure_one(job):
     Returns (set, r, name, e2e ShotData, control ShotData, stage-one normalised errors
     (n, 5) with NaN where not measured, seconds). Nothing is left on disk.
     """
-    from cadra.fitting.data import load_shot_data, shot_data_from_truth
+    from cadra.flight.data import load_shot_data, shot_data_from_truth
     from cadra.measure.shot import measure_shot
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

@@ -2,7 +2,7 @@
 
 ``cadra2 fit`` starts every free coefficient from linear theory (cadra.fitting.start): damped
 sines of theta and psi give a pitch frequency and damping, hence C_m_alpha = -omega^2 I/(q S d)
-and C_mq. ``cadra.cli.motion.epicyclic_estimates`` gives the same targets from the epicyclic
+and C_mq. ``cadra.flight.starts.epicyclic_estimates`` gives the same targets from the epicyclic
 fit's two arms instead (C_m_alpha = I (omega_1 omega_2 - lambda_1 lambda_2)/(q S d), with the
 swerve's lift; docs/motion.md). This bench fits the same data from both starts, every free
 parameter at ZERO in the model file, and reports per case: the starting C_m_alpha and C_mq
@@ -78,11 +78,12 @@ def gyro_factor(sim) -> float:
 
 
 def run_case(case: str, draws: int, seed: int) -> dict:
-    from cadra.cli.motion import epicyclic_estimates
-    from cadra.fitting import fit_shots, shot_data_from_truth, starting_model
+    from cadra.fitting import fit_shots, starting_model
     from cadra.fitting.sensitivity import Integration
     from cadra.fitting.solver import FitOptions
-    from cadra.fitting.start import estimate_motion
+    from cadra.flight import shot_data_from_truth
+    from cadra.flight.estimates import estimate_motion
+    from cadra.flight.starts import epicyclic_estimates
 
     sim = simulate(case)
     truth = sim.model

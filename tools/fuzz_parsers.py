@@ -299,7 +299,7 @@ def allowed():
     from cadra.aero.expr import ExpressionError
     from cadra.aero.model import ModelFileError
     from cadra.calibration.table import StationHistoryError
-    from cadra.fitting.data import FitDataError
+    from cadra.flight.data import FitDataError
     from cadra.io.facility_file import FacilityFileError
     from cadra.io.shotfile import ShotFileError
     from cadra.io.spec_file import SpecError
@@ -335,7 +335,7 @@ def load_model_text(text: str | bytes, folder: Path, evaluate: bool = False):
 
 
 def load_trajectory_text(text: str | bytes, folder: Path):
-    from cadra.fitting.data import load_shot_data
+    from cadra.flight.data import load_shot_data
     from cadra.io.trajectory import load_trajectory
 
     p = folder / "trajectory.csv"

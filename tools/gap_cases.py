@@ -230,7 +230,7 @@ def measure(sim, nominal, spec, seed, edit, offset=(0.0, 0.0)):
     """Stage-one-like measurements of a simulated shot, with a measurement edit applied;
     ``offset``: (y, z) m by which the whole path is translated (a lateral launch offset);
     ``seed`` None: without noise."""
-    from cadra.fitting import shot_data_from_truth
+    from cadra.flight import shot_data_from_truth
 
     sphere = sim.body.kind == "sphere"
     truth = sim.truth.copy()

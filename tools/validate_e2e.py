@@ -41,7 +41,8 @@ def main(argv=None) -> int:
                         help="also write the cadra2 fit outputs (report, plots) here")
     args = parser.parse_args(argv)
 
-    from cadra.fitting import fit_shots, load_shot_data
+    from cadra.fitting import fit_shots
+    from cadra.flight import load_shot_data
     from cadra.measure.shot import measure_shot
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

@@ -118,7 +118,7 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0):
     saved = rng.bit_generator.state
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
-    from cadra.fitting.data import CHANNELS
+    from cadra.flight.data import CHANNELS
     from cadra.gap.score import diagnose_gap
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 

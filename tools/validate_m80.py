@@ -8,7 +8,7 @@ them with stage one (one process), and then
 
 * **linear theory** (the classic method, per round): the tricyclic fit of the measured angles
   with the trim arm at the spin from the twist, C_L_alpha from the swerve, and C_M_alpha,
-  C_Mq + C_Malphadot and C_Mpalpha from the arms (``cadra.cli.motion.analyse_shot``,
+  C_Mq + C_Malphadot and C_Mpalpha from the arms (``cadra.flight.classic.analyse_shot``,
   docs/motion.md), in MR 1833's normalisation (q d/V, p d/V: cadra.motion's p d/2V values
   divided by 2);
 * **the 6-DOF fit** (``cadra.fitting.fit_shots``, both rounds together, the model ``m80``
@@ -19,7 +19,7 @@ them with stage one (one process), and then
 Reported per coefficient: value, sigma, truth, pull = (value - truth) / sigma; over the draws
 the fraction of |pull| <= 2 (``m80_within_2sigma_frac``, 6-DOF) and the pulls' mean and
 standard deviation. Then one round with film-range noise (0.1 mm, 0.1 deg: stage one's sigmas
-on real film, cadra.fitting.FILM_SIGMAS) added to the exact truth gives a realistic per-round
+on real film, cadra.flight.FILM_SIGMAS) added to the exact truth gives a realistic per-round
 sigma of CMQ to set beside the round-to-round spread of MR 1833 Table II (-2.8 to -4.5).
 
 A draw whose stage-one output the fit refuses to load (``FitDataError``: at 78ed666 stage
@@ -99,7 +99,7 @@ def gyroscopic_stability(Ix, Iy, p, rho, V, d, cma) -> float:
 def measure_draw(k: int, out: Path, keep_images: bool = False, reuse: bool = False):
     """Fly, render and measure every round of draw ``k``; returns (ShotData list, seconds).
     ``reuse``: keep a round's earlier shot file and stage-one output when both are there."""
-    from cadra.fitting import load_shot_data
+    from cadra.flight import load_shot_data
     from cadra.measure.shot import measure_shot
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
@@ -124,9 +124,9 @@ def measure_draw(k: int, out: Path, keep_images: bool = False, reuse: bool = Fal
 
 def linear_theory(shot) -> tuple[dict, dict, float]:
     """The classic reduction of one round: (values, sigmas) in MR 1833's normalisation, and
-    C_D from the deceleration (cadra.fitting.start.estimate_motion)."""
-    from cadra.cli.motion import analyse_shot
-    from cadra.fitting.start import estimate_motion
+    C_D from the deceleration (cadra.flight.estimates.estimate_motion)."""
+    from cadra.flight.classic import analyse_shot
+    from cadra.flight.estimates import estimate_motion
 
     c = analyse_shot(shot, spin=muzzle_spin_rad_s()).coefficients
     val = {"CMA": c.Cm_alpha, "CMQ": c.Cmq_sum / 2, "CMPA": c.Cm_p_alpha / 2,
@@ -173,7 +173,7 @@ def start_from_linear(lin: list[tuple[dict, dict, float]]) -> dict:
 def film_sigma(rng: np.random.Generator) -> dict:
     """Round M80-1 with film-range noise on the exact truth: the 6-DOF fit's per-round
     sigmas (and pulls) where stage one measures 0.1 mm and 0.1 deg."""
-    from cadra.fitting.data import shot_data_from_truth
+    from cadra.flight.data import shot_data_from_truth
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     sim = simulate_shot(load_shot_spec(ROOT / "sample_shots" / "specs" / f"{SPECS[0]}.toml"))
@@ -210,7 +210,7 @@ def conditions() -> dict:
 def run(draws: int = 8, out: Path | None = None, keep_images: bool = False,
         film: bool = True, seed: int = 1, verbose: bool = True, reuse: bool = False) -> dict:
     """Every draw (module doc); returns the summary (the JSON of :func:`main`)."""
-    from cadra.fitting.data import FitDataError
+    from cadra.flight.data import FitDataError
 
     out = Path(out or ROOT / "out" / "m80")
     truth = truth_model()

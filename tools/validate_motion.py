@@ -39,9 +39,9 @@ from cadra.dynamics.modes import TestMode
 from cadra.dynamics.observe import observe
 from cadra.dynamics.setup import RigidBody, propagate_states
 from cadra.dynamics.trajectory import Launch
-from cadra.fitting.data import ShotData
 from cadra.fitting.sensitivity import Integration
 from cadra.fitting.solver import FitOptions, fit
+from cadra.flight.data import ShotData
 from cadra.motion import (
     FlightConditions,
     kb_pitch_reduction,

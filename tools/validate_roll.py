@@ -70,7 +70,7 @@ def run_tool(script: str, args: list[str]) -> dict:
 def finner_realisation(r: int, seed: int, work: Path) -> dict:
     """FINNER-1 with a new seed: images -> cadra1 -> cadra2; pulls of the free coefficients."""
     from cadra.fitting import fit_shots
-    from cadra.fitting.data import load_shot_data
+    from cadra.flight.data import load_shot_data
     from cadra.measure.shot import measure_shot
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

@@ -191,7 +191,8 @@ def cadra_fit_stage_two(t, states, noise, sigma: float, start: dict) -> dict:
     started from the pureroll MDC's coefficients and the record's own roll and rate there."""
     from cadra import channels
     from cadra.dynamics.observe import observe
-    from cadra.fitting import FitOptions, Integration, ShotData, fit_shots
+    from cadra.fitting import FitOptions, Integration, fit_shots
+    from cadra.flight import ShotData
 
     b = body()
     k = channels.NAMES.index("phi")

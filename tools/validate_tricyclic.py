@@ -52,7 +52,7 @@ from cadra.dynamics.modes import TestMode
 from cadra.dynamics.observe import air_angles, observe
 from cadra.dynamics.setup import RigidBody, propagate_states
 from cadra.dynamics.trajectory import Launch
-from cadra.fitting.data import rigid_body_from_shot
+from cadra.flight.data import rigid_body_from_shot
 from cadra.io.shotfile import MassProperties, ShotFile, StationRecord
 from cadra.motion import fit_epicyclic, fixed_plane_angles
 
@@ -382,11 +382,11 @@ def tricyclic_estimate(shot, spin_rad_s: float):
     look: the 10-constant fit of the measured theta, psi in time with the trim arm at the
     independently measured spin (seed 002: a fiber-optics camera or a painted stripe), C_m
     alpha and C_mq + C_m alpha-dot from its arms by linear theory (docs/motion.md), and the
-    starting state spinning at that spin. ``cadra.cli.motion.epicyclic_estimates`` does the
+    starting state spinning at that spin. ``cadra.flight.starts.epicyclic_estimates`` does the
     same from the two-arm fit (spin from the arms); the fitter's damped-sine start alone (no
     spin) puts a body spinning at 28 rps with I_x > I_y in another basin (C_m alpha -0.07
     for -0.185, chi^2/dof 238 on the cg case)."""
-    from cadra.fitting.start import estimate_motion
+    from cadra.flight.estimates import estimate_motion
     from cadra.motion import FlightConditions, linear_coefficients
 
     th, ps = shot.meas[:, 3], shot.meas[:, 4]
@@ -434,7 +434,7 @@ def diagnose(case: Case, sigma_angle_deg: float, seed: int, folder: Path,
     else:
         from cadra.aero import load_model
         from cadra.fitting import fit_shots
-        from cadra.fitting.inputs import load_shots
+        from cadra.flight.load import load_shots
         from cadra.gap.report import write_diagnosis
         from cadra.gap.score import diagnose_gap
         from cadra.gap.where import where_analysis

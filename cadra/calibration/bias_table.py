@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 from cadra.calibration.history import current_table, load_bias_table, load_history
 from cadra.calibration.sphere import apply_bias_table
-from cadra.fitting.data import ShotData
+from cadra.flight.data import ShotData
 
 #: the ``table`` of :func:`correct_by_bias_table` that means "the history's latest entry"
 CURRENT = "current"

@@ -42,8 +42,9 @@ import numpy as np
 
 from cadra.aero import AeroModel, load_bundled_model
 from cadra.channels import POSITION
-from cadra.fitting import FitOptions, ShotData, fit_shots
+from cadra.fitting import FitOptions, fit_shots
 from cadra.fitting.problem import result_problem
+from cadra.flight import ShotData
 
 #: bias channels: position x, y, z (m) and spark time (s)
 BIAS_CHANNELS = ("x", "y", "z", "time")

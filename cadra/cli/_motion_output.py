@@ -1,5 +1,5 @@
 """What ``cadra2 motion`` writes and prints: tables, report, plots (docs/motion.md). Reads only
-what :func:`cadra.cli.motion.analyse_shot` stored; plots with matplotlib's object API
+what :func:`cadra.flight.classic.analyse_shot` stored; plots with matplotlib's object API
 (imported lazily), never pyplot."""
 
 from __future__ import annotations

@@ -54,8 +54,8 @@ from cadra.cli._format import (
     warn,
 )
 from cadra.cli.motion import add_parser as add_motion_parser
-from cadra.cli.motion import start_estimates
 from cadra.cli.roll import add_parser as add_roll_parser
+from cadra.flight.starts import start_estimates
 from cadra.numfmt import pm
 
 #: the top-level help's description (plain text: the module doc is rST)
@@ -118,7 +118,7 @@ def _input_paths(args) -> list[Path]:
             if Path(spec.aero_model).exists():
                 paths.append(Path(spec.aero_model))
         return paths
-    from cadra.fitting.inputs import trajectory_and_shot
+    from cadra.flight.load import trajectory_and_shot
 
     given = args.shot or []
     paths += [Path(p) for p in (*args.trajectories, *given)]
@@ -188,7 +188,7 @@ def _model(args):
 
 def _shots(args):
     """The shots named on the command line and their trajectory files."""
-    from cadra.fitting.inputs import load_shots
+    from cadra.flight.load import load_shots
 
     return load_shots(args.trajectories, args.shot, sigma_time_s=args.sigma_time_s,
                       min_sigma_position_m=args.min_sigma_position_m,

@@ -118,7 +118,6 @@ def records_of(shots):
 def run(args) -> int:
     """``cadra2 roll`` (module doc); returns the exit status."""
     from cadra.aero import resolve_model
-    from cadra.fitting.inputs import load_shots
     from cadra.fitting.segmented import (
         plot_segmented_fit,
         seed003_tables,
@@ -126,6 +125,7 @@ def run(args) -> int:
         steady_spins,
         write_tables,
     )
+    from cadra.flight.load import load_shots
     from cadra.io.atomic import atomic_output_dir
 
     quiet = bool(getattr(args, "quiet", False))

@@ -18,7 +18,12 @@ import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.channels import ANGLE, POSITION
-from cadra.fitting.data import (
+from cadra.fitting.problem import FitProblem, result_problem
+from cadra.fitting.result import FitResult
+from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
+from cadra.fitting.solver import FitOptions, fit
+from cadra.fitting.start import initial_states, starting_model
+from cadra.flight.data import (
     CHANNELS,
     FILM_SIGMAS,
     FitDataError,
@@ -27,11 +32,7 @@ from cadra.fitting.data import (
     load_shot_data,
     shot_data_from_truth,
 )
-from cadra.fitting.problem import FitProblem, result_problem
-from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
-from cadra.fitting.solver import FitOptions, fit
-from cadra.fitting.start import estimate_motion, initial_states, starting_model
+from cadra.flight.estimates import estimate_motion
 
 #: the progress-bar labels of :func:`fit_shots`' two phases (continuation)
 PHASE_LABELS = ("fit (film-level sigmas)", "fit (stage-one sigmas)")
@@ -65,9 +66,9 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
     the factors are in ``result.options["variance_components"]``, the rescaled shots in
     ``result.problem.shots``).
 
-    ``estimates``: each shot's :class:`~cadra.fitting.start.MotionEstimate` for the
-    starting values, in place of :func:`~cadra.fitting.start.estimate_motion`'s (e.g. the
-    epicyclic fit's, ``cadra.cli.motion.epicyclic_estimates``).
+    ``estimates``: each shot's :class:`~cadra.flight.estimates.MotionEstimate` for the
+    starting values, in place of :func:`~cadra.flight.estimates.estimate_motion`'s (e.g. the
+    epicyclic fit's, ``cadra.flight.starts.epicyclic_estimates``).
 
     Returns the result and the starting model (for the report's "initial value" column).
     """

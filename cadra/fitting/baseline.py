@@ -45,8 +45,8 @@ from cadra.dynamics import layout as L
 from cadra.dynamics.eom import derivative
 from cadra.dynamics.integrate import inverse3
 from cadra.dynamics.setup import plane_code
-from cadra.fitting.data import ShotData
 from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, apply_local, observables
+from cadra.flight.data import ShotData
 
 #: finite-difference steps of the 12 local unknowns (m, m/s, rad, rad/s): each moves the
 #: trajectory by ~1e-5 m or rad over a shot, far above ``solve_ivp``'s step-selection noise

@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 
 from cadra.channels import OBSERVED, from_si
-from cadra.fitting.data import ShotData
 from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
+from cadra.flight.data import ShotData
 
 
 def fitted_histories(result: FitResult, shots: Sequence[ShotData] | None = None,

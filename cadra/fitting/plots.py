@@ -1,6 +1,6 @@
 """Plots of a stage-two fit: coefficients, angle histories, residuals, a 3-D view.
 
-Every function takes the fit result (and the :class:`cadra.fitting.data.ShotData` it used),
+Every function takes the fit result (and the :class:`cadra.flight.data.ShotData` it used),
 draws on a given figure (``fig=``) or a new one, and returns the figure; none shows anything.
 matplotlib is imported lazily and used through :class:`matplotlib.figure.Figure` (Agg canvas,
 no pyplot state), so headless use never loads a GUI stack. The 3-D view is rendered
@@ -26,9 +26,9 @@ import pandas as pd
 
 from cadra.aero.program import COEFFICIENTS
 from cadra.channels import BY_NAME, POSITION, wrap_angle
-from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.histories import fitted_histories
 from cadra.fitting.result import FitResult
+from cadra.flight.data import CHANNELS, ShotData
 
 #: display names of the coefficients (mathtext)
 COEFFICIENT_LABELS = {"CD": "$C_D$", "CL": "$C_L$", "CC": "$C_C$", "Cl": "$C_l$",

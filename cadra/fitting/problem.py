@@ -1,7 +1,7 @@
 """One fit problem behind every prediction: the solver's, the report's, the gap's.
 
 A :class:`FitProblem` is the whole forward model of a fit as plain data -- the shots
-(:class:`cadra.fitting.data.ShotData`), the aerodynamic model, the extra unknowns
+(:class:`cadra.flight.data.ShotData`), the aerodynamic model, the extra unknowns
 (:mod:`cadra.fitting.extras`: effects made free or held, station terms), the integration
 settings, each shot's reference state at its epoch and its free local unknowns -- with
 
@@ -37,7 +37,6 @@ import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.dynamics.observe import air_angles, observe
-from cadra.fitting.data import ShotData
 from cadra.fitting.extras import (
     Extra,
     add_station_terms,
@@ -54,6 +53,7 @@ from cadra.fitting.sensitivity import (
     predict_states,
     predict_with_jacobian,
 )
+from cadra.flight.data import ShotData
 
 
 def default_local_free(data: ShotData, model: AeroModel | None = None) -> np.ndarray:

@@ -26,10 +26,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from cadra.fitting.data import ShotData
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, apply_local
 from cadra.fitting.solver import FitOptions, fit
+from cadra.flight.data import ShotData
 
 #: convergence control of the profile's held fits (warm-started a step away: they settle fast)
 PROFILE_OPTIONS = FitOptions(max_iterations=30)

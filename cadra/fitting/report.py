@@ -45,11 +45,11 @@ import pandas as pd
 from cadra.aero import AeroModel
 from cadra.channels import BY_NAME, N_CHANNELS, OBSERVED, residual
 from cadra.dynamics.observe import air_angles
-from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.histories import fitted_histories
 from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local, observables
+from cadra.flight.data import CHANNELS, ShotData
 from cadra.numfmt import pm
 
 #: results.json format tag

@@ -34,8 +34,8 @@ from scipy import sparse
 
 from cadra.aero import AeroModel
 from cadra.channels import residual
-from cadra.fitting.data import CHANNELS
 from cadra.fitting.sensitivity import LOCAL_NAMES
+from cadra.flight.data import CHANNELS
 
 if TYPE_CHECKING:
     from cadra.fitting.problem import FitProblem

@@ -10,7 +10,7 @@ block-arrow normal matrix, B^jk = 0 for j != k). Here:
 - :class:`RollRecord` is one measured roll history; :func:`choose_segments` cuts it as the
   paper does (one oscillation cycle from a zero-rate peak to the next-but-one, 180 deg of roll
   in speed-up, 360 deg in steady spin, a short segment split at a pronounced saddle);
-- :func:`segment_shots` makes each segment a :class:`cadra.fitting.data.ShotData` that
+- :func:`segment_shots` makes each segment a :class:`cadra.flight.data.ShotData` that
   measures the roll angle only, :func:`segment_states` its reference state from the smoothed
   record; the fits are :func:`cadra.fitting.fit_shots` calls, so every prediction is the fit
   problem's (the roll-bearing 6-DOF with the aero model, :mod:`cadra.dynamics.modes`);
@@ -41,10 +41,10 @@ from cadra import channels
 from cadra.aero import AeroModel
 from cadra.dynamics.setup import RigidBody
 from cadra.dynamics.trajectory import Launch
-from cadra.fitting.data import ShotData
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES
 from cadra.fitting.solver import FitOptions
+from cadra.flight.data import ShotData
 
 #: the paper's start set, then the remaining terms 3-4 at a time (Table 1's order)
 STEPS: tuple[tuple[str, ...], ...] = (

@@ -17,7 +17,7 @@ a relative cut-off, so a singular matrix (parameters the data cannot separate) n
 the step leaves those directions alone and the result names them
 (:mod:`cadra.fitting.result`).
 
-Pure function over plain data: :func:`fit` takes :class:`cadra.fitting.data.ShotData` s and an
+Pure function over plain data: :func:`fit` takes :class:`cadra.flight.data.ShotData` s and an
 :class:`cadra.aero.AeroModel` and returns a :class:`cadra.fitting.result.FitResult`.
 """
 
@@ -33,10 +33,10 @@ import numpy as np
 from cadra.aero import AeroModel
 from cadra.channels import residual
 from cadra.dynamics.integrate import MAX_ADAPTIVE_EVALS
-from cadra.fitting.data import ShotData
 from cadra.fitting.extras import Extra
 from cadra.fitting.problem import FitProblem, default_local_free
 from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, Integration, apply_local
+from cadra.flight.data import ShotData
 
 #: statuses of a fit; only the first counts as a result
 STATUSES = ("converged", "max_iterations", "stalled", "failed")

@@ -1,213 +1,47 @@
-"""Starting values from linear theory, estimated from the measurements themselves.
+"""Starting values of the 6-DOF fit, from linear theory and the measurements themselves.
 
-No guru needed: before the 6-DOF fit, each shot's measurements give
+No guru needed: :mod:`cadra.flight.estimates` reads each shot's frequency, damping, drag and
+mean angle from its measurements (or :mod:`cadra.flight.starts` from its epicyclic arms), and
 
-- the initial position and velocity at the epoch (quadratic fits of x, y, z against time);
-- the attitude and the transverse angular velocity at the epoch (local quadratic fits of the
-  measured axis direction; the roll about the axis is not seen in the images and is chosen
-  from a grid by the chi^2 of the starting trajectory);
-- the drag coefficient, from the deceleration (drag-only closed form
-  ``x = x0 + ln(1 + k V0 t) / k`` with ``k = rho S C_D / 2m``);
-- the pitch (and yaw) frequency and the amplitude trend, from a damped-sinusoid fit of theta and
-  psi with a quadratic trend (variable projection over omega and lambda), which linear theory
-  turns into ``C_m_alpha = -omega^2 I / (q S d)`` and ``C_mq = 8 I lambda / (rho V S d^2)``.
-
-:func:`starting_model` maps these *targets* onto whatever parameters the model file has: it
-finds the smallest change of the free parameters (relative to the file's values) for which the
-model reproduces the targets at the shots' mean flight condition (C_D, slope of C_m, C_m = 0 at
-the mean angle for a trimmed lifting body, C_mq, and the yaw slope of C_n for alpha-beta
-models). Parameters the targets do not touch keep the file's values.
+- :func:`starting_model` maps these *targets* onto whatever parameters the model file has: it
+  finds the smallest change of the free parameters (relative to the file's values) for which
+  the model reproduces the targets at the shots' mean flight condition (C_D, slope of C_m,
+  C_m = 0 at the mean angle for a trimmed lifting body, C_mq, and the yaw slope of C_n for
+  alpha-beta models). Parameters the targets do not touch keep the file's values.
+- :func:`initial_states` gives each shot's state at its epoch: position and velocity from
+  quadratic fits of x, y, z against time, the attitude and transverse angular velocity from
+  local quadratic fits of the measured axis direction; the roll about the axis, which the
+  images do not show, is chosen from a grid by the chi^2 of the starting trajectory.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares, minimize
+from scipy.optimize import least_squares
 
 from cadra.aero import AeroModel
 from cadra.channels import residual
 from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
 from cadra.dynamics.setup import state_from_reference
-from cadra.fitting.data import CHANNELS, FitDataError, ShotData
 from cadra.fitting.problem import FitProblem
 from cadra.fitting.sensitivity import Integration
+from cadra.flight.data import CHANNELS, FitDataError, ShotData
+from cadra.flight.estimates import (
+    MotionEstimate,
+    estimate_motion,
+    kinematics_at_epoch,
+    polyfit_finite,
+)
+from cadra.motion import FlightConditions, planar_coefficients
 
 #: roll angles (deg) tried for a shot whose roll the images do not show
 ROLL_GRID_DEG = tuple(range(0, 360, 30))
 #: the axis-inclination channels (columns of ``ShotData.meas``)
 _THETA, _PSI = CHANNELS.index("theta"), CHANNELS.index("psi")
 _PHI = CHANNELS.index("phi")
-
-
-@dataclass(frozen=True)
-class MotionEstimate:
-    """Linear-theory estimates of one shot (SI)."""
-
-    shot_id: str
-    speed_m_s: float
-    mach: float
-    dynamic_pressure_pa: float
-    cd: float
-    omega_pitch_rad_s: float      # NaN if no angles / no oscillation found
-    lambda_pitch_1_s: float
-    omega_yaw_rad_s: float
-    lambda_yaw_1_s: float
-    sigma_mean_rad: float         # mean angle between the measured axis and the velocity
-    sigma_rms_rad: float
-    #: linear-theory moment coefficients found another way (per rad; NaN: none), used by
-    #: :func:`starting_model` before the frequency and damping above: the epicyclic fit's
-    #: arms give them for a spinning body, whose pitch frequency alone does not
-    #: (``cadra.cli.motion.epicyclic_estimates``)
-    cm_alpha: float = math.nan
-    cmq_sum: float = math.nan     # C_mq + C_m_alpha_dot
-    #: the spin about the axis (rad/s; NaN: not known), which the images do not show; the
-    #: epicyclic arms give it as (omega_1 + omega_2) I / I_x. The starting state spins at it
-    #: (a gyroscopically stable body started without spin tumbles)
-    spin_rad_s: float = math.nan
-
-
-def _polyfit(t, v, deg, w=None):
-    ok = np.isfinite(v)
-    deg = min(deg, max(int(ok.sum()) - 1, 0))
-    return np.polyfit(t[ok], v[ok], deg, w=None if w is None else w[ok])
-
-
-def _kinematics(shot: ShotData):
-    """Reference-point position and velocity at the epoch, and the deceleration fit."""
-    t = shot.t_s
-    t0 = t[shot.epoch_index]
-    tt = t - t0
-    if np.isfinite(shot.meas[:, 0]).sum() < 3:
-        raise ValueError(f"{shot.shot_id}: fewer than 3 stations with a position: no starting "
-                         "values can be estimated")
-    pos = np.zeros(3)
-    vel = np.zeros(3)
-    for j in range(3):
-        c = _polyfit(tt, shot.meas[:, j], 2)
-        pos[j] = np.polyval(c, 0.0)
-        vel[j] = np.polyval(np.polyder(c), 0.0)
-    return pos, vel
-
-
-def _drag_k(shot: ShotData) -> tuple[float, float]:
-    """k = rho S C_D / 2m from x(t) (drag-only closed form); returns (k, V at first station)."""
-    t = shot.t_s - shot.t_s[0]
-    x = shot.meas[:, 0]
-    ok = np.isfinite(x)
-    t, x = t[ok], x[ok]
-    c = np.polyfit(t, x, 2)
-    V0 = c[1]
-    k0 = max(-2 * c[0] / V0**2, 1e-6)
-
-    def res(p):
-        x0, v0, k = p
-        return x0 + np.log1p(k * v0 * t) / k - x
-
-    sol = least_squares(res, [c[2], V0, k0], x_scale=[1e-3, 1.0, k0])
-    return float(sol.x[2]), float(sol.x[1])
-
-
-def _damped_sine(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
-    """(omega, lambda, relative residual) of ``v(t) = poly2 + e^(lambda t)(A cos + B sin)``.
-
-    Variable projection: the linear coefficients are solved for each (omega, lambda); omega is
-    first found on a grid up to the sampling's Nyquist frequency.
-    """
-    ok = np.isfinite(v)
-    t, v = t[ok], v[ok]
-    if t.size < 7 or np.ptp(v) == 0:
-        return math.nan, math.nan, math.nan
-    t = t - t.mean()
-    dt = np.median(np.diff(t))
-    w_max = 0.95 * math.pi / dt
-
-    def design(w, lam):
-        e = np.exp(lam * t)
-        return np.column_stack([np.ones_like(t), t, t * t, e * np.cos(w * t), e * np.sin(w * t)])
-
-    def cost(p):
-        X = design(*p)
-        c, *_ = np.linalg.lstsq(X, v, rcond=None)
-        r = v - X @ c
-        return float(r @ r)
-
-    span = t[-1] - t[0]
-    grid = np.linspace(2 * math.pi / span, w_max, 400)
-    costs = [cost((w, 0.0)) for w in grid]
-    w0 = grid[int(np.argmin(costs))]
-    sol = minimize(cost, [w0, 0.0], method="Nelder-Mead",
-                   options={"xatol": 1e-4, "fatol": 1e-14, "maxiter": 400})
-    w, lam = sol.x
-    base = np.column_stack([np.ones_like(t), t, t * t])
-    c, *_ = np.linalg.lstsq(base, v, rcond=None)
-    r0 = v - base @ c
-    rel = math.sqrt(sol.fun / max(float(r0 @ r0), 1e-300))
-    if rel > 0.7 or not (0 < w < w_max):
-        return math.nan, math.nan, rel
-    return abs(float(w)), float(lam), rel
-
-
-def estimate_motion(shot: ShotData) -> MotionEstimate:
-    """Linear-theory estimates of one shot (see module doc)."""
-    rig = shot.rigid
-    if rig.mode.kind != "range":
-        return _estimate_in_stream(shot)
-    k, V0 = _drag_k(shot)
-    pos, vel = _kinematics(shot)
-    V = float(np.linalg.norm(vel))
-    qdyn = 0.5 * rig.density_kg_m3 * V * V
-    cd = 2 * rig.mass_kg * k / (rig.density_kg_m3 * rig.area_m2)
-    # total angle: between the measured axis and the local flight direction
-    tt = shot.t_s - shot.t_s[shot.epoch_index]
-    dpos = [np.polyder(_polyfit(tt, shot.meas[:, j], 2)) for j in range(3)]
-    wp, lp, wy, ly, sig_mean, sig_rms = _angle_motion(
-        shot, lambda i: np.array([np.polyval(d, tt[i]) for d in dpos]))
-    return MotionEstimate(shot.shot_id, V, V / rig.speed_of_sound_m_s, qdyn, float(cd), wp, lp,
-                          wy, ly, sig_mean, sig_rms)
-
-
-def _angle_motion(shot: ShotData, direction):
-    """Pitch and yaw frequencies and damping rates (damped sines of theta and psi), and the
-    mean and rms total angle between the measured axis and ``direction(i)`` (the air's
-    direction relative to the model at station i, any length). NaN rates and zero angles
-    for a shot without angles."""
-    wp = lp = wy = ly = math.nan
-    sig_mean = sig_rms = 0.0
-    if not shot.has_angles:
-        return wp, lp, wy, ly, sig_mean, sig_rms
-    t = shot.t_s
-    wp, lp, _ = _damped_sine(t, shot.meas[:, _THETA])
-    wy, ly, _ = _damped_sine(t, shot.meas[:, _PSI])
-    sig = []
-    for i in range(len(t)):
-        th, ps = shot.meas[i, _THETA], shot.meas[i, _PSI]
-        if not (np.isfinite(th) and np.isfinite(ps)):
-            continue
-        a = axis_from_inclinations(th, ps)
-        v = direction(i)
-        sig.append(math.acos(np.clip(a @ v / np.linalg.norm(v), -1, 1)))
-    if sig:
-        sig = np.array(sig)
-        sig_mean = float(sig.mean())
-        sig_rms = float(np.sqrt(np.mean(sig**2)))
-    return wp, lp, wy, ly, sig_mean, sig_rms
-
-
-def _estimate_in_stream(shot: ShotData) -> MotionEstimate:
-    """:func:`estimate_motion` of a wind-tunnel record (cadra.dynamics.modes): the speed is
-    the stream's, the drag is not estimated (a mounted model shows none; a released one
-    drifts a little), the total angle is between the axis and the stream (+x)."""
-    rig = shot.rigid
-    V = rig.mode.stream_m_s
-    qdyn = 0.5 * rig.density_kg_m3 * V * V
-    stream = np.array([1.0, 0.0, 0.0])
-    wp, lp, wy, ly, sig_mean, sig_rms = _angle_motion(shot, lambda i: stream)
-    return MotionEstimate(shot.shot_id, V, V / rig.speed_of_sound_m_s, qdyn, math.nan, wp, lp,
-                          wy, ly, sig_mean, sig_rms)
 
 
 def _slope(model: AeroModel, coef: str, var: str, point: dict, params: np.ndarray) -> float:
@@ -241,13 +75,20 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
     l_pivot = float(rig.mode.pivot_from_cg_body_m[0]) if rig.mode.mounted else 0.0
     I_yy += rig.mass_kg * l_pivot**2
     I_zz += rig.mass_kg * l_pivot**2
-    S, d, rho = rig.area_m2, rig.d_m, rig.density_kg_m3
+    d, rho = rig.d_m, rig.density_kg_m3
     V = float(np.mean([e.speed_m_s for e in est]))
-    qdyn = 0.5 * rho * V * V
     mach = float(np.mean([e.mach for e in est]))
     sig = float(np.mean([e.sigma_mean_rad for e in est]))
     sig_rms = float(np.mean([e.sigma_rms_rad for e in est]))
     sigma_plane = model.angle_plane == "sigma"
+
+    def planar(omega: float, lam: float, inertia: float) -> tuple[float, float]:
+        """(C_m_alpha, C_mq + C_m_alpha_dot) of a planar oscillation at the mean speed
+        (linear theory's one home, :func:`cadra.motion.planar_coefficients`)."""
+        cond = FlightConditions(mass_kg=rig.mass_kg, Ix_kg_m2=float(rig.inertia_body_kg_m2[0, 0]),
+                                I_kg_m2=inertia, d_m=d, density_kg_m3=rho, speed_m_s=V)
+        return planar_coefficients(omega, lam if np.isfinite(lam) else 0.0, cond)
+
     angle = max(sig_rms, math.radians(0.5)) if sigma_plane else sig
     point = {"alpha": angle, "beta": 0.0, "sigma": angle, "mach": mach}
     targets = []   # (function of params, target value, tolerance)
@@ -269,7 +110,7 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
     cma_given = mean_finite([e.cm_alpha for e in est])
     cmq_given = mean_finite([e.cmq_sum for e in est])
     if "Cm" in model.coefficients and (np.isfinite(wp) or np.isfinite(cma_given)):
-        cma = cma_given if np.isfinite(cma_given) else -wp * wp * I_yy / (qdyn * S * d)
+        cma = cma_given if np.isfinite(cma_given) else planar(wp, lp, I_yy)[0]
         if l_pivot and not np.isfinite(cma_given) and "CL" in model.coefficients:
             # about a pivot l ahead of the cg the lift adds -l/d C_L_alpha to the slope
             cla = _slope(model, "CL", var, point, p0)
@@ -285,13 +126,13 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
                             0.05 * abs(cma) + 1e-4))
     if "Cmq" in model.coefficients and (np.isfinite(lp) or np.isfinite(cmq_given)):
         cmq = float(np.clip(cmq_given if np.isfinite(cmq_given)
-                            else 8 * I_yy * lp / (rho * V * S * d * d), -20, 20))
+                            else planar(0.0, lp, I_yy)[1], -20, 20))
         targets.append((lambda p: float(model.evaluate(**point, params=p)["Cmq"]), cmq,
                         0.5 * abs(cmq) + 0.5))
     if not sigma_plane and "Cn" in model.coefficients:
         wy = mean_finite([e.omega_yaw_rad_s for e in est])
         if np.isfinite(wy):
-            cnb = -wy * wy * I_zz / (qdyn * S * d)
+            cnb = planar(wy, mean_finite([e.lambda_yaw_1_s for e in est]), I_zz)[0]
             targets.append((lambda p: _slope(model, "Cn", "beta", point, p), cnb,
                             0.2 * abs(cnb) + 1e-3))
     scale = np.maximum(np.abs(p0[free]), 0.1)
@@ -335,7 +176,7 @@ def _axis_and_rate(shot: ShotData):
     a = np.zeros(3)
     adot = np.zeros(3)
     for j in range(3):
-        c = _polyfit(tt, axes[:, j], 2)
+        c = polyfit_finite(tt, axes[:, j], 2)
         a[j] = np.polyval(c, 0.0)
         adot[j] = np.polyval(np.polyder(c), 0.0) if len(c) > 1 else 0.0
     a /= np.linalg.norm(a)
@@ -376,7 +217,7 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
     if mode.mounted and np.isfinite(shot.meas[:, 0]).sum() < 3:
         pos, vel = np.zeros(3), np.zeros(3)
     else:
-        pos, vel = _kinematics(shot)
+        pos, vel = kinematics_at_epoch(shot)
     if mode.mounted:
         vel = np.zeros(3)
     ref = shot.rigid.ref_from_cg_body_m()
@@ -460,5 +301,5 @@ def initial_states(shots: Sequence[ShotData], model: AeroModel,
     return [initial_state(s, model, integ, p) for s, p in zip(shots, spins, strict=True)]
 
 
-__all__ = ["MotionEstimate", "estimate_motion", "initial_state", "initial_states",
-           "starting_model", "state_candidates"]
+__all__ = ["ROLL_GRID_DEG", "initial_state", "initial_states", "starting_model",
+           "state_candidates"]

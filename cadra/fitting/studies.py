@@ -44,11 +44,11 @@ from cadra.aero import AeroModel, load_bundled_model
 from cadra.channels import OBSERVED
 from cadra.conventions import axis_from_inclinations
 from cadra.dynamics.observe import air_angles, observe
-from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.problem import FitProblem, result_problem
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import Integration
 from cadra.fitting.solver import FitOptions, fit
+from cadra.flight.data import CHANNELS, ShotData
 from cadra.numfmt import pm
 
 #: an initial-state source: per-shot (13,) states, or ``f(shot, model) -> (13,) state``

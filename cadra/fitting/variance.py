@@ -36,8 +36,8 @@ from dataclasses import replace
 import numpy as np
 
 from cadra import channels as channel_registry
-from cadra.fitting.data import ShotData
 from cadra.fitting.result import FitResult
+from cadra.flight.data import ShotData
 
 __all__ = ["channel_variance_factors", "fit_variance_components", "rescale_channels"]
 

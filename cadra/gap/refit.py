@@ -18,11 +18,11 @@ from dataclasses import replace
 from scipy import stats
 
 from cadra.aero import AeroModel
-from cadra.fitting.data import ShotData
 from cadra.fitting.extras import Extra
 from cadra.fitting.profile import profile_parameter
 from cadra.fitting.result import FitResult
 from cadra.fitting.solver import FitOptions
+from cadra.flight.data import ShotData
 from cadra.gap.candidates import Candidate, augmented_model
 
 #: iteration budget a fit short of convergence is continued with before it is diagnosed

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cadra.fitting.data import CHANNELS
+from cadra.flight.data import CHANNELS
 from cadra.gap.score import size_text
 from cadra.gap.where import by_group
 from cadra.io.atomic import atomic_output_dir

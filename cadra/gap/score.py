@@ -33,7 +33,6 @@ from scipy import stats
 
 from cadra.aero import AeroModel
 from cadra.channels import POSITION, residual
-from cadra.fitting.data import ShotData
 from cadra.fitting.extras import station_columns
 from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
@@ -42,6 +41,7 @@ from cadra.fitting.sensitivity import (
     predict_with_jacobian,
 )
 from cadra.fitting.solver import FitOptions
+from cadra.flight.data import ShotData
 from cadra.gap import verdict as vd
 from cadra.gap.candidates import Candidate, augmented_model, form_counterpart, library
 from cadra.gap.refit import (

@@ -33,9 +33,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from cadra.fitting.data import ShotData
 from cadra.fitting.extras import Extra
 from cadra.fitting.result import FitResult
+from cadra.flight.data import ShotData
 from cadra.gap.where import by_group, frequency_content, motion_frequencies, sequence_tests
 from cadra.numfmt import pm
 

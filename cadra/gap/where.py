@@ -30,9 +30,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from cadra.fitting.data import CHANNELS, ShotData
 from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
+from cadra.flight.data import CHANNELS, ShotData
 
 #: p-value below which a "where" test is reported as significant (before the one-page
 #: summary's own multiplicity note)

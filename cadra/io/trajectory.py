@@ -144,25 +144,39 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
         if ch.optional and ch.value_column not in table and ch.sigma_column not in table:
             table[ch.value_column] = ""
             table[ch.sigma_column] = ""
+    return trajectory_from_table(table, meta, path)
+
+
+def trajectory_from_table(table: pd.DataFrame, meta: dict | None = None,
+                          source: str | os.PathLike = "trajectory table") -> Trajectory:
+    """A stage-one table in memory (:data:`ALL_COLUMNS`, file units: what
+    :func:`station_rows` makes and a trajectory file holds) validated as
+    :func:`load_trajectory` validates a file, with the SI columns added: the hand-off from
+    stage one to stage two without a file. ``source`` names the table in messages."""
+    table = table.copy()
+    for ch in OBSERVED:       # an optional channel's columns may be left out: not measured
+        if ch.optional and ch.value_column not in table and ch.sigma_column not in table:
+            table[ch.value_column] = np.nan
+            table[ch.sigma_column] = np.nan
     missing = [c for c in ALL_COLUMNS if c not in table]
     if missing:
-        raise TrajectoryFileError(f"{path}: missing column(s) {missing}")
+        raise TrajectoryFileError(f"{source}: missing column(s) {missing}")
     if table.empty:
-        raise TrajectoryFileError(f"{path}: no stations (a header without rows)")
+        raise TrajectoryFileError(f"{source}: no stations (a header without rows)")
     for c in ("reason", "warnings", "status"):
-        table[c] = table[c].fillna("")
+        table[c] = table[c].fillna("").astype(str)
     bad = sorted(set(table["status"]) - set(STATUSES))
     if bad:
-        raise TrajectoryFileError(f"{path}: column status has unknown value(s) {bad}")
-    table = _numeric(table, path)
+        raise TrajectoryFileError(f"{source}: column status has unknown value(s) {bad}")
+    table = _numeric(table.reset_index(drop=True), source)
     if table["station"].duplicated().any():
         st = int(table.loc[table["station"].duplicated(), "station"].iloc[0])
-        raise TrajectoryFileError(f"{path}: station {st} listed twice")
+        raise TrajectoryFileError(f"{source}: station {st} listed twice")
     for ch in OBSERVED:       # SI columns beside the file's (theta_rad beside theta_deg)
         if ch.si_column != ch.value_column:
             table[ch.si_column] = to_si(table[ch.value_column], ch.file_unit)
             table[ch.si_sigma_column] = to_si(table[ch.sigma_column], ch.file_unit)
-    return Trajectory(table=table, meta=meta)
+    return Trajectory(table=table, meta=dict(meta or {}))
 
 
 def _read_csv(source, path, **kwargs) -> pd.DataFrame:
@@ -224,12 +238,15 @@ def _numeric(table: pd.DataFrame, path: Path) -> pd.DataFrame:
     for c in ALL_COLUMNS:
         if c in ("status", "reason", "warnings"):
             continue
-        text = raw[c].str.strip()
-        num = pd.to_numeric(text, errors="coerce")
-        notnum = num.isna() & text.notna() & (text.str.lower() != "nan") & (text != "")
-        if notnum.any():
-            i = int(notnum.to_numpy().argmax())
-            fail(i, c, f"{raw[c].iloc[i]!r} is not a number")
+        if raw[c].dtype == object:         # text, as a file holds it
+            text = raw[c].str.strip()
+            num = pd.to_numeric(text, errors="coerce")
+            notnum = num.isna() & text.notna() & (text.str.lower() != "nan") & (text != "")
+            if notnum.any():
+                i = int(notnum.to_numpy().argmax())
+                fail(i, c, f"{raw[c].iloc[i]!r} is not a number")
+        else:                              # numbers, as a table in memory holds them
+            num = pd.to_numeric(raw[c], errors="coerce")
         table[c] = num.astype(float)
     st = table["station"].to_numpy()
     ok = np.isfinite(st) & (st >= 1) & (st == np.round(st)) & (st < 1e9)

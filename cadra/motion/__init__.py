@@ -19,6 +19,7 @@ from cadra.motion.coefficients import (
     lift_from_swerve,
     linear_coefficients,
     pitch_coefficients,
+    planar_coefficients,
     transfer_cg,
 )
 from cadra.motion.epicyclic import Arm, EpicyclicFit, Layout, MotionFitError, fit_epicyclic
@@ -51,5 +52,6 @@ __all__ = [
     "fit_report", "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
     "limit_cycle_amplitude_eq31", "linear_coefficients", "mdc_fit", "nonplanar_ratio",
     "nonplanar_ratio_of_fit", "nonrolling_angle", "nonrolling_rate", "pitch_coefficients",
-    "pure_roll_coefficients", "sectional_epicyclic", "sectional_pitch", "transfer_cg",
+    "planar_coefficients", "pure_roll_coefficients", "sectional_epicyclic", "sectional_pitch",
+    "transfer_cg",
 ]

@@ -149,6 +149,20 @@ def linear_coefficients(fit: EpicyclicFit, conditions: FlightConditions,
         C_L_alpha=None if lift is None else cl, C_L_alpha_sigma=None if lift is None else cl_sig)
 
 
+def planar_coefficients(omega: float, lam: float, conditions: FlightConditions,
+                        variable: str = "time") -> tuple[float, float]:
+    """C_mα and C_mq + C_mα̇ of one planar oscillation ``e^(λs) cos(ωs)`` in ``variable``
+    (seed 001 eqs. 10-12, exact in λ): roots λ ± iω of α̈ − Dα̇ − Mα = 0 give
+    M = −(ω² + λ²), D = 2λ, so ``C_mα = −I(ω² + λ²)/(q∞Sd)`` (eq. 11 without λ²) and
+    ``C_mq + C_mα̇ = 2λ · 2VI/(q∞Sd²) = 8Iλ/(ρVSd²)`` (eq. 12, whose OCR drops the square on
+    D); in distance the rates are per metre and the damping gains the drag term. The one
+    home of this conversion: the 1-DOF pitch fit's coefficients and the fit's starting
+    values from the damped sines both use it."""
+    Vs, k = _domain(variable, conditions)
+    s_m, s_d, _ = conditions.scales()
+    return (float(-Vs**2 * (omega**2 + lam**2) * s_m), float(Vs * (2 * lam - k) * s_d))
+
+
 def pitch_coefficients(fit: PitchFit, conditions: FlightConditions) -> LinearCoefficients:
     """C_mα and C_mq + C_mα̇ of a 1-DOF pitch fit (seed 001 eqs. 10-12, exact in λ):
     roots λ ± iω of α̈ − Dα̇ − Mα = 0 give M = −(ω² + λ²), D = 2λ, so
@@ -156,17 +170,17 @@ def pitch_coefficients(fit: PitchFit, conditions: FlightConditions) -> LinearCoe
     ``C_mq + C_mα̇ = 2λ · 2VI/(q∞Sd²) = 8Iλ/(ρVSd²)`` (eq. 12, whose OCR drops the square
     on D)."""
     c = conditions
-    Vs, k = _domain(fit.variable, c)
+    Vs, _ = _domain(fit.variable, c)
     lam, om = fit.value("lambda"), fit.value("omega")
     C = fit.covariance[3:5, 3:5]
     s_m, s_d, _ = c.scales()
     g_M = -Vs**2 * np.array([2 * lam, 2 * om]) * s_m
     g_D = Vs * np.array([2.0, 0.0]) * s_d
     nan = float("nan")
+    cm_alpha, cmq_sum = planar_coefficients(om, lam, c, fit.variable)
     return LinearCoefficients(
-        Cm_alpha=float(-Vs**2 * (om**2 + lam**2) * s_m),
-        Cm_alpha_sigma=float(np.sqrt(g_M @ C @ g_M)),
-        Cmq_sum=float(Vs * (2 * lam - k) * s_d), Cmq_sum_sigma=float(np.sqrt(g_D @ C @ g_D)),
+        Cm_alpha=cm_alpha, Cm_alpha_sigma=float(np.sqrt(g_M @ C @ g_M)),
+        Cmq_sum=cmq_sum, Cmq_sum_sigma=float(np.sqrt(g_D @ C @ g_D)),
         Cm_p_alpha=nan, Cm_p_alpha_sigma=nan, spin_from_fit=nan, spin_from_fit_sigma=nan)
 
 

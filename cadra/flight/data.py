@@ -1,12 +1,15 @@
-"""Stage two's input: one shot's measurements and physics as plain data.
+"""A shot's measured flight as plain data: what stage two and the classic methods read.
 
 :class:`ShotData` holds what the fit needs of a shot and nothing else: the rigid body and air
 (:class:`cadra.dynamics.setup.RigidBody`), the spark times and the measured reference point and
 nose-axis inclinations with their sigmas, SI. It is a frozen dataclass of numpy arrays, so a
-scheduler can ship it. :func:`load_shot_data` builds it from a shot file and a trajectory
-measurement file (stage one's output) and refuses pairs that do not belong together;
-:func:`shot_data_from_truth` builds it from a simulated shot's exact truth plus seeded noise
-(tests, benchmarks, Monte Carlo).
+scheduler can ship it. It is built
+
+- from stage one's trajectory and the shot's record, in memory
+  (:func:`shot_data_from_trajectory`), or from the two files (:func:`load_shot_data`), which
+  refuse pairs that do not belong together;
+- from a simulated shot's exact truth plus seeded noise (:func:`shot_data_from_truth`: tests,
+  benchmarks, Monte Carlo).
 
 Channels (columns of ``meas`` and ``sigma``), in this order: :data:`CHANNELS`.
 """
@@ -166,14 +169,10 @@ def _fold_timing(t_s, meas, sigma, sigma_t_s):
 def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathLike, *,
                    sigma_t_s: float = 0.0, min_sigma: dict | None = None,
                    effects: Effects | None = None) -> ShotData:
-    """A shot's measurements from its shot file and a trajectory measurement file.
-
-    Stations whose status is ``failed`` are left out; a NaN value or sigma masks that channel.
-    ``min_sigma`` (``{"position_m": .., "angle_rad": ..}``) floors the stage-one sigmas (for
-    an analyst who does not trust them below some level). Raises :class:`FitDataError` when
-    the files do not belong together: another shot id, a station the shot does not have, or a
-    spark time that differs from the shot file's.
-    """
+    """A shot's measurements from its shot file and a trajectory measurement file
+    (:func:`shot_data_from_trajectory` on what the two files hold). Raises
+    :class:`FitDataError` naming the file when either cannot be read or they do not belong
+    together."""
     from cadra.io.shotfile import ShotFileError, load_shot
     from cadra.io.trajectory import TrajectoryFileError, load_trajectory
 
@@ -185,6 +184,30 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
         traj = load_trajectory(trajectory_path)
     except (TrajectoryFileError, FileNotFoundError) as exc:
         raise FitDataError(str(exc)) from None
+    return shot_data_from_trajectory(
+        traj, shot, sigma_t_s=sigma_t_s, min_sigma=min_sigma, effects=effects,
+        source={"shot_file": str(Path(shot_path)), "trajectory_file": str(trajectory_path)})
+
+
+def shot_data_from_trajectory(traj, shot, *, sigma_t_s: float = 0.0,
+                              min_sigma: dict | None = None, effects: Effects | None = None,
+                              source: dict | None = None) -> ShotData:
+    """A shot's measurements from a stage-one trajectory (:class:`cadra.io.trajectory.
+    Trajectory`: a loaded file, or :func:`cadra.io.trajectory.trajectory_from_table` of a
+    table in memory) and the shot's record (:class:`cadra.io.shotfile.ShotFile`: body, mass
+    properties, air, spark times).
+
+    Stations whose status is ``failed`` are left out; a NaN value or sigma masks that channel.
+    ``sigma_t_s``: the spark-time sigma (s), folded into x's sigma as V sigma_t.
+    ``min_sigma`` (``{"position_m": .., "angle_rad": ..}``) floors the stage-one sigmas (for
+    an analyst who does not trust them below some level). ``source`` names where the data
+    came from (the messages use its ``trajectory_file`` and ``shot_file``). Raises
+    :class:`FitDataError` when the two do not belong together: another shot id, a station the
+    shot does not have, or a spark time that differs from the shot's.
+    """
+    source = dict(source or {"shot_file": f"shot {shot.shot_id}",
+                             "trajectory_file": f"stage one's trajectory of {shot.shot_id}"})
+    trajectory_path, shot_path = source.get("trajectory_file"), source.get("shot_file")
     tid = traj.meta.get("shot_id")
     if tid is not None and tid != shot.shot_id:
         raise FitDataError(f"{trajectory_path}: measurements of shot {tid!r}, but the shot file "
@@ -230,7 +253,7 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
         shot_id=shot.shot_id, rigid=rigid_body_from_shot(shot, effects), body_kind=kind,
         stations=table["station"].to_numpy(int), t_s=t_s, meas=meas,
         sigma=_fold_timing(t_s, meas, sigma, sigma_t_s), sigma_t_s=float(sigma_t_s),
-        source={"shot_file": str(Path(shot_path)), "trajectory_file": str(trajectory_path)})
+        source=source)
 
 
 def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, body_kind: str, *,
