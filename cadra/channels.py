@@ -9,10 +9,11 @@ angle ``phi``, the spark time as an observed channel) is one more entry here plu
 observation model that predicts it.
 
 Units: values inside CADRA are SI (m, rad, s); the trajectory file (``docs/stage1.md``)
-stores angles in degrees (``file_unit``) and reports display angles in degrees
-(``display_unit``, ``display_scale`` = display value per SI value). Conversions go through
-:func:`to_si` / :func:`from_si`, which use numpy's ``radians`` / ``degrees`` (bit-identical
-to what the file reader always did).
+stores angles in degrees (``file_unit``), reports show values in ``display_unit`` and
+residuals, rms and noise floors in ``residual_unit`` (µm and degrees: a residual of a few
+micrometres reads badly in metres). Every unit is an entry of the one unit table
+(:data:`cadra.units.UNITS`); :func:`to_si` / :func:`from_si` convert through it (degrees
+bit for bit as numpy's ``radians`` / ``degrees``, what the file reader always did).
 """
 
 from __future__ import annotations
@@ -22,9 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: kinds of channel (what a channel measures)
+from cadra import units
+
+#: kinds of channel (what a channel measures), and the quantity of the unit table they are
 KINDS = ("position", "angle", "time")
+_QUANTITY = {"position": "length", "angle": "angle", "time": "time"}
 _SI_UNIT = {"position": "m", "angle": "rad", "time": "s"}
+#: the unit residuals are shown in, by kind
+_RESIDUAL_UNIT = {"position": "um", "angle": "deg", "time": "us"}
 
 
 @dataclass(frozen=True)
@@ -36,7 +42,7 @@ class Channel:
     name : short name (``"x"``, ``"theta"``), the ``channel`` column of residual tables.
     kind : ``"position"``, ``"angle"`` or ``"time"`` (:data:`KINDS`).
     file_unit : the unit of the trajectory file's columns (``"m"``, ``"deg"``, ``"s"``).
-    display_unit : the unit of reports and residual files.
+    display_unit : the unit of reports and residual files (values).
     label : the name on plots (``"θ"``).
     description : one line, for documentation.
     periodic : an angle defined modulo 2 pi (the roll angle): a residual is wrapped to
@@ -58,10 +64,11 @@ class Channel:
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"channel {self.name!r}: kind must be one of {KINDS}")
+        known = units.units_of(_QUANTITY[self.kind])
         for u in (self.file_unit, self.display_unit):
-            if u not in _SCALE[self.kind]:
+            if u not in known:
                 raise ValueError(f"channel {self.name!r}: unit {u!r} is not a "
-                                 f"{self.kind} unit ({sorted(_SCALE[self.kind])})")
+                                 f"{self.kind} unit ({sorted(known)})")
 
     @property
     def unit(self) -> str:
@@ -71,7 +78,22 @@ class Channel:
     @property
     def display_scale(self) -> float:
         """Display value per SI value (180/pi for an angle shown in degrees)."""
-        return _SCALE[self.kind][self.display_unit]
+        return _per_si(self.display_unit)
+
+    @property
+    def residual_unit(self) -> str:
+        """The unit of residuals, their rms and noise floors in reports (µm, deg)."""
+        return _RESIDUAL_UNIT[self.kind]
+
+    @property
+    def residual_scale(self) -> float:
+        """Residual display value per SI value (1e6 for µm)."""
+        return _per_si(self.residual_unit)
+
+    @property
+    def residual_label(self) -> str:
+        """The residual unit as printed (``µm``, ``deg``)."""
+        return {"um": "µm", "us": "µs"}.get(self.residual_unit, self.residual_unit)
 
     @property
     def value_column(self) -> str:
@@ -99,10 +121,10 @@ class Channel:
         return f"{self.name}_{self.display_unit}"
 
 
-#: unit -> value in that unit per SI value, by kind
-_SCALE = {"position": {"m": 1.0, "mm": 1e3},
-          "angle": {"rad": 1.0, "deg": 180.0 / math.pi},
-          "time": {"s": 1.0, "us": 1e6}}
+def _per_si(unit: str) -> float:
+    """Value in ``unit`` per SI value (the unit table's conversion of 1)."""
+    return float(units.from_si(1.0, unit))
+
 
 #: the observed channels, in the order of every (n, N_CHANNELS) array
 OBSERVED: tuple[Channel, ...] = (
@@ -177,23 +199,25 @@ def residual(meas: np.ndarray, pred: np.ndarray) -> np.ndarray:
 
 
 def to_si(values, unit: str):
-    """``values`` in ``unit`` converted to SI (deg -> rad by ``np.radians``)."""
-    if unit == "deg":
-        return np.radians(values)
-    for table in _SCALE.values():
-        if unit in table:
-            return values / table[unit] if table[unit] != 1.0 else values
-    raise ValueError(f"unknown unit {unit!r}")
+    """``values`` in ``unit`` converted to SI through the unit table (deg -> rad as
+    ``np.radians``, bit for bit); an SI unit returns ``values`` as given."""
+    if unit in _SI_UNIT.values():
+        return values
+    try:
+        return units.to_si(values, unit)
+    except KeyError:
+        raise ValueError(f"unknown unit {unit!r}") from None
 
 
 def from_si(values, unit: str):
-    """SI ``values`` converted to ``unit`` (rad -> deg by ``np.degrees``)."""
-    if unit == "deg":
-        return np.degrees(values)
-    for table in _SCALE.values():
-        if unit in table:
-            return values * table[unit] if table[unit] != 1.0 else values
-    raise ValueError(f"unknown unit {unit!r}")
+    """SI ``values`` converted to ``unit`` through the unit table (rad -> deg as
+    ``np.degrees``, bit for bit)."""
+    if unit in _SI_UNIT.values():
+        return values
+    try:
+        return units.from_si(values, unit)
+    except KeyError:
+        raise ValueError(f"unknown unit {unit!r}") from None
 
 
 def trajectory_value_columns() -> list[str]:

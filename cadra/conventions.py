@@ -35,6 +35,25 @@ def quat_normalize(q: np.ndarray) -> np.ndarray:
     return -q if q[0] < 0 else q
 
 
+def quat_mul(a, b):
+    """Hamilton product of quaternions (w, x, y, z); complex-safe."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw])
+
+
+def rotvec_quat(v) -> np.ndarray:
+    """Unit quaternion of the rotation vector ``v`` (rad)."""
+    v = np.asarray(v, dtype=float)
+    a = float(np.linalg.norm(v))
+    if a < 1e-300:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate([[np.cos(a / 2)], np.sin(a / 2) * v / a])
+
+
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     """Rotation matrix R (3x3) of unit quaternion ``q = (w, x, y, z)``: ``v_E = R v_B``."""
     w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)

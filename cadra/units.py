@@ -59,6 +59,7 @@ UNITS = _table(
     Unit("m", "length", 1.0),
     Unit("cm", "length", M_PER_CM),
     Unit("mm", "length", M_PER_MM),
+    Unit("um", "length", 1e-6, 1e6),
     Unit("kg", "mass", 1.0),
     Unit("g", "mass", KG_PER_G),
     Unit("kg_m2", "inertia", 1.0),

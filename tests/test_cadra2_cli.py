@@ -158,15 +158,14 @@ def test_unknown_model_and_bad_hold(shots, capsys):
 
 
 def test_hold_value_in_file_units():
-    """--hold alpha_ref=20 is degrees (the model file's unit), stored as radians; bounds of a
-    degree parameter too; an empty side of a bound is no bound."""
+    """A held value is in the model file's unit (alpha_ref in degrees) and stored in radians;
+    bounds of a degree parameter too; an empty side of a bound is no bound; --free frees a
+    parameter the file holds (what --hold/--bound/--free give :func:`apply_holds`)."""
     from cadra.aero import resolve_model
-    from cadra.cli.cadra2 import _model, build_parser
+    from cadra.fitting.inputs import apply_holds
 
-    args = build_parser().parse_args(["fit", "x", "--model", "m2_m070", "-o", "y",
-                                      "--hold", "alpha_ref=20.0", "--bound", "CD_A1=0.5:1.5",
-                                      "--free", "Cmq_A3", "--bound", "Cm_A1=:-0.1"])
-    m = _model(args)
+    m = apply_holds(resolve_model("m2_m070"), hold=["alpha_ref=20.0"],
+                    bound=["CD_A1=0.5:1.5", "Cm_A1=:-0.1"], free=["Cmq_A3"])
     assert m.parameter("alpha_ref").value == math.radians(20.0)
     assert not m.parameter("alpha_ref").vary
     assert (m.parameter("CD_A1").min, m.parameter("CD_A1").max) == (0.5, 1.5)

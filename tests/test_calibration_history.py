@@ -343,7 +343,7 @@ def test_csv_round_trip_and_refusals(tmp_path):
 def test_plot_returns_figure():
     from matplotlib.figure import Figure
 
-    from cadra.calibration.plots import plot_biases
+    from cadra.report.calibration import plot_biases
 
     old = make_table(1, created="2026-10-01T00:00:00Z")
     mid = make_table(2, created="2026-11-01T00:00:00Z")

@@ -43,9 +43,9 @@ def test_registry_matches_the_documented_channels():
 
 
 def test_old_names_are_aliases_of_the_registry():
-    from cadra.fitting.report import CHANNEL_OUTPUT_UNITS
     from cadra.flight import data
     from cadra.io.trajectory import COLUMNS
+    from cadra.report.fit import CHANNEL_OUTPUT_UNITS
 
     assert data.CHANNELS == C.NAMES and data.N_CHANNELS == 6
     assert data.CHANNEL_UNITS == C.UNITS
@@ -105,4 +105,4 @@ def test_stage_two_does_not_import_upward_or_in_a_circle():
                    if m.split(".")[:2] in (["cadra", "synthetic"], ["cadra", "measure"],
                                            ["cadra", "cli"])}
             assert not bad, f"{path.name} imports {bad}"
-    assert "cadra.fitting.report" not in _imports(ROOT / "cadra" / "fitting" / "plots.py")
+    assert "cadra.report.fit" not in _imports(ROOT / "cadra" / "report" / "fit_plots.py")

@@ -6,7 +6,6 @@ sigma`` format, hints and plain warnings instead of ``nan ± nan``. Run in-proce
 
 from __future__ import annotations
 
-import argparse
 import re
 from pathlib import Path
 
@@ -15,20 +14,38 @@ import pandas as pd
 import pytest
 
 import cadra
-from cadra.cli import cadra1, cadra2
-from cadra.cli._format import join_number_lists
-from cadra.fitting.studies import SINGLE_FIT_CHI2_WARN, single_fit_warnings
+from cadra.cli.cadra1 import main as cadra1_main
+from cadra.cli.cadra2 import main as cadra2_main
 from cadra.io.trajectory import COLUMNS, write_trajectory
 from cadra.numfmt import pm
+from cadra.report.stage1 import station_lines
+from cadra.studies.single import SINGLE_FIT_CHI2_WARN, check_single_fits
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 SPECS = Path("sample_shots/specs")
 SUBCOMMANDS = ("fit", "single", "holdone", "diagnose", "calibrate", "simulate", "models")
 
 
-def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
-    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return dict(action.choices)
+def option_blocks(text: str) -> dict[str, str]:
+    """A help text's options: the first option string of each entry -> its whole entry (the
+    option lines and the help under them, joined)."""
+    blocks, key = {}, None
+    for line in text.splitlines():
+        m = re.match(r"^  (-[-\w]+)", line)
+        if m:
+            key = m.group(1)
+            blocks[key] = line.strip()
+        elif key is not None and line.startswith("    ") and line.strip():
+            blocks[key] += " " + line.strip()
+        elif not line.strip() or not line.startswith(" "):
+            key = None
+    return blocks
+
+
+def description(text: str) -> str:
+    """A subcommand's help description: the paragraph after the usage lines."""
+    parts = [p for p in re.split(r"\n\s*\n", text) if p.strip()]
+    return " ".join(parts[1].split())
 
 
 def _help(capsys, run, argv) -> str:
@@ -62,34 +79,33 @@ def fine_shot(tmp_path_factory):
 # --------------------------------------------------------------------------- version, help
 
 
-@pytest.mark.parametrize("run, prog", [(cadra1.main, "cadra1"), (cadra2.main, "cadra2")])
+@pytest.mark.parametrize("run, prog", [(cadra1_main, "cadra1"), (cadra2_main, "cadra2")])
 def test_version(capsys, run, prog):
     assert _help(capsys, run, ["--version"]).strip() == f"{prog} {cadra.__version__}"
 
 
 def test_top_level_help_is_plain_text(capsys):
-    text = _help(capsys, cadra2.main, ["--help"])
+    text = _help(capsys, cadra2_main, ["--help"])
     assert "``" not in text and "Stage two" in text and "Exit status" in text
     for name in SUBCOMMANDS:
         assert re.search(rf"^\s+{name}\s+\S", text, re.M), name   # each with its summary
-    text1 = _help(capsys, cadra1.main, ["--help"])
+    text1 = _help(capsys, cadra1_main, ["--help"])
     assert "``" not in text1 and "Exit status" in text1
 
 
-@pytest.mark.parametrize("name", SUBCOMMANDS)
+@pytest.mark.parametrize("name", SUBCOMMANDS + ("motion", "roll"))
 def test_every_subcommand_has_a_description_and_shows_defaults(capsys, name):
-    sub = _subparsers(cadra2.build_parser())[name]
-    assert sub.description and "``" not in sub.description and ":func:" not in sub.description
-    text = _help(capsys, cadra2.main, [name, "--help"])
-    assert sub.description.split()[0] in text
-    for action in sub._actions:
-        if not action.option_strings or isinstance(action, argparse._HelpAction):
+    text = _help(capsys, cadra2_main, [name, "--help"])
+    desc = description(text)
+    assert len(desc) > 40 and "``" not in desc and ":func:" not in desc
+    blocks = option_blocks(text)
+    assert "-o" in blocks or name == "models"
+    for opt, block in blocks.items():
+        if opt in ("-h", "-q", "-v"):       # help; -q/-v: set on the top-level parser
             continue
-        assert action.help, f"{name} {action.option_strings}: no help"
-        rendered = sub.formatter_class(name)._get_help_string(action)
-        shown = ("(default" in rendered or "(required)" in rendered
-                 or action.default is argparse.SUPPRESS)           # -q/-v: set on the top
-        assert shown, f"{name} {action.option_strings}: default not shown"
+        assert len(block.split()) > 2, f"{name} {opt}: no help"
+        assert "(default" in block or "(required)" in block, \
+            f"{name} {opt}: default not shown: {block}"
     if name in ("fit", "single", "holdone", "diagnose", "calibrate"):
         flat = " ".join(text.split())
         assert "--max-iterations MAX_ITERATIONS most Levenberg-Marquardt" in flat
@@ -97,7 +113,7 @@ def test_every_subcommand_has_a_description_and_shows_defaults(capsys, name):
 
 
 def test_cadra1_options_show_defaults(capsys):
-    flat = " ".join(_help(capsys, cadra1.main, ["--help"]).split())
+    flat = " ".join(_help(capsys, cadra1_main, ["--help"]).split())
     assert "--no-overlays skip the overlay PNGs (default: off)" in flat
     assert "(default: all cores" in flat and "-q, --quiet" in flat and "-v, --verbose" in flat
 
@@ -106,15 +122,15 @@ def test_cadra1_options_show_defaults(capsys):
 
 
 def test_models_lists_the_bundled_models(capsys):
-    assert cadra2.main(["models"]) == 0
+    assert cadra2_main(["models"]) == 0
     out = capsys.readouterr().out
     row = next(line for line in out.splitlines() if line.startswith("m2_m070 "))
     assert row.split()[1:5] == ["M2", "M0.70", "alpha_beta", "15"]
     assert "Seed 004 Table 4, M2 lifting capsule" in row
     assert all(m in out for m in ("sphere", "linear_template_sigma", "m1_m110"))
-    assert cadra2.main(["models", "-q"]) == 0
+    assert cadra2_main(["models", "-q"]) == 0
     assert capsys.readouterr().out.count("\n") == 1       # the result line only
-    assert cadra2.main(["models", "-v"]) == 0
+    assert cadra2_main(["models", "-v"]) == 0
     assert "free: CD_0" in capsys.readouterr().out
 
 
@@ -128,46 +144,57 @@ _MINIMAL = {"fit": ["t.csv", "--model", "m", "-o", "o"], "single": ["t.csv", "-o
 
 
 @pytest.mark.parametrize("name", SUBCOMMANDS)
-def test_quiet_and_verbose_accepted_everywhere(name):
-    parser = cadra2.build_parser()
-    for flag, quiet, verbose in (("-q", True, False), ("--quiet", True, False),
-                                 ("-v", False, True), ("--verbose", False, True)):
-        after = parser.parse_args([name, *_MINIMAL[name], flag])
-        before = parser.parse_args([flag, name, *_MINIMAL[name]])   # not reset by the sub
-        for args in (after, before):
-            assert (args.quiet, args.verbose) == (quiet, verbose)
-    plain = parser.parse_args([name, *_MINIMAL[name]])
-    assert (plain.quiet, plain.verbose) == (False, False)
+def test_quiet_and_verbose_accepted_everywhere(name, tmp_path, monkeypatch, capsys):
+    """-q and -v before or after the subcommand: never a usage error (status 2); the inputs
+    here do not exist, so each command refuses them (1), or lists the models (0)."""
+    monkeypatch.chdir(tmp_path)
+    expected = 0 if name == "models" else 1
+    for flag in ("-q", "--quiet", "-v", "--verbose"):
+        assert cadra2_main([name, *_MINIMAL[name], flag]) == expected, (name, flag)
+        assert cadra2_main([flag, name, *_MINIMAL[name]]) == expected, (flag, name)
+    assert cadra2_main([name, *_MINIMAL[name]]) == expected
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:          # the two together are a usage error
+        cadra2_main([name, *_MINIMAL[name], "-q", "-v"])
+    assert exc.value.code == 2
+
+
+def test_quiet_before_the_subcommand_is_not_reset(capsys):
+    """``cadra2 -q models``: the top-level -q holds (the subcommand's parser does not reset
+    it), as ``cadra2 models -q`` does; -v likewise."""
+    for argv in (["-q", "models"], ["models", "-q"]):
+        assert cadra2_main(argv) == 0
+        assert capsys.readouterr().out.count("\n") == 1
+    for argv in (["-v", "models"], ["models", "-v"]):
+        assert cadra2_main(argv) == 0
+        assert "free: CD_0" in capsys.readouterr().out
 
 
 def test_cadra1_quiet_and_verbose(capsys):
     shot = "sample_shots/m2_2429/shot.toml"
     for flag in ("-q", "-v"):
-        assert cadra1.main(["--check", shot, flag]) == 1     # images are not committed
+        assert cadra1_main(["--check", shot, flag]) == 1     # images are not committed
     with pytest.raises(SystemExit) as exc:
-        cadra1.main(["--check", shot, "-q", "-v"])
+        cadra1_main(["--check", shot, "-q", "-v"])
     assert exc.value.code == 2
 
 
 # --------------------------------------------------------------------------- negative lists
 
 
-def test_negative_number_lists():
-    assert join_number_lists(["holdone", "--values", "-1.0,-1.5", "-q"], ("--values",)) == [
-        "holdone", "--values=-1.0,-1.5", "-q"]
-    # an option or a positive list is left alone
-    assert join_number_lists(["--values", "-q"], ("--values",)) == ["--values", "-q"]
-    assert join_number_lists(["--values", "1,2"], ("--values",)) == ["--values", "1,2"]
-
-
-def test_holdone_takes_negative_values(monkeypatch, tmp_path):
-    seen = {}
-    monkeypatch.setattr(cadra2, "_holdone", lambda args: seen.setdefault("values",
-                                                                         args.values) and 0)
-    rc = cadra2.main(["holdone", str(tmp_path / "t.csv"), "--model", "m2_m070", "--param",
-                      "Cm_A1", "--values", "-1.0,-1.5", "-o", str(tmp_path / "out")])
-    assert rc == 0
-    assert [float(v) for v in seen["values"].split(",")] == [-1.0, -1.5]
+def test_holdone_takes_negative_values(tmp_path, capsys):
+    """``--values -1.0,-1.5`` is a value list, not an option: the command line parses (the
+    missing trajectory is then refused, status 1, not a usage error, status 2); a lone
+    option after --values is still a usage error."""
+    base = ["holdone", str(tmp_path / "t.csv"), "--model", "m2_m070", "--param", "Cm_A1",
+            "-o", str(tmp_path / "out")]
+    assert cadra2_main([*base, "--values", "-1.0,-1.5"]) == 1
+    assert "no trajectory file" in capsys.readouterr().err
+    assert cadra2_main([*base, "--values", "1,2"]) == 1
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        cadra2_main([*base, "--values", "-q"])
+    assert exc.value.code == 2
 
 
 # --------------------------------------------------------------------------- value ± sigma
@@ -187,7 +214,7 @@ def test_one_format_for_value_and_sigma():
 def test_fit_one_status_line_and_two_labelled_phases(fine_shot, capsys):
     base, traj = fine_shot
     out = base / "fit"
-    assert cadra2.main(["fit", str(traj), "--model", "m2_m070", "-o", str(out),
+    assert cadra2_main(["fit", str(traj), "--model", "m2_m070", "-o", str(out),
                         "--no-plots"]) == 0
     cap = capsys.readouterr()
     lines = cap.out.splitlines()
@@ -206,20 +233,48 @@ def test_fit_one_status_line_and_two_labelled_phases(fine_shot, capsys):
     assert "two phases" in report and "jumps between the phases" in report
     # every value ± sigma in the one format
     row = next(line for line in lines if line.startswith("Cm_A1 "))
-    assert re.fullmatch(r"Cm_A1\s+-?\d+\.\d+ ± \d+\.\d+", row.strip())
+    assert re.match(r"Cm_A1\s+-?\d+\.\d+ ± \d+\.\d+(\s|$)", row.strip())
 
     # -q: no progress bars, the status line only
-    assert cadra2.main(["fit", str(traj), "--model", "m2_m070", "-o", str(base / "fit_q"),
+    assert cadra2_main(["fit", str(traj), "--model", "m2_m070", "-o", str(base / "fit_q"),
                         "--no-plots", "-q"]) == 0
     cap = capsys.readouterr()
     assert cap.out.count("\n") == 1 and cap.out.startswith("converged: ")
     assert cap.err == ""
     # -v: more detail (chi^2 history, per-shot residual rms)
-    assert cadra2.main(["fit", str(traj), "--model", "m2_m070", "-o", str(base / "fit_v"),
+    assert cadra2_main(["fit", str(traj), "--model", "m2_m070", "-o", str(base / "fit_v"),
                         "--no-plots", "-v"]) == 0
     out_v = capsys.readouterr().out
     assert "chi^2 history:" in out_v and "residual rms" in out_v
     assert len(out_v.splitlines()) > len(lines)
+
+
+def test_fit_warnings_go_to_stderr_and_survive_quiet(fine_shot, capsys):
+    """chi^2/nu far above 1 is a warning on the result: stderr, with or without -q (it was
+    stdout, and -q hid it); stdout keeps the status line. The data: the fine shot with its
+    sigmas halved (chi^2/nu ~ 4)."""
+    from cadra.io.trajectory import load_trajectory
+
+    base, traj = fine_shot
+    loaded = load_trajectory(traj)
+    table = loaded.table.loc[:, list(COLUMNS)].copy()
+    for c in table.columns:
+        if c.startswith("sigma_"):
+            table[c] = table[c] / 2
+    tight = base / "tight" / "trajectory.csv"
+    tight.parent.mkdir()
+    write_trajectory(tight, table, loaded.meta)
+    for quiet in (True, False):
+        out = base / f"tight_fit_{quiet}"
+        assert cadra2_main(["fit", str(tight), "--model", "m2_m070", "-o", str(out),
+                            "--no-plots", *(["-q"] if quiet else [])]) == 0
+        cap = capsys.readouterr()
+        warn = [line for line in cap.err.splitlines() if line.startswith("cadra2 fit: warning")]
+        assert warn and warn[0].startswith("cadra2 fit: warning: chi^2/nu = ")
+        assert "> 2: the sigmas or the model do not describe the data" in warn[0]
+        assert "warning" not in cap.out
+        assert cap.out.startswith("converged: ")
+        assert (cap.out.count("\n") == 1) == quiet
 
 
 # --------------------------------------------------------------------------- single
@@ -228,7 +283,7 @@ def test_fit_one_status_line_and_two_labelled_phases(fine_shot, capsys):
 def test_single_on_one_shot_says_why_not_nan(fine_shot, capsys):
     base, traj = fine_shot
     out = base / "single"
-    cadra2.main(["single", str(traj), "-o", str(out)])
+    cadra2_main(["single", str(traj), "-o", str(out)])
     cap = capsys.readouterr()
     assert "nan ± nan" not in cap.out and "nan +- nan" not in cap.out
     assert "quasi-linear trends not computed" in cap.out
@@ -245,7 +300,7 @@ def test_single_warnings_survive_quiet(fine_shot, capsys):
     """-q hides progress and chatter, never a warning on the result: the one-shot quasi-linear
     warning was not printed at all under -q (it sat inside the not-quiet block, on stdout)."""
     base, traj = fine_shot
-    cadra2.main(["single", str(traj), "-o", str(base / "single_q"), "-q"])
+    cadra2_main(["single", str(traj), "-o", str(base / "single_q"), "-q"])
     cap = capsys.readouterr()
     warned = [line for line in cap.err.splitlines() if ": warning: " in line]
     assert len(warned) == 2   # one shot; the linear model does not fit it (chi^2/nu >> 1)
@@ -256,41 +311,22 @@ def test_single_warnings_survive_quiet(fine_shot, capsys):
         cap.out.splitlines()   # stdout: the status line only
 
 
-@pytest.mark.parametrize("quiet", [True, False])
-def test_fit_warnings_go_to_stderr_and_survive_quiet(capsys, quiet):
-    """chi^2/nu far above 1 and the result's own warnings (a parameter at a bound): stderr,
-    with or without -q (they were stdout, and -q hid them)."""
-    from types import SimpleNamespace
-
-    result = SimpleNamespace(
-        status="converged", message="converged: step below tolerance", options={},
-        iterations=7, chi2=880.0, dof=10, reduced_chi2=88.0, elapsed_s=0.5, converged=True,
-        warnings=("CD_A1 = 2 is at a bound [0, 2]",), aero_names=("CD_A1",),
-        aero_values=np.array([2.0]), aero_sigma=np.array([0.01]), history=[88.0], shots=())
-    cadra2._print_summary(result, argparse.Namespace(quiet=quiet, verbose=False))
-    cap = capsys.readouterr()
-    assert cap.err.splitlines() == [
-        "cadra2 fit: warning: chi^2/nu = 88 > 2: the sigmas or the model do not describe the "
-        "data; use the scaled or coloured sigmas (report.md)",
-        "cadra2 fit: warning: CD_A1 = 2 is at a bound [0, 2]"]
-    assert "warning" not in cap.out
-    assert cap.out.splitlines()[0].startswith("converged: step below tolerance; chi^2/nu")
-    assert len(cap.out.splitlines()) == (1 if quiet else 3)
-
-
 def test_single_fit_warnings_flag_meaningless_sigmas():
     table = pd.DataFrame({"shot_id": ["A", "B", "C"], "converged": [True, True, False],
                           "status": ["converged", "converged", "max_iterations"],
                           "message": ["", "", "not converged after 60 iterations"],
                           "reduced_chi2": [1.1, 5e3, 2.0]})
-    w = single_fit_warnings(table)
-    assert not any(x.startswith("quasi-linear") for x in w)      # two converged shots
+    checks = check_single_fits(table)
+    w = checks.messages
+    assert checks.trends and not checks.trends_note               # two converged shots
     assert any(x.startswith("B: chi^2/nu = 5e+03, far above 1") and "not meaningful" in x
                for x in w)
     assert any(x.startswith("C: fit max_iterations") for x in w)
     assert not any(x.startswith("A:") for x in w)
     assert SINGLE_FIT_CHI2_WARN > 1
-    assert single_fit_warnings(table.iloc[:1])[0].startswith("quasi-linear trends not computed")
+    one = check_single_fits(table.iloc[:1])
+    assert not one.trends and one.trends_note.startswith("quasi-linear trends not computed")
+    assert one.messages[0] == one.trends_note
 
 
 # --------------------------------------------------------------------------- cadra1 --check
@@ -298,27 +334,27 @@ def test_single_fit_warnings_flag_meaningless_sigmas():
 
 def test_check_hints_how_images_are_rendered(capsys):
     shot = "sample_shots/m2_2429/shot.toml"
-    assert cadra1.main(["--check", shot]) == 1
+    assert cadra1_main(["--check", shot]) == 1
     err = capsys.readouterr().err.splitlines()
     assert len(err) <= 6                                   # summarised, not 32 lines
     assert any("python tools/make_sample_shots.py --images m2_2429" in line
                and "cadra2 simulate SPEC -o DIR" in line for line in err)
-    assert cadra1.main(["--check", shot, "-v"]) == 1
+    assert cadra1_main(["--check", shot, "-v"]) == 1
     err = capsys.readouterr().err
     assert err.count("no image listed") == 32 and "make_sample_shots.py" in err
 
 
-def test_cadra1_verbose_stations_use_the_one_format(capsys):
-    """``cadra1 -v`` prints each measured station as value ± sigma (mm, deg) with :func:`pm`;
-    a failed station is left to its FAILED line."""
+def test_cadra1_verbose_stations_use_the_one_format():
+    """``cadra1 -v`` prints each measured station as value ± sigma (mm, deg) with :func:`pm`
+    (:func:`cadra.report.stage1.station_lines`); a failed station is left to its FAILED
+    line."""
     t = pd.DataFrame({"station": [1, 2], "status": ["ok", "failed"],
                       "x_m": [1.2345671, np.nan], "y_m": [0.0012, np.nan],
                       "z_m": [-0.0031, np.nan], "theta_deg": [2.51234, np.nan],
                       "psi_deg": [-0.41, np.nan], "sigma_x_m": [3.1e-7, np.nan],
                       "sigma_y_m": [2.5e-7, np.nan], "sigma_z_m": [2.5e-7, np.nan],
                       "sigma_theta_deg": [0.0012, np.nan], "sigma_psi_deg": [0.0012, np.nan]})
-    cadra1._print_stations(t)
-    out = capsys.readouterr().out.splitlines()
+    out = station_lines(t)
     assert out == ["  station  1: x 1234.56710 ± 0.00031 mm, y 1.20000 ± 0.00025 mm, "
                    "z -3.10000 ± 0.00025 mm, theta 2.5123 ± 0.0012 deg, "
                    "psi -0.4100 ± 0.0012 deg"]
@@ -345,7 +381,7 @@ def test_calibrate_warnings_survive_quiet(tmp_path, capsys):
     from test_bad_inputs_plausible import _trajectory
 
     traj = _trajectory(tmp_path / "stage1")
-    assert cadra2.main(["calibrate", str(traj), "--stations-root", str(tmp_path), "-o",
+    assert cadra2_main(["calibrate", str(traj), "--stations-root", str(tmp_path), "-o",
                         str(tmp_path / "out"), "-q"]) == 0
     cap = capsys.readouterr()
     assert cap.err.startswith("cadra2 calibrate: warning: timing biases not estimated: the "

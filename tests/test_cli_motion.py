@@ -10,7 +10,6 @@ truth history's own angle of attack (axis inclinations minus those of the cg's v
 Tolerance: 3 sigma (one noise draw: |pull| < 3 fails 0.3 % of the time for an honest sigma).
 """
 
-import argparse
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -20,11 +19,11 @@ import pandas as pd
 import pytest
 
 from cadra.aero import resolve_model
-from cadra.cli import cadra2
-from cadra.cli._motion_output import write_outputs
+from cadra.cli.cadra2 import main as cadra2_main
 from cadra.flight.classic import analyse_shot
 from cadra.flight.load import load_shots
 from cadra.io.trajectory import COLUMNS, write_trajectory
+from cadra.report.motion import write_outputs
 
 SAMPLE = Path(__file__).resolve().parents[1] / "sample_shots" / "cone_1"
 SIGMA_POS, SIGMA_DEG = 1e-4, 0.1
@@ -77,7 +76,7 @@ def _pull(value, sigma, truth):
 def test_motion_recovers_the_simulators_truth(traj, capsys):
     base, path = traj
     out = base / "out"
-    assert cadra2.main(["motion", str(path), "-o", str(out)]) == 0
+    assert cadra2_main(["motion", str(path), "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "C_mα (per rad): -0.49" in text and f"wrote {out}/" in text
     for f in ("report.md", "angles.csv", "arms.csv", "coefficients.csv", "yaw_card.png",
@@ -131,7 +130,7 @@ def test_tricyclic_with_the_spin_gives_magnus_and_quiet_prints_one_line(traj, ca
     out = base / "spin"
     truth = pd.read_csv(SAMPLE / "truth.csv")
     p = float(truth["p_rad_s"].mean())
-    assert cadra2.main(["motion", str(path), "-o", str(out), "--spin", f"{p:.4f}",
+    assert cadra2_main(["motion", str(path), "-o", str(out), "--spin", f"{p:.4f}",
                         "--variable", "time", "-q"]) == 0
     cap = capsys.readouterr()
     assert cap.out.count("\n") == 1 and cap.out.startswith("motion: 1 shot(s)")
@@ -153,20 +152,20 @@ def test_an_existing_output_is_refused_and_left_alone(traj, capsys):
     out = base / "existing"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
-    assert cadra2.main(["motion", str(path), "-o", str(out)]) == 1
+    assert cadra2_main(["motion", str(path), "-o", str(out)]) == 1
     err = capsys.readouterr().err
     assert "cadra2 motion:" in err and "refusing to overwrite" in err
     assert [f.name for f in out.iterdir()] == ["keep.txt"]
     assert (out / "keep.txt").read_text() == "mine"
     # an output over an input is refused even with --overwrite
-    assert cadra2.main(["motion", str(path), "-o", str(base), "--overwrite"]) == 1
+    assert cadra2_main(["motion", str(path), "-o", str(base), "--overwrite"]) == 1
     assert "cadra2 motion:" in capsys.readouterr().err
 
 
 def test_too_few_stations_is_one_clear_message(tmp_path, capsys):
     path = _trajectory(tmp_path / "short.csv", np.random.default_rng(1), rows=range(5))
     out = tmp_path / "out"
-    assert cadra2.main(["motion", str(path), "-o", str(out)]) == 1
+    assert cadra2_main(["motion", str(path), "-o", str(out)]) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "Traceback" not in err
     assert err.startswith("cadra2 motion: ") and "5 station(s)" in err
@@ -176,26 +175,31 @@ def test_too_few_stations_is_one_clear_message(tmp_path, capsys):
 
 def test_bad_spin_count_is_refused(traj, capsys):
     base, path = traj
-    assert cadra2.main(["motion", str(path), str(path), "-o", str(base / "x"), "--spin", "1",
+    assert cadra2_main(["motion", str(path), str(path), "-o", str(base / "x"), "--spin", "1",
                         "--spin", "2", "--spin", "3"]) == 1
     assert "--spin: give one value for every shot" in capsys.readouterr().err
     assert not (base / "x").exists()
 
 
-def test_help_shows_every_default_and_verbosity_on_both_sides(capsys):
-    parser = cadra2.build_parser()
-    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    sub = action.choices["motion"]
-    assert sub.description and "``" not in sub.description
-    for act in sub._actions:
-        if not act.option_strings or isinstance(act, argparse._HelpAction):
-            continue
-        shown = sub.formatter_class("motion")._get_help_string(act)
-        assert ("(default" in shown or "(required)" in shown
-                or act.default is argparse.SUPPRESS), act.option_strings
-    for argv in (["-q", "motion", "t.csv", "-o", "o"], ["motion", "t.csv", "-o", "o", "-q"]):
-        args = parser.parse_args(argv)
-        assert (args.quiet, args.verbose) == (True, False)
+def test_help_shows_every_default_and_verbosity_on_both_sides(capsys, tmp_path):
+    """``cadra2 motion --help`` shows every option's default, and -q is taken before the
+    subcommand as after it (the trajectory here does not exist: refused, status 1, not a
+    usage error)."""
+    with pytest.raises(SystemExit) as exc:
+        cadra2_main(["motion", "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "``" not in text and "Kryloff-Bogoliuboff" in text
+    options = text.split("options:", 1)[1]
+    for opt in ("--variable", "--spin", "--offset", "--nonrolling", "--path-degree",
+                "--window", "--step", "--overwrite"):
+        entry = options.split(f"\n  {opt}", 1)[1].split("\n  -", 1)[0]
+        assert "(default" in " ".join(entry.split()), opt
+    missing = str(tmp_path / "t.csv")
+    for argv in (["-q", "motion", missing, "-o", str(tmp_path / "o")],
+                 ["motion", missing, "-o", str(tmp_path / "o"), "-q"]):
+        assert cadra2_main(argv) == 1
+
 
 
 def test_a_long_record_gets_sectional_fits_and_the_kb_reduction(traj, tmp_path):

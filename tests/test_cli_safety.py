@@ -29,6 +29,7 @@ from cadra.io.atomic import (
     stale_temps,
 )
 from cadra.measure.shot import measure_shot
+from cadra.report.stage1 import write_stage1
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -132,8 +133,8 @@ def test_cadra2_output_holding_the_inputs(work, capsys, command):
 def test_cadra2_output_is_the_images_of_the_shot(work, capsys):
     stage1 = work / "shot_stage1"
     if not stage1.exists():
-        measure_shot(work / "shot" / "shot.toml", stage1, workers=1, progress=False,
-                     overlays=False)
+        write_stage1(measure_shot(work / "shot" / "shot.toml", workers=1, progress=False,
+                                  overlays=False), stage1)
     _refused(cadra2, ["fit", str(stage1), "--model", "m2_m070", "-o",
                       str(work / "shot" / "images"), "--overwrite"], "st01_", capsys, work, 1)
 

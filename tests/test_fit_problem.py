@@ -65,7 +65,7 @@ def _solver_fitted(res, channel):
 
 def test_report_histories_use_the_fitted_physics(fitted):
     """The report's fitted histories at the station times are the solver's predictions."""
-    from cadra.fitting.report import fitted_histories
+    from cadra.report.fit import fitted_histories
 
     res, sd = fitted
     h = fitted_histories(res, [sd])["M2-2429"]
@@ -83,7 +83,7 @@ def test_report_histories_use_the_fitted_physics(fitted):
 
 
 def test_report_histories_at_station_times_equal_solver_predictions(fitted):
-    from cadra.fitting.report import fitted_histories
+    from cadra.report.fit import fitted_histories
 
     res, sd = fitted
     h = fitted_histories(res, [sd], times=sd.t_s)["M2-2429"]

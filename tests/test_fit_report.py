@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cadra.fitting.report import write_fit_outputs
 from cadra.fitting.solver import fit
 from cadra.flight.data import CHANNELS, FILM_SIGMAS, shot_data_from_truth
+from cadra.report.fit import write_fit_outputs
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
 FREE = ("CD_A1", "Cm_A1", "Cmq_A1")
@@ -173,7 +173,7 @@ def test_overwrite_replaces(fitted, tmp_path):
 
 
 def test_no_partial_output_when_a_plot_fails(fitted, tmp_path, monkeypatch):
-    from cadra.fitting import plots
+    from cadra.report import fit_plots as plots
 
     def broken(*args, **kwargs):
         raise ValueError("plot failed on purpose")
@@ -201,7 +201,7 @@ def _tiny_figure(*args, **kwargs):
 
 def test_3d_falls_back_to_matplotlib_without_offscreen_rendering(fitted, tmp_path,
                                                                  monkeypatch):
-    from cadra.fitting import plots
+    from cadra.report import fit_plots as plots
 
     monkeypatch.setattr(plots, "offscreen_rendering", lambda: (False, "no OpenGL here"))
     with pytest.raises(plots.RenderingUnavailable, match="no OpenGL here"):
@@ -217,7 +217,7 @@ def test_3d_falls_back_to_matplotlib_without_offscreen_rendering(fitted, tmp_pat
 
 
 def test_body_from_kind_when_no_body_given(fitted):
-    from cadra.fitting.plots import resolve_body
+    from cadra.report.fit_plots import resolve_body
 
     sd = fitted["shots"][0]
     body, generic = resolve_body(sd)
@@ -246,7 +246,7 @@ def test_a_finned_body_is_drawn_as_its_body_of_revolution():
     """The 3-D view's surface of a finned body (no ``arcs`` of its own) is its cone-cylinder:
     the radius d/2 along the cylinder, the length the body's."""
     from cadra.body import body_from_spec
-    from cadra.fitting.plots import body_surface
+    from cadra.report.fit_plots import body_surface
 
     fb = body_from_spec({"kind": "finner", "preset": "basic_finner", "d_m": 0.007})
     P = body_surface(fb)

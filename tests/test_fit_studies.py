@@ -1,4 +1,4 @@
-"""Seed 004's analysis studies (cadra.fitting.studies) against independent truth.
+"""Seed 004's analysis studies (cadra.studies.single) against independent truth.
 
 - single fits of shots flown with an exactly linear model recover that model (the simulator's
   own values) and the amplitude measures equal the simulator's truth table;
@@ -23,17 +23,16 @@ import pytest
 from cadra.aero import load_bundled_model
 from cadra.dynamics.setup import propagate_states
 from cadra.fitting.solver import fit
-from cadra.fitting.studies import (
+from cadra.flight.data import FILM_SIGMAS, shot_data_from_truth
+from cadra.report.studies import plot_hold_one, plot_quasi_linear
+from cadra.studies.holdone import hold_one_study
+from cadra.studies.single import (
     aero_angle_history,
-    hold_one_study,
     linear_template_for,
-    plot_hold_one,
-    plot_quasi_linear,
     quasi_linear_summary,
     single_fit,
     single_fits,
 )
-from cadra.flight.data import FILM_SIGMAS, shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, rigid_body, simulate_shot, spec_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -149,10 +149,12 @@ def _table(values_by_shot, channel="z"):
 
 
 def test_runs_test_counts_runs_and_flags_a_systematic_pattern():
-    from cadra.gap.where import runs_test, sequence_tests
+    from cadra.gap.where import sequence_tests
+    from cadra.stats import runs_of_sign
 
-    runs, z, p = runs_test(np.array([1, 2, -1, -3, -2, 4, 5, -1]))
-    assert runs == 4
+    rt = runs_of_sign(np.array([1, 2, -1, -3, -2, 4, 5, -1]))
+    runs, z = rt.runs, rt.z
+    assert runs == 4 and rt.longest == 3 and rt.n == 8
     # hand formula: n1 = n2 = 4: mean 5, variance 2*16*(32-8)/(64*7) = 12/7
     assert z == pytest.approx((4 - 5) / np.sqrt(12 / 7))
     # a slow drift (one sign change in 16) is flagged; white noise mostly is not

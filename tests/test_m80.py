@@ -198,13 +198,15 @@ def test_range_covers_a_slow_cycle_and_samples_the_fast_arm(flight):
 
 def test_stage_one_recovers_one_rendered_station(tmp_path):
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import write_shot
 
     spec = dataclasses.replace(load_shot_spec(SPEC), n_stations=2)
     shot = simulate_shot(spec)
     write_shot(shot, tmp_path / "shot", images=True, progress=False)
-    res = measure_shot(tmp_path / "shot" / "shot.toml", tmp_path / "st1", workers=1,
-                       progress=False, overlays=False)
+    res = measure_shot(tmp_path / "shot" / "shot.toml", workers=1, progress=False,
+                       overlays=False)
+    write_stage1(res, tmp_path / "st1")
     meas = res.trajectory
     truth = pd.read_csv(tmp_path / "shot" / "truth.csv")
     assert (meas["status"] != "failed").all()

@@ -9,15 +9,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from cadra.motion import (
-    FlightConditions,
-    coefficients_report,
-    fit_epicyclic,
-    fit_report,
-    lift_from_swerve,
-    linear_coefficients,
-)
+from cadra.motion import FlightConditions, fit_epicyclic, lift_from_swerve, linear_coefficients
 from cadra.numfmt import pm
+from cadra.report.motion import coefficients_report, fit_report
 
 ARMS = [(0.10, 0.3, -0.5, 12.0), (0.05, -1.0, -0.8, 3.0)]   # K (rad), phase, λ (1/s), ω (rad/s)
 TRIM = (0.01, 0.2, 30.0)                                     # K_t, phase, p

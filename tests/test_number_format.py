@@ -41,7 +41,7 @@ def _single_table(n: int) -> pd.DataFrame:
 
 
 def test_single_fit_report_uses_the_one_format(tmp_path):
-    from cadra.fitting.studies import write_single_fits
+    from cadra.report.studies import write_single_fits
 
     lines = write_single_fits(_single_table(1), resolve_model("sphere"), tmp_path / "one")
     row = next(line for line in lines if line.startswith("| S0 |"))
@@ -51,7 +51,8 @@ def test_single_fit_report_uses_the_one_format(tmp_path):
 
 
 def test_quasi_linear_table_uses_the_one_format(tmp_path):
-    from cadra.fitting.studies import quasi_linear_summary, write_single_fits
+    from cadra.report.studies import write_single_fits
+    from cadra.studies.single import quasi_linear_summary
 
     table = _single_table(4)
     lines = write_single_fits(table, resolve_model("sphere"), tmp_path / "four")
@@ -68,7 +69,7 @@ def test_quasi_linear_table_uses_the_one_format(tmp_path):
 
 
 def test_fit_report_coefficients_not_nan(tmp_path):
-    from cadra.fitting.report import coefficient_markdown
+    from cadra.report.fit import coefficient_markdown
 
     table = pd.DataFrame({"coefficient": ["CD", "Cma"], "form": ["A1", "A1"],
                           "A1": [0.81234, -0.25], "A1_sigma": [0.0123, math.nan],

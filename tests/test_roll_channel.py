@@ -173,8 +173,8 @@ def test_finned_range_shot_fits_its_roll_coefficients_and_plots_the_roll():
 
     matplotlib.use("Agg")
     from cadra.fitting import fit_shots
-    from cadra.fitting.plots import plot_angle_histories
     from cadra.flight import shot_data_from_truth
+    from cadra.report.fit_plots import plot_angle_histories
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
     sim = simulate_shot(load_shot_spec("sample_shots/specs/finner_1.toml"))

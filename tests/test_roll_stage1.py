@@ -13,7 +13,6 @@ import shapely
 from cadra.body import outline_polygon
 from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import VIEW_AXES
-from cadra.io.facility_file import resolve_facility_path
 from cadra.measure.combine import StationPose
 from cadra.measure.roll import (
     PERIOD_RAD,
@@ -28,7 +27,6 @@ from cadra.measure.shot import with_roll_track
 from cadra.measure.station import StationResult, measure_station
 from cadra.measure.wires import wire_mask
 from cadra.synthetic.crb_roll import roll_crb
-from cadra.synthetic.render import write_image
 from cadra.synthetic.render_config import RenderConfig
 from cadra.synthetic.simulate import (
     load_shot_spec,
@@ -128,13 +126,10 @@ def test_measure_station_measures_the_finner_and_its_roll(shot, tmp_path):
     """The whole station (wires, pose fit with the fins, roll): pose within 3 um and 0.01 deg
     of the truth, the roll within 0.05 deg modulo 90, the templates at the measured roll."""
     k = 6
-    paths = {}
     items = render_station_views(shot, k, np.random.default_rng(7), RenderConfig(seed=7))
-    for item in items:
-        paths[item["view"]] = str(tmp_path / f"{item['view']}.png")
-        write_image(paths[item["view"]], item["image"])
-    res = measure_station(shot.stations[k], paths, shot.spec.model,
-                          str(resolve_facility_path("hffaf")), overlays=False)
+    images = {item["view"]: item["image"] for item in items}     # in memory, no file
+    res = measure_station(shot.facility.station(shot.stations[k]), images, shot.spec.model,
+                          overlays=False)
     assert res.status == "ok", res.reason
     t = shot.truth.iloc[k]
     p = res.pose

@@ -1,4 +1,4 @@
-"""Seed 003's global segmented roll fit (cadra.fitting.segmented; docs/segmented_roll.md).
+"""Seed 003's global segmented roll fit (cadra.studies.segmented_roll; docs/segmented_roll.md).
 
 Truths: seed 003's own derived figures (the steady spins +0.0280, -0.0212 and the unstable
 -0.0068 of Table 2's C00 + C10 p + C30 p^3, text under Fig. 8) against the bundled model's
@@ -20,7 +20,9 @@ from scipy.integrate import solve_ivp
 
 from cadra.aero import resolve_model
 from cadra.dynamics.observe import air_angles, observe
-from cadra.fitting.segmented import (
+from cadra.report.roll import write_roll
+from cadra.stats import runs_of_sign
+from cadra.studies.segmented_roll import (
     PAPER_TABLE2,
     STEPS,
     TABLE_ORDER,
@@ -30,11 +32,9 @@ from cadra.fitting.segmented import (
     correlation_table,
     paper_correlation,
     roll_constants,
-    runs_of_sign,
     segment_table,
     segmented_fit,
     steady_spins,
-    write_tables,
     zero_rate_points,
 )
 
@@ -159,15 +159,18 @@ def test_segments_start_at_the_zero_rate_peaks(run1):
 def test_runs_of_sign_by_hand_and_on_noise():
     r = runs_of_sign([1.0, 2.0, -1.0, -0.5, 3.0, -2.0, -1.0, -1.0, 0.0])
     # n+ = 3, n- = 5, n = 8: E = 1 + 2*15/8 = 4.75, Var = 30*22/(64*7)
-    assert (r["n"], r["runs"], r["longest"]) == (8, 4, 3)
-    assert r["expected"] == pytest.approx(4.75)
-    assert r["z"] == pytest.approx((4 - 4.75) / math.sqrt(660 / 448))
+    assert (r.n, r.runs, r.longest) == (8, 4, 3)
+    assert r.expected == pytest.approx(4.75)
+    assert r.z == pytest.approx((4 - 4.75) / math.sqrt(660 / 448))
     rng = np.random.default_rng(5)
-    white = [runs_of_sign(rng.standard_normal(60))["z"] for _ in range(400)]
+    white = [runs_of_sign(rng.standard_normal(60)).z for _ in range(400)]
     assert abs(np.mean(white)) < 0.15 and 0.85 < np.std(white) < 1.15
     e = rng.standard_normal(60)
     ar = np.array([e[: k + 1] @ 0.9 ** np.arange(k, -1, -1) for k in range(60)])
-    assert runs_of_sign(ar)["z"] < -3
+    assert runs_of_sign(ar).z < -3
+    # all of one sign: the extreme, as the gap's sequence tests read it
+    one = runs_of_sign([1.0, 2.0, 0.5, 3.0])
+    assert (one.runs, one.longest, one.z, one.p) == (1, 4, -math.inf, 0.0)
 
 
 def test_paper_correlation_table_is_symmetric_and_signed():
@@ -189,7 +192,7 @@ def test_global_fit_recovers_the_start_set_within_its_sigmas(body, run1, tmp_pat
     """The paper's start set free (the other seven held at the truth), started by equation
     error with the start set at 0: the local fit, then the global one through fit_shots."""
     start = MODEL.with_values({n: 0.0 for n in STEPS[0]})
-    from cadra.fitting.segmented import equation_error_start
+    from cadra.studies.segmented_roll import equation_error_start
 
     keep = run1.t_s <= 5.0
     rec_for_start = case.measured_record(case.TrueRun("run1", run1.t_s[keep],
@@ -220,12 +223,15 @@ def test_global_fit_recovers_the_start_set_within_its_sigmas(body, run1, tmp_pat
     assert set(seg["kind"]) <= {"oscillation", "saddle", "speed-up", "steady"}
     assert seg["rms_deg"].mean() == pytest.approx(case.SIGMA_DEG, rel=0.15)
     assert abs(seg["runs_z"].mean()) < 1.0
-    paths = write_tables({"table2": tab, "segments": seg}, tmp_path)
-    assert sorted(p.name for p in paths) == ["segments.csv", "segments.md", "table2.csv",
-                                             "table2.md"]
-    back = pd.read_csv(tmp_path / "table2.csv", index_col=0)
+    out = write_roll(sf, {"table2": tab, "segments": seg}, [run1], case.ALPHA,
+                     tmp_path / "roll")
+    assert sorted(p.name for p in out.iterdir()) == [
+        "report.md", "roll_fit.png", "segments.csv", "segments.md", "table2.csv", "table2.md"]
+    back = pd.read_csv(out / "table2.csv", index_col=0)
     np.testing.assert_allclose(back["value"], tab["value"], rtol=1e-12)
-    assert (tmp_path / "table2.md").read_text().startswith("| coefficient | value |")
+    assert (out / "table2.md").read_text().startswith("| coefficient | value |")
+    with pytest.raises(FileExistsError):      # an existing output is never overwritten
+        write_roll(sf, {"table2": tab}, [run1], case.ALPHA, out)
 
 
 def test_noise_free_segments_give_table2_from_the_equation_error_start(body, run1):

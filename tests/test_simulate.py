@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cadra.cli import cadra1, cadra2
+from cadra.cli.cadra1 import main as cadra1_main
+from cadra.cli.cadra2 import main as cadra2_main
 from cadra.dynamics.observe import observe
 from cadra.synthetic.render import illumination_field, read_image, render_clean
 from cadra.synthetic.render_config import RenderConfig
@@ -94,13 +95,13 @@ def test_write_shot_files_and_check(tmp_path):
     assert len(list((out / "images").glob("*.png"))) == 4
     img = read_image(out / "images" / "st01_side.png")
     assert img.dtype == np.uint8 and img.shape == (1200, 1600)
-    assert cadra1.main([str(out / "shot.toml"), "--check"]) == 0
+    assert cadra1_main([str(out / "shot.toml"), "--check"]) == 0
     # nothing overwritten
     with pytest.raises(FileExistsError):
         write_shot(shot, out, images=False, progress=False)
     # a missing image is named by the check
     (out / "images" / "st02_top.png").unlink()
-    assert cadra1.main([str(out / "shot.toml"), "--check"]) == 1
+    assert cadra1_main([str(out / "shot.toml"), "--check"]) == 1
 
 
 def test_regeneration_is_deterministic(tmp_path):
@@ -167,7 +168,7 @@ def test_bad_spec_is_refused_naming_the_key_and_nothing_is_written(tmp_path, cha
     spec_path = tmp_path / "bad.toml"
     spec_path.write_text(tomli_w.dumps(data))
     out = tmp_path / "out"
-    assert cadra2.main(["simulate", str(spec_path), "-o", str(out), "-q"]) == 1
+    assert cadra2_main(["simulate", str(spec_path), "-o", str(out), "-q"]) == 1
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
 
@@ -176,7 +177,7 @@ def test_cli_refuses_to_overwrite(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "keep.txt").write_text("precious")
-    assert cadra2.main(["simulate", str(SPECS / "sphere_1.toml"), "-o", str(out), "-q",
+    assert cadra2_main(["simulate", str(SPECS / "sphere_1.toml"), "-o", str(out), "-q",
                         "--no-images"]) == 1
     assert (out / "keep.txt").read_text() == "precious"
     shutil.rmtree(out)

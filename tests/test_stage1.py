@@ -12,6 +12,7 @@ import pytest
 from cadra.cli.cadra1 import main as cadra1_main
 from cadra.io.trajectory import load_trajectory
 from cadra.measure.shot import measure_shot
+from cadra.report.stage1 import write_stage1
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 SPECS = Path(__file__).resolve().parents[1] / "sample_shots" / "specs"
@@ -37,7 +38,8 @@ def _copy(shot: Path, tmp_path: Path) -> Path:
 
 def test_short_shot_against_truth(m2_shot, tmp_path):
     out = tmp_path / "out"
-    res = measure_shot(m2_shot / "shot.toml", out, workers=1, progress=False)
+    res = measure_shot(m2_shot / "shot.toml", workers=1, progress=False)
+    assert write_stage1(res, out) == out
     assert not res.any_failed
     truth = pd.read_csv(m2_shot / "truth.csv")
     t = load_trajectory(out / "trajectory.csv").table.merge(truth, on="station",
@@ -84,7 +86,7 @@ def test_no_model_and_missing_wire(m2_shot, tmp_path):
     img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
     img[20:100, :] = img[120:200, :]                         # wire 'y+' painted out
     cv2.imwrite(str(p), img)
-    res = measure_shot(shot / "shot.toml", None, workers=1, progress=False, overlays=False)
+    res = measure_shot(shot / "shot.toml", workers=1, progress=False, overlays=False)
     t = res.trajectory.set_index("station")
     assert t.loc[1, "status"] == "failed" and "no model" in t.loc[1, "reason"]
     assert t.loc[2, "status"] == "warning" and "'y+' not found" in t.loc[2, "warnings"]
@@ -99,7 +101,7 @@ def test_model_crossing_a_wire_and_partly_out_of_frame(tmp_path_factory):
     # late sparks: the model sits on the x+ wire (80 mm downrange of the station centre)
     shot = _make(tmp_path_factory, "cross", "m1_2366.toml", n_stations=2,
                  trigger_offset_mean_m=0.080, trigger_offset_sd_m=0.0)
-    res = measure_shot(shot / "shot.toml", None, workers=1, progress=False, overlays=False)
+    res = measure_shot(shot / "shot.toml", workers=1, progress=False, overlays=False)
     truth = pd.read_csv(shot / "truth.csv").set_index("station")
     t = res.trajectory.set_index("station")
     assert (t["status"] == "warning").all()
@@ -108,7 +110,7 @@ def test_model_crossing_a_wire_and_partly_out_of_frame(tmp_path_factory):
     # later still: the model runs off the picture's edge (the frame ends 101.6 mm downrange)
     shot = _make(tmp_path_factory, "edge", "m1_2366.toml", n_stations=1,
                  trigger_offset_mean_m=0.100, trigger_offset_sd_m=0.0)
-    res = measure_shot(shot / "shot.toml", None, workers=1, progress=False, overlays=False)
+    res = measure_shot(shot / "shot.toml", workers=1, progress=False, overlays=False)
     row = res.trajectory.iloc[0]
     assert row["status"] in ("failed", "warning")
     assert "out of frame" in (row["reason"] + row["warnings"])
@@ -122,22 +124,23 @@ def test_outputs_are_atomic_and_never_overwrite(m2_shot, tmp_path, monkeypatch):
     # an output directory holding the inputs is refused
     assert cadra1_main([str(m2_shot / "shot.toml"), "-o", str(m2_shot), "-q"]) == 2
     # a failure while writing leaves nothing behind
-    import cadra.measure.plots as plots
+    import cadra.report.stage1 as stage1_report
 
     def boom(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(plots, "trajectory_figure", boom)
+    monkeypatch.setattr(stage1_report, "trajectory_figure", boom)
     out2 = tmp_path / "out2"
+    res = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False)
     with pytest.raises(RuntimeError):
-        measure_shot(m2_shot / "shot.toml", out2, workers=1, progress=False, overlays=False)
+        write_stage1(res, out2)
     assert not out2.exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out2")]
 
 
 def test_parallel_equals_serial(m2_shot):
-    a = measure_shot(m2_shot / "shot.toml", None, workers=1, progress=False, overlays=False)
-    b = measure_shot(m2_shot / "shot.toml", None, workers=2, progress=False, overlays=False)
+    a = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False)
+    b = measure_shot(m2_shot / "shot.toml", workers=2, progress=False, overlays=False)
     pd.testing.assert_frame_equal(a.trajectory, b.trajectory)
 
 
@@ -146,8 +149,8 @@ def test_truth_comparison_in_the_report(m2_shot, tmp_path):
     to the difference of the two files (issue 18)."""
     out = tmp_path / "out"
     truth = pd.read_csv(m2_shot / "truth.csv")
-    measure_shot(m2_shot / "shot.toml", out, workers=1, progress=False, overlays=False,
-                 truth=truth)
+    write_stage1(measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False),
+                 out, truth=truth)
     cmp = pd.read_csv(out / "truth_comparison.csv")
     traj = load_trajectory(out / "trajectory.csv").table
     t = traj.merge(truth, on="station", suffixes=("", "_true"))

@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from cadra.measure.truth_compare import compare_with_truth, comparison_markdown
+from cadra.measure.truth_compare import compare_with_truth
+from cadra.report.stage1 import comparison_markdown
 
 
 def _tables(n=9, seed=1):

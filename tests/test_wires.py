@@ -21,7 +21,6 @@ lines are within 2e-3 px.
 
 import math
 import pickle
-import time
 
 import numpy as np
 import pytest
@@ -311,19 +310,3 @@ def test_position_sigma_is_small(default_cases):
     view, _M, _img, res = default_cases[0]
     sig = res.position_sigma_m((0.0, 0.0)) / view.scale_m_per_px
     assert np.all(sig > 1e-4) and np.all(sig < 0.02)
-
-
-def test_speed(default_cases):
-    view, _M, img, _res = default_cases[0]
-    for profile_model, budget in ((False, 0.04), (True, 0.25)):
-        measure_wires(img, view, profile_model=profile_model)
-        times = []
-        for _ in range(5):
-            t0 = time.perf_counter()
-            measure_wires(img, view, profile_model=profile_model)
-            times.append(time.perf_counter() - t0)
-        print(f"measure_wires (profile model {profile_model}): best "
-              f"{min(times) * 1e3:.1f} ms")
-        # budgets ~3x the measured 15 ms (centroids) and ~50 ms (the profile model's
-        # formation fit and centres), generous against a loaded test machine
-        assert min(times) < budget

@@ -163,12 +163,13 @@ def speed(tmpdir: Path, shot_spec: Path):
     import cv2
 
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     shot_dir = tmpdir / "shot"
     write_shot(simulate_shot(load_shot_spec(shot_spec)), shot_dir, images=True, progress=False)
     paths = sorted((shot_dir / "images").glob("*.png"))
-    measure_shot(shot_dir / "shot.toml", None, workers=1, progress=False, overlays=False)  # warm
+    measure_shot(shot_dir / "shot.toml", workers=1, progress=False, overlays=False)  # warm
     floors = []
     for _ in range(5):
         t0 = time.perf_counter()
@@ -180,17 +181,16 @@ def speed(tmpdir: Path, shot_spec: Path):
     runs = []
     for _ in range(5):   # this VM's CPU speed wanders by +-20 %: best of 5, median alongside
         t0 = time.perf_counter()
-        res = measure_shot(shot_dir / "shot.toml", None, workers=1, progress=False,
-                           overlays=False)
+        res = measure_shot(shot_dir / "shot.toml", workers=1, progress=False, overlays=False)
         runs.append(time.perf_counter() - t0)
     bare, bare_median = min(runs), float(np.median(runs))
     t0 = time.perf_counter()
-    measure_shot(shot_dir / "shot.toml", tmpdir / "out", workers=1, progress=False,
-                 overlays=True)
+    write_stage1(measure_shot(shot_dir / "shot.toml", workers=1, progress=False, overlays=True),
+                 tmpdir / "out")
     full = time.perf_counter() - t0
     cores = os.cpu_count() or 1
     t0 = time.perf_counter()
-    measure_shot(shot_dir / "shot.toml", None, workers=cores, progress=False, overlays=False)
+    measure_shot(shot_dir / "shot.toml", workers=cores, progress=False, overlays=False)
     parallel = time.perf_counter() - t0
     truth = __import__("pandas").read_csv(shot_dir / "truth.csv")
     t = res.trajectory.merge(truth, on="station", suffixes=("", "_true"))

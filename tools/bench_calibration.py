@@ -121,6 +121,7 @@ def end_to_end() -> dict:
     from cadra.calibration.sphere import estimate_station_biases
     from cadra.flight import load_shot_data
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     out = ROOT / "out" / "calibration_e2e"
@@ -133,8 +134,8 @@ def end_to_end() -> dict:
         d = out / name
         write_shot(simulate_shot(load_shot_spec(spec)), d, images=True, overwrite=True,
                    progress=False)
-        measure_shot(d / "shot.toml", out / f"{name}_stage1", progress=False, overlays=False,
-                     overwrite=True)
+        write_stage1(measure_shot(d / "shot.toml", progress=False, overlays=False),
+                     out / f"{name}_stage1", overwrite=True)
         shots.append(load_shot_data(d / "shot.toml", out / f"{name}_stage1" / "trajectory.csv"))
         injected = pd.read_csv(d / "station_biases.csv").sort_values("station")
     est = estimate_station_biases(shots, facility="hffaf")

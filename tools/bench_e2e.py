@@ -72,6 +72,7 @@ def measure_one(job):
     """
     from cadra.flight.data import load_shot_data, shot_data_from_truth
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     set_name, r, name, seed, work = job
@@ -83,8 +84,8 @@ def measure_one(job):
     try:
         shot_dir, meas_dir = tmp / "shot", tmp / "stage1"
         write_shot(sim, shot_dir, images=True, progress=False)
-        measure_shot(shot_dir / "shot.toml", meas_dir, workers=1, progress=False,
-                     overlays=False)
+        write_stage1(measure_shot(shot_dir / "shot.toml", workers=1, progress=False,
+                                  overlays=False), meas_dir)
         e2e = load_shot_data(shot_dir / "shot.toml", meas_dir / "trajectory.csv")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

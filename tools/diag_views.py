@@ -53,8 +53,7 @@ def station_rows(name: str, seed: int, render: dict) -> list[dict]:
     tmp = Path(tempfile.mkdtemp(prefix="diag_views_"))
     try:
         write_shot(sim, tmp / "shot", images=True, progress=False)
-        res = measure_shot(tmp / "shot" / "shot.toml", None, workers=1, progress=False,
-                           overlays=False)
+        res = measure_shot(tmp / "shot" / "shot.toml", workers=1, progress=False, overlays=False)
         tv = pd.read_csv(tmp / "shot" / "truth_images.csv")
         truth = pd.read_csv(tmp / "shot" / "truth.csv").set_index("station")
     finally:

@@ -44,6 +44,7 @@ def main(argv=None) -> int:
     from cadra.fitting import fit_shots
     from cadra.flight import load_shot_data
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     out = Path(args.out)
@@ -61,8 +62,8 @@ def main(argv=None) -> int:
             t_render += time.perf_counter() - t
         if not (args.reuse and (meas_dir / "trajectory.csv").is_file()):
             t = time.perf_counter()
-            res = measure_shot(shot_dir / "shot.toml", meas_dir, progress=False,
-                               overlays=False, overwrite=True)
+            res = measure_shot(shot_dir / "shot.toml", progress=False, overlays=False)
+            write_stage1(res, meas_dir, overwrite=True)
             t_measure += time.perf_counter() - t
             print(f"{name}: stage one {res.seconds:.1f} s, "
                   f"{int((res.trajectory['status'] != 'failed').sum())}/{len(res.trajectory)} "
@@ -84,7 +85,7 @@ def main(argv=None) -> int:
     for w in result.warnings:
         print(f"warning: {w}")
     if args.fit_out:
-        from cadra.fitting.report import write_fit_outputs
+        from cadra.report.fit import write_fit_outputs
 
         write_fit_outputs(result, shots, args.fit_out, overwrite=True, start_model=start,
                           reference_model=truth_model)

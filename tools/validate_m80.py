@@ -101,6 +101,7 @@ def measure_draw(k: int, out: Path, keep_images: bool = False, reuse: bool = Fal
     ``reuse``: keep a round's earlier shot file and stage-one output when both are there."""
     from cadra.flight import load_shot_data
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     shots, t0 = [], time.perf_counter()
@@ -114,8 +115,8 @@ def measure_draw(k: int, out: Path, keep_images: bool = False, reuse: bool = Fal
             shots.append(load_shot_data(shot_dir / "shot.toml", meas_dir / "trajectory.csv"))
             continue
         write_shot(simulate_shot(spec), shot_dir, images=True, overwrite=True, progress=False)
-        measure_shot(shot_dir / "shot.toml", meas_dir, workers=1, progress=False,
-                     overlays=False, overwrite=True)
+        write_stage1(measure_shot(shot_dir / "shot.toml", workers=1, progress=False,
+                                  overlays=False), meas_dir, overwrite=True)
         if not keep_images:
             shutil.rmtree(shot_dir / "images", ignore_errors=True)
         shots.append(load_shot_data(shot_dir / "shot.toml", meas_dir / "trajectory.csv"))

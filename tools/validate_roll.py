@@ -72,6 +72,7 @@ def finner_realisation(r: int, seed: int, work: Path) -> dict:
     from cadra.fitting import fit_shots
     from cadra.flight.data import load_shot_data
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     spec = load_shot_spec(ROOT / "sample_shots" / "specs" / "finner_1.toml")
@@ -83,8 +84,8 @@ def finner_realisation(r: int, seed: int, work: Path) -> dict:
     try:
         write_shot(sim, tmp / "shot", images=True, progress=False)
         t1 = time.perf_counter()
-        measure_shot(tmp / "shot" / "shot.toml", tmp / "stage1", workers=1, progress=False,
-                     overlays=False)
+        write_stage1(measure_shot(tmp / "shot" / "shot.toml", workers=1, progress=False,
+                                  overlays=False), tmp / "stage1")
         t2 = time.perf_counter()
         shot = load_shot_data(tmp / "shot" / "shot.toml", tmp / "stage1" / "trajectory.csv")
     finally:

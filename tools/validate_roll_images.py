@@ -98,8 +98,7 @@ def _case(i, shot, rng, tmp, config, crb=True):
                                   motion_blur_px=scene.motion_blur_px,
                                   width_px=view.width_px, height_px=view.height_px)
     t0 = time.perf_counter()
-    res = measure_station(station.id, paths, shot.spec.model,
-                          str(facility.source_path or "hffaf"), overlays=False)
+    res = measure_station(station, paths, shot.spec.model, overlays=False)
     seconds = time.perf_counter() - t0
     for p in paths.values():
         os.remove(p)

@@ -3,7 +3,7 @@
 Two simulated air-bearing runs of a Basic Finner at alpha = 57 deg in seed 003's tunnel
 (V 117 ft/s, q 16.3 lb/ft^2), flown by CADRA's roll-bearing dynamics with Eq. 5 and Table 2
 as truth (``cadra/aero/models/seed003_romof.toml``), measured at 100 frames/s with 0.25 deg of
-white noise; each noise draw is segmented as the paper segments (cadra.fitting.segmented) and
+white noise; each noise draw is segmented as the paper segments (cadra.studies.segmented_roll) and
 fitted globally for all 14 coefficients. Prints a Table-2-like and a Table-3-like table and, as
 the last line, JSON: the pull spread, our signal/noise over the paper's, the steady spins of
 the fitted coefficients against +0.0280 / -0.0212, the C10-C11 and C10-C30 correlations.
@@ -92,7 +92,7 @@ def measured_record(run: TrueRun, rng: np.random.Generator | None,
                     sigma_deg: float = SIGMA_DEG):
     """The run as the film measures it: the roll angle in [0, 2 pi) (the paper plots 0-360
     deg) with white noise of ``sigma_deg`` (none without ``rng``)."""
-    from cadra.fitting.segmented import RollRecord
+    from cadra.studies.segmented_roll import RollRecord
 
     sig = math.radians(sigma_deg)
     phi = run.phi_rad + (rng.standard_normal(run.phi_rad.size) * sig if rng is not None else 0.0)
@@ -103,7 +103,7 @@ def fit_draw(draw: int, *, seed: int = 2003, stepwise: bool = False, body=None, 
              runs=None):
     """One noise draw of both runs, segmented and fitted (all 14 coefficients; the paper's
     stepwise order with ``stepwise``). Returns the :class:`SegmentedFit`."""
-    from cadra.fitting.segmented import STEPS, TABLE_ORDER, segmented_fit
+    from cadra.studies.segmented_roll import STEPS, TABLE_ORDER, segmented_fit
 
     body = body or seed003_body()
     model = model or resolve_model(MODEL)
@@ -124,14 +124,13 @@ def _nearest_stable(tab, target: float) -> float:
 def main(argv=None) -> int:
     import pandas as pd
 
-    from cadra.fitting.segmented import (
+    from cadra.report.roll import plot_segmented_fit, write_tables
+    from cadra.studies.segmented_roll import (
         PAPER_TABLE2,
         TABLE_ORDER,
         paper_correlation,
-        plot_segmented_fit,
         seed003_tables,
         steady_spins,
-        write_tables,
     )
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

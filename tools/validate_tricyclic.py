@@ -435,9 +435,9 @@ def diagnose(case: Case, sigma_angle_deg: float, seed: int, folder: Path,
         from cadra.aero import load_model
         from cadra.fitting import fit_shots
         from cadra.flight.load import load_shots
-        from cadra.gap.report import write_diagnosis
         from cadra.gap.score import diagnose_gap
         from cadra.gap.where import where_analysis
+        from cadra.report.gap import write_diagnosis
 
         shots, _ = load_shots([str(traj)], None)
         model = load_model(model_path)

@@ -4,7 +4,8 @@ the compiled evaluator the 6-DOF integrator calls.
 Public API (docs/aero_models.md; frames and signs: docs/conventions.md):
 
 - :class:`Parameter`, :class:`AeroModel`, :func:`load_model`, :func:`save_model`,
-  :func:`model_from_dict`, :func:`load_bundled_model`, :func:`bundled_model_names`;
+  :func:`model_from_dict`, :func:`load_bundled_model`, :func:`bundled_model_names`,
+  :func:`bundled_model_table`;
 - :func:`resolve_model` (a bundled name or a model file path: the one resolver of model names
   used by the simulator and the CLIs), :func:`resolve_model_path`, :func:`is_model_path`,
   :class:`ModelNotFoundError`;
@@ -29,6 +30,7 @@ from cadra.aero.model import (
     ModelNotFoundError,
     Parameter,
     bundled_model_names,
+    bundled_model_table,
     is_model_path,
     load_bundled_model,
     load_model,
@@ -58,6 +60,7 @@ __all__ = [
     "ModelNotFoundError",
     "Parameter",
     "bundled_model_names",
+    "bundled_model_table",
     "compile_program",
     "eval_coefficients",
     "eval_coefficients_batch",

@@ -580,6 +580,19 @@ def bundled_model_names() -> tuple[str, ...]:
     return tuple(sorted(p.stem for p in MODELS_DIR.glob("*.toml")))
 
 
+def bundled_model_table() -> list[dict]:
+    """One row per bundled model: ``name``, ``case`` (the paper's case it reproduces, or
+    "—"), ``plane`` (its angle plane), ``free`` (its free parameters' names) and
+    ``description``."""
+    rows = []
+    for name in bundled_model_names():
+        m = resolve_model(name)
+        rows.append({"name": name, "case": str(m.reference.get("case", "—")),
+                     "plane": m.angle_plane, "free": m.free_names(),
+                     "description": m.description})
+    return rows
+
+
 def is_model_path(name_or_path: str | os.PathLike) -> bool:
     """Whether ``name_or_path`` names a model file rather than a bundled model: a ``Path``, or
     text with a directory part or a suffix (``"models/m.toml"``, ``"m.toml"``, ``"./m"``)."""

@@ -22,7 +22,13 @@ CURRENT = "current"
 
 
 def shot_facility(shot: ShotData) -> str:
-    """The facility (name or path, as its shot file gives it) a shot was measured in."""
+    """The facility (name or path, as its shot's record gives it) a shot was measured in:
+    the shot data's own, else its shot file's."""
+    if shot.facility:
+        return shot.facility
+    if "shot_file" not in shot.source:
+        raise ValueError(f"{shot.shot_id}: the facility it was measured in is not known "
+                         "(give ShotData.facility)")
     from cadra.io.shotfile import load_shot
 
     return load_shot(shot.source["shot_file"]).facility

@@ -26,7 +26,6 @@ import sys
 
 from cadra.cli._format import HelpFormatter, add_verbosity, add_version, console_main
 from cadra.io.shot_check import check_shot
-from cadra.numfmt import pm
 
 #: ``--check`` lists this many missing images (``-v``: all of them)
 MISSING_SHOWN = 3
@@ -74,21 +73,26 @@ def _main(argv: list[str] | None) -> int:
     from cadra.io.shotfile import load_shot
     from cadra.io.trajectory import load_truth
     from cadra.measure.shot import measure_shot
+    from cadra.report.stage1 import write_stage1
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
     try:
-        check_output_dir(out, _input_paths(args))  # measure_shot checks the shot's inputs too
+        check_output_dir(out, _input_paths(args))  # before measuring: never over an input
+        if out.exists() and not args.overwrite:
+            raise FileExistsError(f"{out} exists; refusing to overwrite (use --overwrite)")
         check_model_size(load_shot(args.shot_file))  # a size in the wrong unit: no measuring
         truth = load_truth(args.truth) if args.truth else None  # errors name row, column
-        res = measure_shot(args.shot_file, out, workers=args.workers, progress=not args.quiet,
-                           overlays=not args.no_overlays, overwrite=args.overwrite,
-                           truth=truth)
+        res = measure_shot(args.shot_file, workers=args.workers, progress=not args.quiet,
+                           overlays=not args.no_overlays)
+        write_stage1(res, out, truth=truth, overwrite=args.overwrite)
     except (ValueError, OSError) as exc:
         print(f"cadra1: {exc}", file=sys.stderr)
         return 2
     t = res.trajectory
     if args.verbose and not args.quiet:
-        _print_stations(t)
+        from cadra.report.stage1 import station_lines
+
+        print("\n".join(station_lines(t)))
     n_fail = int((t["status"] == "failed").sum())
     n_warn = int((t["status"] == "warning").sum())
     for r in t.itertuples():
@@ -131,21 +135,9 @@ def _check(args) -> int:
     return 1 if problems else 0
 
 
-def _print_stations(t) -> None:
-    """-v: each station's measurement with its sigmas (mm, deg)."""
-    for r in t.itertuples():
-        if r.status == "failed":
-            continue
-        cells = [f"{c} {pm(getattr(r, f'{c}_m') * 1e3, getattr(r, f'sigma_{c}_m') * 1e3, 'mm')}"
-                 for c in ("x", "y", "z")]
-        cells += [f"{c} {pm(getattr(r, f'{c}_deg'), getattr(r, f'sigma_{c}_deg'), 'deg')}"
-                  for c in ("theta", "psi")]
-        print(f"  station {r.station:2d}: " + ", ".join(cells))
-
-
 def _input_paths(args) -> list:
     """Every file the run reads, for the output guard: shot file, truth table, images and
-    facility file (best effort: a shot that cannot be read is reported by measure_shot)."""
+    facility file (best effort: a shot that cannot be read is reported when it is measured)."""
     from contextlib import suppress
     from pathlib import Path
 

@@ -115,6 +115,7 @@ def _fit_shots(shots, model, *, options, auto_start, initial, continuation, loca
             return replace(result, iterations=first.iterations + result.iterations,
                            elapsed_s=first.elapsed_s + result.elapsed_s,
                            history=first.history + result.history,
+                           initial_values=first.initial_values,
                            options={**result.options, "phases": phases,
                                     "continuation": dict(continuation)}), start
     return fit(shots, start, states, options=options, local_free=local_free,

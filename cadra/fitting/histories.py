@@ -3,8 +3,8 @@
 :func:`fitted_histories` samples each shot's fitted trajectory through
 :func:`cadra.fitting.problem.result_problem` -- the fitted model, the extras the fit used
 and its integration settings -- so what the report and its plots show is what the solver
-fitted (docs/fitting.md). Plain data in, tables out: :mod:`cadra.fitting.report` and
-:mod:`cadra.fitting.plots` both import it (neither imports the other's module for it).
+fitted (docs/fitting.md). Plain data in, tables out: :mod:`cadra.report.fit` and
+:mod:`cadra.report.fit_plots` both import it (neither imports the other's module for it).
 """
 
 from __future__ import annotations

@@ -32,8 +32,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-__all__ = ["Reference", "ReferenceComparison", "compare_with_reference", "load_reference",
-           "reference_markdown"]
+__all__ = ["Reference", "ReferenceComparison", "compare_with_reference", "load_reference"]
 
 
 @dataclass(frozen=True)
@@ -150,25 +149,3 @@ def compare_with_reference(names, values, covariance, reference: Reference
     return ReferenceComparison(reference.label, table, chi2, dof, p, not_compared)
 
 
-def reference_markdown(cmp: ReferenceComparison) -> list[str]:
-    """The report's section on the reference."""
-    from cadra.numfmt import pm
-
-    L = ["## Against the reference", "",
-         f"Reference: `{cmp.label}`. Pull = (fit − reference) / √(σ_fit² + σ_ref²); "
-         "σ_ref is 0 for a model file (values only).", "",
-         "| parameter | fit | reference | difference | pull |", "|---|---|---|---|---|"]
-    for r in cmp.table.itertuples():
-        ref = pm(r.reference, r.reference_sigma) if r.reference_sigma > 0 else f"{r.reference:.6g}"
-        pct = f" ({r.difference_percent:+.2f} %)" if np.isfinite(r.difference_percent) else ""
-        L.append(f"| {r.parameter} | {pm(r.fit, r.sigma)} | {ref} | {r.difference:+.4g}{pct} "
-                 f"| {r.pull:+.2f} |")
-    n = len(cmp.table)
-    within = int((np.abs(cmp.table["pull"]) <= 2).sum()) if n else 0
-    L += ["", f"{within} of {n} within 2σ. Joint χ² of agreement (the parameters' "
-          f"correlations counted) = {cmp.chi2:.2f} for {cmp.dof} degrees of freedom, "
-          f"p = {cmp.p:.3g}" + (" — **the fit and the reference disagree**"
-                                if np.isfinite(cmp.p) and cmp.p < 0.01 else "") + ".", ""]
-    if cmp.not_compared:
-        L += ["Not in the reference (not compared): " + ", ".join(cmp.not_compared), ""]
-    return L

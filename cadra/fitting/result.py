@@ -102,9 +102,75 @@ class FitResult:
     #: the fitted model, the extras at their values, each shot's fitted state): what the
     #: report, its plots and the gap diagnosis predict with -- the solver's own physics
     problem: FitProblem | None = None
+    #: the free aerodynamic parameters' values the fit started from (SI)
+    initial_values: dict = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         return self.status == "converged"
+
+    def __repr__(self) -> str:
+        shots = ", ".join(sf.shot_id for sf in self.shots[:3]) + (
+            f" +{len(self.shots) - 3}" if len(self.shots) > 3 else "")
+        return (f"<FitResult {self.status}: {self.model.name}, {len(self.aero_names)} aero "
+                f"of {self.n_free} unknowns, {len(self.shots)} shot(s) ({shots}), "
+                f"chi^2/nu = {self.reduced_chi2:.4g}, {self.iterations} iterations>")
+
+    @property
+    def params(self):
+        """Every parameter by name, lmfit's way (:class:`cadra.fitting.params.FitParameters`):
+        ``result.params["Cm_A1"].value``, ``.stderr``, ``.min``, ``.max``, ``.vary``,
+        ``.init_value``, ``.correl``."""
+        from cadra.fitting.params import FitParameter, FitParameters
+
+        R = self.correlation()
+        index = {n: k for k, n in enumerate(self.param_names)}
+        sig = np.sqrt(np.maximum(np.diag(self.covariance), 0.0)) if self.param_names else []
+
+        def correl(name):
+            k = index[name]
+            return {m: float(R[k, j]) for m, j in index.items() if j != k}
+
+        out = []
+        for prm in self.model.parameters:
+            if prm.name in index:
+                k = self.aero_names.index(prm.name)
+                out.append(FitParameter(prm.name, prm.value, float(self.aero_sigma[k]), True,
+                                        prm.min, prm.max,
+                                        self.initial_values.get(prm.name), "aero",
+                                        correl(prm.name)))
+            else:
+                out.append(FitParameter(prm.name, prm.value, None, False, prm.min, prm.max,
+                                        prm.value, "aero"))
+        for e, v, s in zip(self.extras, self.extra_values, self.extra_sigma, strict=True):
+            out.append(FitParameter(e.name, float(v), float(s), True, kind="extra",
+                                    correl=correl(e.name)))
+        for e in self.held_extras:
+            out.append(FitParameter(e.name, float(e.value), None, False, kind="extra"))
+        for sf in self.shots:
+            for k, local in enumerate(LOCAL_NAMES):
+                if local not in sf.local_free:
+                    continue
+                name = f"{sf.shot_id}:{local}"
+                value = 0.0 if local.startswith("rot_") else float(
+                    sf.state[k] if k < 6 else sf.state[k + 1])
+                out.append(FitParameter(name, value, float(sig[index[name]]), True,
+                                        kind="state", correl=correl(name)))
+        return FitParameters(out)
+
+    def status_line(self) -> str:
+        """One line: status, why, chi^2/nu, iterations (per phase), time."""
+        from cadra.fitting.summary import status_line
+
+        return status_line(self)
+
+    def report(self, *, verbose: bool = False, status: bool = True,
+               warnings: bool = True) -> str:
+        """The fit's text report (:func:`cadra.fitting.summary.fit_report`): the status
+        line, statistics, every free parameter ``value ± sigma`` with its start, the held
+        ones, high correlations, the phases and the warnings; what ``cadra2 fit`` prints."""
+        from cadra.fitting.summary import fit_report
+
+        return fit_report(self, verbose=verbose, status=status, warnings=warnings)
 
     @property
     def converged(self) -> bool:
@@ -431,6 +497,8 @@ def build_result(problem, params: np.ndarray, states, status: str, message: str,
         extra_values=extra_values,
         extra_sigma=sig[na:ns].copy(), held_extras=tuple(held_extras), jacobian=jacobian,
         problem=final,
+        initial_values={n: float(model.parameters[i].value)
+                        for n, i in zip(names_aero, aero_idx, strict=True)},
         options={"max_iterations": options.max_iterations,
                  "step_tol_sigma": options.step_tol_sigma,
                  "integration": options.integration.__dict__, "final_lambda": lam})

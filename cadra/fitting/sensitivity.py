@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cadra.channels import N_CHANNELS, OBSERVED
+from cadra.conventions import quat_mul, rotvec_quat
 from cadra.dynamics.integrate import propagate_batch
 from cadra.dynamics.layout import N_STATE, P_CG_OFFSET
 from cadra.dynamics.observe import observe
@@ -65,25 +66,6 @@ class Integration:
         for k in ("h_max_s", "tol_position_m", "tol_angle_rad"):
             if not getattr(self, k) > 0:
                 raise ValueError(f"integration.{k} must be positive")
-
-
-def quat_mul(a, b):
-    """Hamilton product of quaternions (w, x, y, z); complex-safe."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw])
-
-
-def rotvec_quat(v) -> np.ndarray:
-    """Unit quaternion of the rotation vector ``v`` (rad)."""
-    v = np.asarray(v, dtype=float)
-    a = float(np.linalg.norm(v))
-    if a < 1e-300:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    return np.concatenate([[np.cos(a / 2)], np.sin(a / 2) * v / a])
 
 
 def apply_local(y_nom: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -91,6 +91,27 @@ class ShotMotion:
         """The fit's independent variable at the stations: x (m) or t (s)."""
         return self.x_m if self.variable == "distance" else self.t_s
 
+    @property
+    def warnings(self) -> list[str]:
+        """Where this reduction is not to be trusted: a chi^2/dof above 2 (the epicyclic form
+        or the angle sigmas do not describe the motion), arms whose frequencies disagree with
+        the spin given, constants the data do not determine."""
+        out = []
+        if self.fit.chi2_dof > 2.0:
+            out.append(f"{self.shot_id}: chi^2/dof = {self.fit.chi2_dof:.3g} > 2: the "
+                       "epicyclic form or the angle sigmas do not describe the motion (sigmas "
+                       "scaled by it)")
+        lc, spin = self.coefficients, self.conditions.spin_rad_s
+        if (lc is not None and spin
+                and abs(lc.spin_from_fit - spin) > 3 * lc.spin_from_fit_sigma):
+            out.append(f"{self.shot_id}: the arms' frequencies give a spin of "
+                       f"{pm(lc.spin_from_fit, lc.spin_from_fit_sigma, 'rad/s')}, not the "
+                       f"{spin:g} rad/s given")
+        if not np.all(np.isfinite(self.fit.sigmas)):
+            out.append(f"{self.shot_id}: some fitted constants are not determined by the data "
+                       "(infinite sigma)")
+        return out
+
 
 @dataclass(frozen=True)
 class FlightPathAngles:

@@ -69,6 +69,8 @@ class ShotData:
         (x .. psi, (n, 5)): the optional ones (phi) are then not measured.
     sigma_t_s : timing sigma, s, already folded into ``sigma`` (x as V sigma_t).
     source : where the data came from (paths or "simulated").
+    facility : the facility the shot was measured in (its name or file, as the shot's record
+        gives it; "" when not known): a station bias table applies to its stations only.
     """
 
     shot_id: str
@@ -80,6 +82,7 @@ class ShotData:
     sigma: np.ndarray
     sigma_t_s: float = 0.0
     source: dict = field(default_factory=dict)
+    facility: str = ""
 
     def __post_init__(self):
         n = len(self.t_s)
@@ -253,7 +256,7 @@ def shot_data_from_trajectory(traj, shot, *, sigma_t_s: float = 0.0,
         shot_id=shot.shot_id, rigid=rigid_body_from_shot(shot, effects), body_kind=kind,
         stations=table["station"].to_numpy(int), t_s=t_s, meas=meas,
         sigma=_fold_timing(t_s, meas, sigma, sigma_t_s), sigma_t_s=float(sigma_t_s),
-        source=source)
+        source=source, facility=str(shot.facility))
 
 
 def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, body_kind: str, *,
@@ -261,7 +264,7 @@ def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, bo
                          sigma_t_s: float = 0.0, rng: np.random.Generator | None = None,
                          angles: bool | None = None, roll: bool | None = None,
                          sigma_roll_rad: float | None = None,
-                         positions: bool = True) -> ShotData:
+                         positions: bool = True, facility: str = "") -> ShotData:
     """Measurements made from a simulated shot's exact truth (``truth.csv`` columns).
 
     With ``rng`` the measurements get Gaussian noise of the given sigmas, and the spark times
@@ -272,7 +275,8 @@ def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, bo
     ``sigma_angle_rad``); default: only for a finned body (``"finner"``), whose roll stage one
     measures. ``positions=False`` drops x, y, z (a mounted wind-tunnel record).
     A truth table without an optional channel's column (an older ``truth.csv`` without
-    ``phi_deg``) reads it as not measured.
+    ``phi_deg``) reads it as not measured. ``facility``: the facility's name, when a bias
+    table is to be applied.
     """
     n = len(truth)
     meas = np.column_stack([channel_registry.to_si(truth[c.value_column].to_numpy(float),
@@ -313,4 +317,5 @@ def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, bo
     return ShotData(shot_id=shot_id, rigid=rigid, body_kind=body_kind,
                     stations=stations, t_s=t_s, meas=meas,
                     sigma=_fold_timing(t_s, meas, sigma, sigma_t_s), sigma_t_s=sigma_t_s,
-                    source={"origin": "simulated truth" + (" + noise" if rng else "")})
+                    source={"origin": "simulated truth" + (" + noise" if rng else "")},
+                    facility=facility)

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -36,10 +36,7 @@ from cadra.channels import POSITION, residual
 from cadra.fitting.extras import station_columns
 from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
-from cadra.fitting.sensitivity import (
-    Integration,
-    predict_with_jacobian,
-)
+from cadra.fitting.sensitivity import Integration, predict_with_jacobian
 from cadra.fitting.solver import FitOptions
 from cadra.flight.data import ShotData
 from cadra.gap import verdict as vd
@@ -77,6 +74,13 @@ class GapDiagnosis:
     dropped: tuple = ()              # effects added first that left such a misfit standing
     base_note: str = ""              # how the fit given was continued, if it had not converged
     fit_given: FitResult | None = None   # the fit the diagnosis started from (continued)
+    #: where the fit as given misses (:func:`cadra.gap.where.where_analysis`), when asked
+    where_tables: dict | None = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        added = ", ".join(a["effect"] for a in self.added) or "no effect added"
+        return (f"<GapDiagnosis: {added}; chi^2/dof {self.reduced_chi2_before:.4g} -> "
+                f"{self.reduced_chi2_after:.4g}; {self.verdict[:80]}>")
 
 
 def _columns(result: FitResult, shots: Sequence[ShotData], cands: Sequence[Candidate],

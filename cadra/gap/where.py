@@ -33,6 +33,7 @@ from scipy import stats
 from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
 from cadra.flight.data import CHANNELS, ShotData
+from cadra.stats import runs_of_sign
 
 #: p-value below which a "where" test is reported as significant (before the one-page
 #: summary's own multiplicity note)
@@ -48,28 +49,14 @@ def by_group(where: pd.DataFrame, keys: Sequence[str]) -> pd.DataFrame:
                                          kind="stable").reset_index(drop=True)
 
 
-def runs_test(values: np.ndarray) -> tuple[int, float, float]:
-    """Wald-Wolfowitz runs test of the signs of ``values``: (runs, z, two-sided p)."""
-    s = np.sign(np.asarray(values, dtype=float))
-    s = s[s != 0]
-    n1, n2 = int((s > 0).sum()), int((s < 0).sum())
-    n = n1 + n2
-    if n1 == 0 or n2 == 0:
-        return (1 if n else 0), -math.inf if n > 1 else math.nan, 0.0 if n > 1 else math.nan
-    runs = 1 + int(np.count_nonzero(s[1:] != s[:-1]))
-    mean = 2.0 * n1 * n2 / n + 1.0
-    var = 2.0 * n1 * n2 * (2.0 * n1 * n2 - n) / (n**2 * (n - 1.0))
-    z = (runs - mean) / math.sqrt(var) if var > 0 else 0.0
-    return runs, z, float(2 * stats.norm.sf(abs(z)))
-
-
 def sequence_tests(where: pd.DataFrame) -> pd.DataFrame:
     """Runs and lag-1 autocorrelation tests per shot and channel (station order)."""
     rows = []
     for (shot, ch), grp in where.groupby(["shot_id", "channel"], sort=False):
         r = grp.sort_values("station")["normalized"].to_numpy()
         n = r.size
-        runs, z, p = runs_test(r)
+        rt = runs_of_sign(r)
+        runs, z, p = rt.runs, rt.z, rt.p
         rc = r - r.mean()
         lag1 = float(rc[1:] @ rc[:-1] / (rc @ rc)) if n > 2 and rc @ rc > 0 else math.nan
         p1 = float(2 * stats.norm.sf(abs(lag1) * math.sqrt(n))) if n > 2 else math.nan
@@ -251,5 +238,5 @@ def findings(tables: dict) -> list[str]:
 
 
 __all__ = ["ALPHA", "by_group", "cross_shot", "findings", "frequency_content",
-           "fitted_channels", "motion_frequencies", "runs_test", "sequence_tests",
+           "fitted_channels", "motion_frequencies", "sequence_tests",
            "stage_one_consistency", "where_analysis"]

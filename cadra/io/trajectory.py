@@ -238,7 +238,7 @@ def _numeric(table: pd.DataFrame, path: Path) -> pd.DataFrame:
     for c in ALL_COLUMNS:
         if c in ("status", "reason", "warnings"):
             continue
-        if raw[c].dtype == object:         # text, as a file holds it
+        if not pd.api.types.is_numeric_dtype(raw[c]):    # text, as a file holds it
             text = raw[c].str.strip()
             num = pd.to_numeric(text, errors="coerce")
             notnum = num.isna() & text.notna() & (text.str.lower() != "nan") & (text != "")

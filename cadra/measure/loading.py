@@ -1,8 +1,11 @@
-"""Reading station images for stage one, with a clear reason for every refusal.
+"""Station images for stage one, from files or from memory, with a clear reason for every
+refusal.
 
 A station image is refused (and that station flagged, never the whole shot) when it is
 missing, unreadable or truncated, not greyscale, of another size or bit depth than its view
-declares, or holds non-finite values.
+declares, or holds non-finite values. A file (:func:`load_station_image`) and an array in
+memory (:func:`station_image`: what the renderer or a frame grabber hands over) pass the same
+checks and become the same float32 image.
 """
 
 from __future__ import annotations
@@ -40,14 +43,22 @@ def load_station_image(path: str | Path, width_px: int, height_px: int,
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if img is None:
         return ImageProblem(str(path), "unreadable or truncated image file")
+    return station_image(img, width_px, height_px, bit_depth, str(path))
+
+
+def station_image(img: np.ndarray, width_px: int, height_px: int, bit_depth: int,
+                  name: str = "image") -> np.ndarray | ImageProblem:
+    """A grey ``uint8``/``uint16`` image array as float32 in [0, 1] (full scale of its bit
+    depth), or an :class:`ImageProblem` naming ``name``: the checks of a file, on an array."""
+    img = np.asarray(img)
     if img.ndim != 2:
-        return ImageProblem(str(path), f"not a greyscale image (shape {img.shape})")
+        return ImageProblem(name, f"not a greyscale image (shape {img.shape})")
     bits = {np.dtype(np.uint8): 8, np.dtype(np.uint16): 16}.get(img.dtype)
     if bits is None:
-        return ImageProblem(str(path), f"unexpected pixel type {img.dtype}")
+        return ImageProblem(name, f"unexpected pixel type {img.dtype}")
     if bits != bit_depth:
-        return ImageProblem(str(path), f"{bits}-bit image, the view declares {bit_depth}-bit")
+        return ImageProblem(name, f"{bits}-bit image, the view declares {bit_depth}-bit")
     if img.shape != (height_px, width_px):
-        return ImageProblem(str(path), f"{img.shape[1]}x{img.shape[0]} px, the view declares "
-                                       f"{width_px}x{height_px}")
+        return ImageProblem(name, f"{img.shape[1]}x{img.shape[0]} px, the view declares "
+                                  f"{width_px}x{height_px}")
     return img.astype(np.float32) * np.float32(1.0 / (2**bits - 1))

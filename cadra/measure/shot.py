@@ -1,56 +1,92 @@
-"""Stage one over a shot: every station's images -> trajectory measurement file and reports.
+"""Stage one over a shot: every station's images -> the shot's trajectory table.
 
-:func:`measure_shot` is the library call behind ``cadra1`` (docs/stage1.md). Stations are
-measured by :func:`cadra.measure.station.measure_station` (pure, picklable), in parallel on the
-available cores (a process pool; ``workers=1`` runs in-process), with a progress bar. Outputs go
-to a temporary sibling directory moved into place at the end (:func:`cadra.io.atomic.
-atomic_output_dir`): an interrupted or failed run leaves nothing behind, an existing output
-directory is never overwritten unless asked, and an output directory that is or holds an input
-(shot file, facility file, images; links resolved) is refused
-(:func:`cadra.io.atomic.check_output_dir`). The pool's workers ignore Ctrl-C (the parent
-handles it) and die with the parent, even a SIGKILLed one (:func:`_worker_init`).
+:func:`measure_shot` is the library call behind ``cadra1`` and :func:`cadra.measure`
+(docs/stage1.md). It takes the shot's record (a :class:`cadra.io.shotfile.ShotFile` or its
+file) and the images, as arrays in memory or the shot file's image files, and returns a
+:class:`Stage1Result` in memory: the trajectory table, the per-view quality table and every
+station's result. Nothing is written here; :func:`cadra.report.stage1.write_stage1` writes a
+result's folder.
 
-Output directory::
-
-    trajectory.csv        the trajectory measurement file (cadra.io.trajectory)
-    quality.csv           per station and view: wires, affine, silhouette-fit figures, flags
-    trajectory.png        one page: x-z, x-y, theta and psi vs x with error bars
-    overlays/stNN_VIEW.png  every image with the fitted wires and silhouette
-    report.md             what was measured, what failed and why
+Stations are measured by :func:`cadra.measure.station.measure_station` (pure, picklable), in
+parallel on the available cores (a process pool; ``workers=1`` runs in-process), with a
+progress bar. The pool's workers ignore Ctrl-C (the parent handles it) and die with the
+parent, even a SIGKILLed one (:func:`_worker_init`).
 """
 
 from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from cadra.io.trajectory import station_rows, trajectory_to_csv
+from cadra.io.shotfile import ShotFile
+from cadra.io.trajectory import station_rows
 from cadra.measure.station import VIEWS, StationResult, measure_station
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Stage1Result:
-    """What :func:`measure_shot` measured (tables as written) and where it wrote them."""
+    """What :func:`measure_shot` measured.
+
+    Attributes
+    ----------
+    trajectory : the trajectory table (the trajectory file's columns and units,
+        :mod:`cadra.io.trajectory`), one row per station.
+    quality : per station and view, the figures a range engineer checks (docs/stage1.md).
+    stations : every station's :class:`~cadra.measure.station.StationResult`.
+    shot : the shot's record (body, mass properties, air, spark times).
+    meta : the trajectory file's metadata (shot id, shot and facility files, producer).
+    inputs : the files the measurement read (shot, facility, images): an output folder must
+        not be or hold any of them.
+    seconds : wall time of the measurement.
+    """
 
     trajectory: pd.DataFrame
     quality: pd.DataFrame
     stations: tuple[StationResult, ...]
-    out_dir: Path | None
-    seconds: float
+    shot: ShotFile
+    meta: dict
+    inputs: tuple[Path, ...] = ()
+    seconds: float = 0.0
+    notes: tuple[str, ...] = field(default_factory=tuple)
 
     @property
     def any_failed(self) -> bool:
         return bool((self.trajectory["status"] == "failed").any())
 
+    @property
+    def n_measured(self) -> int:
+        return int((self.trajectory["status"] != "failed").sum())
+
+    def __repr__(self) -> str:
+        return (f"<Stage1Result {self.shot.shot_id}: {self.n_measured}/{len(self.trajectory)} "
+                f"stations measured, {self.seconds:.1f} s>")
+
+    def shot_data(self, *, sigma_t_s: float = 0.0, min_sigma: dict | None = None,
+                  effects=None):
+        """The measurements as stage two's :class:`~cadra.flight.data.ShotData`, in memory
+        (:func:`cadra.flight.data.shot_data_from_trajectory`); ``sigma_t_s`` the spark-time
+        sigma (s), ``min_sigma`` floors of the sigmas (``{"position_m": .., "angle_rad":
+        ..}``), ``effects`` the dynamics' effects."""
+        from cadra.flight.data import shot_data_from_trajectory
+        from cadra.io.trajectory import trajectory_from_table
+
+        traj = trajectory_from_table(self.trajectory, self.meta,
+                                     f"stage one's trajectory of {self.shot.shot_id}")
+        return shot_data_from_trajectory(
+            traj, self.shot, sigma_t_s=sigma_t_s, min_sigma=min_sigma, effects=effects,
+            source={"shot_file": self.meta.get("shot_file", f"shot {self.shot.shot_id}"),
+                    "trajectory_file": f"stage one's trajectory of {self.shot.shot_id}"})
+
 
 def _task(args):
-    station_id, paths, body_spec, facility_path, overlays = args
-    return measure_station(station_id, paths, body_spec, facility_path, overlays=overlays)
+    station, images, body_spec, overlays = args
+    return measure_station(station, images, body_spec, overlays=overlays)
 
 
 def quality_rows(results) -> pd.DataFrame:
@@ -175,48 +211,78 @@ def _worker_init(parent_pid: int) -> None:
                          name="cadra-parent-watch").start()
 
 
-def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None = None, *,
-                 workers: int | None = None, progress: bool = True, overlays: bool = True,
-                 overwrite: bool = False, truth: pd.DataFrame | None = None) -> Stage1Result:
-    """Measure every station of a shot; write the outputs to ``out_dir`` (None: write nothing).
+def measure_shot(shot: ShotFile | str | os.PathLike,
+                 images: Mapping[tuple[int, str], np.ndarray | str | os.PathLike] | None = None,
+                 *, facility=None, workers: int | None = None, progress: bool = True,
+                 overlays: bool = True) -> Stage1Result:
+    """Measure every station of a shot (module doc); nothing is written.
 
-    ``workers``: processes (default: the available cores; 1 = in this process). ``truth``: an
-    optional table (``x_m, y_m, z_m, theta_deg, psi_deg``) drawn on the trajectory plot.
-    Bad stations are flagged in the tables, never raised; bad shot/facility files raise
-    ``ValueError``/``OSError`` before anything is written.
+    ``shot``: the shot's record or its shot file. ``images``: ``(station, view)`` -> the image
+    (a grey ``uint8``/``uint16`` array, or a file), default the shot file's image files.
+    ``facility``: a :class:`cadra.facility.reference.Facility`, or a facility file or name
+    (default: the shot's). ``workers``: processes (default: the available cores; 1 = in this
+    process). ``overlays``: draw each image's overlay (PNG bytes in the station results).
+
+    Bad stations are flagged in the tables, never raised; a bad shot or facility raises
+    ``ValueError``/``OSError``.
     """
     import time
 
+    from cadra.facility.reference import Facility
     from cadra.io.facility_file import load_facility, resolve_facility_path
     from cadra.io.shotfile import load_shot
 
     t0 = time.perf_counter()
-    shot = load_shot(shot_path)
-    facility_path = str(resolve_facility_path(shot.facility))
-    facility = load_facility(facility_path)
+    inputs: list[Path] = []
+    shot_file = None
+    if not isinstance(shot, ShotFile):
+        shot_file = Path(shot)
+        shot = load_shot(shot_file)
+        inputs.append(shot_file)
+    elif shot.source_path is not None:
+        shot_file = Path(shot.source_path)
+    facility_file = None
+    if not isinstance(facility, Facility):
+        facility_file = resolve_facility_path(facility if facility is not None
+                                              else shot.facility)
+        facility = load_facility(facility_file)
+        inputs.append(Path(facility_file))
     known = set(facility.station_ids)
-    tasks, inputs = [], [Path(shot_path), Path(facility_path)]
+    tasks = []
     for rec in shot.stations:
         if rec.station not in known:
             raise ValueError(f"shot {shot.shot_id}: station {rec.station} is not in facility "
                              f"{facility.name!r}")
-        paths = {v: str(shot.image_path(rec.station, v)) for v in rec.images}
-        inputs += [Path(p) for p in paths.values()]
-        tasks.append((rec.station, paths, dict(shot.model), facility_path, overlays))
-    if out_dir is not None:
-        from cadra.io.atomic import check_output_dir
+        if images is None:
+            views = {v: shot.image_path(rec.station, v) for v in rec.images}
+        else:
+            views = {v: images[(rec.station, v)] for v in VIEWS if (rec.station, v) in images}
+        inputs += [Path(p) for p in views.values() if isinstance(p, str | os.PathLike)]
+        tasks.append((facility.station(rec.station), views, dict(shot.model), overlays))
+    results = _run(tasks, workers, f"cadra1 {shot.shot_id}" if progress else None)
+    times = {rec.station: rec.time_s for rec in shot.stations}
+    results = with_roll_track(results, times)
+    meta = {"shot_id": shot.shot_id,
+            "shot_file": str(shot_file.resolve()) if shot_file is not None else "",
+            "facility": facility.name,
+            "facility_file": str(facility_file or facility.source_path or ""),
+            "body": shot.model.get("name", shot.model.get("kind")),
+            "producer": "cadra1 (silhouette least squares, docs/stage1.md)",
+            "frame": "facility F: x downrange, y port, z up, origin station 1 (m)"}
+    return Stage1Result(station_rows(results, times), quality_rows(results), tuple(results),
+                        shot, meta, tuple(inputs), time.perf_counter() - t0)
 
-        out_dir = Path(out_dir)
-        check_output_dir(out_dir, inputs)  # inputs are never overwritten (UnsafeOutputError)
-        if out_dir.exists() and not overwrite:
-            raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use --overwrite)")
+
+def _run(tasks: list, workers: int | None, label: str | None) -> list[StationResult]:
+    """The station tasks, in a process pool of ``workers`` (default: the cores; 1 = here),
+    with a progress bar labelled ``label`` (None: none)."""
     workers = (os.cpu_count() or 1) if workers is None else max(int(workers), 1)
     workers = min(workers, len(tasks)) or 1
     bar = None
-    if progress:
+    if label is not None:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(tasks), desc=f"cadra1 {shot.shot_id}", unit="station")
+        bar = tqdm(total=len(tasks), desc=label, unit="station")
     results = []
     try:
         if workers == 1:
@@ -241,89 +307,7 @@ def measure_shot(shot_path: str | os.PathLike, out_dir: str | os.PathLike | None
     finally:
         if bar is not None:
             bar.close()
-    times = {rec.station: rec.time_s for rec in shot.stations}
-    results = with_roll_track(results, times)
-    table = station_rows(results, times)
-    quality = quality_rows(results)
-    meta = {"shot_id": shot.shot_id, "shot_file": str(Path(shot_path).resolve()),
-            "facility": facility.name, "facility_file": facility_path,
-            "body": shot.model.get("name", shot.model.get("kind")),
-            "producer": "cadra1 (silhouette least squares, docs/stage1.md)",
-            "frame": "facility F: x downrange, y port, z up, origin station 1 (m)"}
-    if out_dir is not None:
-        _write_outputs(out_dir, table, quality, results, meta, shot, truth, overwrite)
-    return Stage1Result(table, quality, tuple(results), out_dir, time.perf_counter() - t0)
+    return results
 
 
-def _write_outputs(out_dir: Path, table, quality, results, meta, shot, truth, overwrite):
-    from cadra.io.atomic import atomic_output_dir
-    from cadra.measure.plots import trajectory_figure
-
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
-        (tmp / "trajectory.csv").write_text(trajectory_to_csv(table, meta), encoding="utf-8")
-        quality.to_csv(tmp / "quality.csv", index=False, float_format="%.8g")
-        plot_table = table.assign(ok=table["status"] != "failed")
-        for c in ("theta_deg", "psi_deg", "sigma_theta_deg", "sigma_psi_deg"):
-            plot_table[c] = plot_table[c].astype(float)
-        fig = trajectory_figure(plot_table, truth)
-        fig.suptitle(f"{shot.shot_id}: stage-one trajectory measurement "
-                     f"({int((table['status'] != 'failed').sum())}/{len(table)} stations)")
-        fig.savefig(tmp / "trajectory.png", dpi=110)
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
-        (tmp / "overlays").mkdir()
-        for r in results:
-            for name, v in r.views.items():
-                if v.overlay_png:
-                    (tmp / "overlays" / f"st{r.station:02d}_{name}.png").write_bytes(
-                        v.overlay_png)
-        truth_lines = []
-        if truth is not None:
-            from cadra.body import body_from_spec
-            from cadra.measure.truth_compare import compare_with_truth, comparison_markdown
-
-            try:
-                # a finned body's roll is known to the period of its fins only
-                n_fins = len(getattr(body_from_spec(shot.model), "fin_phi_rad", ()))
-                cmp = compare_with_truth(table, truth, roll_period_rad=2 * math.pi
-                                         / max(n_fins, 1))
-            except ValueError as exc:
-                truth_lines = ["## Measured minus truth", "", f"Not compared: {exc}.", ""]
-            else:
-                cmp.per_station.to_csv(tmp / "truth_comparison.csv", index=False,
-                                       float_format="%.8g")
-                truth_lines = comparison_markdown(cmp)
-        (tmp / "report.md").write_text(_report(table, quality, meta, truth_lines),
-                                       encoding="utf-8")
-
-
-def _report(table, quality, meta, truth_lines=()) -> str:
-    n = len(table)
-    failed = table[table["status"] == "failed"]
-    warned = table[table["status"] == "warning"]
-    lines = [f"# Stage one: {meta['shot_id']}", "",
-             f"{n - len(failed)} of {n} stations measured"
-             f" ({len(warned)} with warnings, {len(failed)} failed).", ""]
-    if len(failed):
-        lines += ["## Failed stations", ""]
-        lines += [f"- station {int(r.station)}: {r.reason}" for r in failed.itertuples()]
-        lines.append("")
-    if len(warned):
-        lines += ["## Warnings", ""]
-        lines += [f"- station {int(r.station)}: {r.warnings}" for r in warned.itertuples()]
-        lines.append("")
-    ok = quality[quality["status"] != "failed"]
-    xc = table["x_consistency"].dropna()
-    if len(ok) and "sigma_u_px" in ok and len(xc):
-        lines += ["## Figures", "",
-                  f"- median position sigma: {np.nanmedian(ok['sigma_u_px']):.4f} px (u), "
-                  f"{np.nanmedian(ok['sigma_v_px']):.4f} px (v)",
-                  f"- median wire-affine rms: {np.nanmedian(ok['affine_rms_px']):.4f} px",
-                  f"- median edge-offset rms: {np.nanmedian(ok['edge_offset_rms_px']):.4f} px",
-                  f"- largest |x_top - x_side| / sigma: "
-                  f"{np.max(np.abs(xc)):.2f}", ""]
-    lines += list(truth_lines)
-    lines += ["Files: trajectory.csv (docs/stage1.md), quality.csv, trajectory.png, "
-              "overlays/" + (", truth_comparison.csv" if truth_lines else "") + ".", ""]
-    return "\n".join(lines)
+__all__ = ["Stage1Result", "measure_shot", "quality_rows", "with_roll_track"]

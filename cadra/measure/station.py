@@ -1,11 +1,13 @@
 """Measure one station: both views' images -> the station's 3-D pose (stage one, per station).
 
-:func:`measure_station` is a pure function of plain, picklable data (paths, the body's spec
-dict, settings) returning a :class:`StationResult`, so a process pool or a Dask scheduler can
-ship it. Per view (docs/stage1.md):
+:func:`measure_station` is a pure function of plain, picklable data (the station's geometry,
+its images as arrays or paths, the body's spec dict, settings) returning a
+:class:`StationResult`, so a process pool or a Dask scheduler can ship it. Per view
+(docs/stage1.md):
 
-1. read the image (:func:`cadra.measure.loading.load_station_image`; a bad file fails that
-   view with its reason);
+1. take the image (an array, :func:`cadra.measure.loading.station_image`, or a file,
+   :func:`cadra.measure.loading.load_station_image`; a bad one fails that view with its
+   reason);
 2. locate the model roughly (:func:`cadra.measure.locate.locate_model`) with the view's
    nominal projection;
 3. find and fit the fiducial wires, solve the image->plane affine and so the view's
@@ -32,14 +34,17 @@ from __future__ import annotations
 
 import functools
 import math
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from cadra.body import FinnedBody
 from cadra.conventions import axis_from_projected_angles
+from cadra.facility.reference import Station
 from cadra.measure.combine import StationPose, ViewPose, combine_views
-from cadra.measure.loading import load_station_image
+from cadra.measure.loading import load_station_image, station_image
 from cadra.measure.locate import locate_model, pose_from_coarse
 from cadra.measure.silhouette_lsq import FitSettings, ViewFit, fit_silhouette
 from cadra.measure.template import make_template, outline_px
@@ -159,9 +164,21 @@ def _wire_crossings(fit: ViewFit, template, projection, wires) -> list[str]:
     return names
 
 
+@dataclass(frozen=True)
+class _Attempt:
+    """One try at a view: the silhouette fit (or None), why it failed ("" if it did not),
+    the wires found, the affine used and the warnings."""
+
+    fit: ViewFit | None
+    reason: str
+    wires: object | None = None
+    affine: np.ndarray | None = None
+    warnings: tuple[str, ...] = ()
+
+
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
                   coarse=None, final: bool = True, masks: dict | None = None,
-                  roll: float = 0.0, restart: bool = False):
+                  roll: float = 0.0, restart: bool = False) -> _Attempt:
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
@@ -176,7 +193,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         if coarse is None:
             coarse = locate_model(img, template, view.optics())
         if not coarse.ok:
-            return None, coarse.reason, None, None, ()
+            return _Attempt(None, coarse.reason)
         H, W = img.shape
         exclude = np.zeros((H, W), bool)
         u0, v0, u1, v1 = coarse.bbox
@@ -184,7 +201,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         exclude[max(v0 - m, 0):v1 + m + 1, max(u0 - m, 0):u1 + m + 1] = True
         wires = measure_wires(img, view, exclude=exclude)
         if not wires.ok:
-            return None, wires.reason, wires, None, ()
+            return _Attempt(None, wires.reason, wires)
         affine = wires.affine
         pose0 = pose_from_coarse(coarse, template, wires.projection)
         mask = masks[view.name] = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
@@ -216,7 +233,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
                                                roll_rad=roll),
                                      TILT_STEP_RAD) if final else None))
     if not fit.ok:
-        return fit, fit.reason, wires, affine, ()
+        return _Attempt(fit, fit.reason, wires, affine)
     warn = list(fit.warnings)
     if wires.reason:
         warn.append(wires.reason)
@@ -230,41 +247,90 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     if crossing:
         warn.append(f"model crosses wire(s) {', '.join(repr(c) for c in crossing)}: "
                     f"{fit.n_segments} edge segments used, pixels on the wire masked")
-    return fit, "", wires, affine, tuple(warn)
+    return _Attempt(fit, "", wires, affine, tuple(warn))
 
 
-def measure_station(station_id: int, image_paths: dict, body_spec: dict, facility_path: str,
-                    settings: FitSettings | None = None, max_rounds: int = 3,
-                    overlays: bool = True) -> StationResult:
-    """Measure one station from its images (see the module docstring).
+def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: float = 0.0,
+                 settings: FitSettings | None = None) -> ViewResult:
+    """One view of one station from its image alone, in the manner of trackpy's ``locate``:
+    find the model, fit the wires and the silhouette, and return the view's
+    :class:`ViewResult` (pose in the view's plane with its covariance, the wires' affine).
 
-    ``image_paths``: view name -> image path; ``body_spec``: the shot file's model table
-    (:func:`cadra.body.spec.body_from_spec`); ``facility_path``: the facility reference file.
-    With ``overlays`` each loaded image's overlay (fitted wires and silhouette) comes back as
-    PNG bytes in ``views[name].overlay_png``.
+    ``image``: a grey ``uint8``/``uint16`` array (or a float array in [0, 1]); ``view``: the
+    facility's :class:`cadra.facility.reference.View`; ``body_spec``: the shot's model table
+    (or a body); ``tilt_rad``: the axis' tilt out of this view's plane, which only the other
+    view sees (:func:`measure_station` alternates the two views to settle it; here it is
+    given, 0 by default); ``roll_rad``: a finned body's roll for its outline template.
     """
     import time
 
-    from cadra.io.facility_file import load_facility
+    t0 = time.perf_counter()
+    settings = FitSettings() if settings is None else settings
+    body = body_spec if hasattr(body_spec, "kind") else _body(body_spec)
+    name = f"station {view.station} {view.name} image"
+    img = np.asarray(image)
+    if img.dtype.kind == "f":
+        if img.shape != (view.height_px, view.width_px) or not np.all(np.isfinite(img)):
+            return ViewResult(view.name, name, False, "a float image must be finite and of the "
+                              f"view's size {view.width_px}x{view.height_px} px")
+        img = img.astype(np.float32)
+    else:
+        img = station_image(img, view.width_px, view.height_px, view.bit_depth, name)
+        if not isinstance(img, np.ndarray):
+            return ViewResult(view.name, name, False, img.reason)
+    coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
+    att = _measure_view(img, view, body, float(tilt_rad), settings, coarse=coarse, final=True,
+                        roll=float(roll_rad))
+    ok = att.fit is not None and att.fit.ok
+    return ViewResult(view.name, name, ok, att.reason, att.fit, att.wires, att.affine,
+                      float(tilt_rad), att.warnings, time.perf_counter() - t0,
+                      projection=None if att.wires is None else att.wires.projection,
+                      roll_rad=float(roll_rad))
+
+
+def _image_name(station_id: int, view: str, source) -> str:
+    """What a view's image is called in the tables: its path, or where it came from."""
+    if isinstance(source, str | os.PathLike):
+        return str(source)
+    return f"station {station_id} {view} image (in memory)"
+
+
+def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os.PathLike],
+                    body_spec: dict, settings: FitSettings | None = None, max_rounds: int = 3,
+                    overlays: bool = True) -> StationResult:
+    """Measure one station from its images (see the module docstring).
+
+    ``station``: the station's geometry (:meth:`cadra.facility.reference.Facility.station`);
+    ``images``: view name -> the image, a grey ``uint8``/``uint16`` array (as the renderer
+    or a frame grabber gives it) or an image file's path; ``body_spec``: the shot's model
+    table (:func:`cadra.body.spec.body_from_spec`). With ``overlays`` each image's overlay
+    (fitted wires and silhouette) comes back as PNG bytes in ``views[name].overlay_png``.
+    """
+    import time
 
     settings = FitSettings() if settings is None else settings
     body = _body(body_spec)
-    facility = load_facility(facility_path)
-    station = facility.station(station_id)
-    images, results = {}, {}
+    station_id = station.id
+    image_names = {n: _image_name(station_id, n, src) for n, src in images.items()}
+    images_in, images, results = images, {}, {}
     sphere = body.kind == "sphere"
     for name in VIEWS:
         view = station.views.get(name)
-        path = image_paths.get(name)
+        src = images_in.get(name)
         if view is None:
-            results[name] = ViewResult(name, str(path), False, f"facility has no {name} view")
+            results[name] = ViewResult(name, image_names.get(name, "None"), False,
+                                       f"facility has no {name} view")
             continue
-        if path is None:
+        if src is None:
             results[name] = ViewResult(name, "", False, "no image listed in the shot file")
             continue
-        img = load_station_image(path, view.width_px, view.height_px, view.bit_depth)
+        if isinstance(src, str | os.PathLike):
+            img = load_station_image(src, view.width_px, view.height_px, view.bit_depth)
+        else:
+            img = station_image(src, view.width_px, view.height_px, view.bit_depth,
+                                image_names[name])
         if not isinstance(img, np.ndarray):
-            results[name] = ViewResult(name, str(path), False, img.reason)
+            results[name] = ViewResult(name, image_names[name], False, img.reason)
             continue
         images[name] = img
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
@@ -293,22 +359,21 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             tries = ROLL_TRIES_RAD if finned and prev is None else (roll,)
             for view_roll in tries:
                 try:
-                    fit, reason, wires, affine, warn = _measure_view(
+                    att = _measure_view(
                         img, station.views[name], body, tilts[name], settings, prev,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
                         restart=prev is not None and abs(_wrap_period(view_roll - prev.roll_rad))
                         > ROLL_RESTART_RAD)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
-                    fit, reason, wires, affine, warn = (
-                        None, f"measurement error ({type(exc).__name__}: {exc})", None, None,
-                        ())
-                if fit is not None and fit.ok:
+                    att = _Attempt(None, f"measurement error ({type(exc).__name__}: {exc})")
+                if att.fit is not None and att.fit.ok:
                     break
-            ok = fit is not None and fit.ok
-            fits[name] = ViewResult(name, str(image_paths[name]), ok, reason, fit, wires,
-                                    affine, tilts[name], warn,
+            ok = att.fit is not None and att.fit.ok
+            fits[name] = ViewResult(name, image_names[name], ok, att.reason, att.fit, att.wires,
+                                    att.affine, tilts[name], att.warnings,
                                     time.perf_counter() - t0 + (prev.seconds if prev else 0.0),
-                                    projection=None if wires is None else wires.projection,
+                                    projection=None if att.wires is None
+                                    else att.wires.projection,
                                     roll_rad=view_roll)
         if sphere or not all(n in fits and fits[n].ok for n in VIEWS):
             break
@@ -334,7 +399,7 @@ def measure_station(station_id: int, image_paths: dict, body_spec: dict, facilit
             break
     results.update(fits)
     if overlays:
-        from cadra.measure.plots import encode_png, view_overlay
+        from cadra.measure.overlay import encode_png, view_overlay
 
         for name, img in images.items():
             r = results[name]

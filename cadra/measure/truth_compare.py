@@ -21,7 +21,7 @@ from scipy import stats
 
 from cadra import channels as channel_registry
 
-__all__ = ["TruthComparison", "compare_with_truth", "comparison_markdown"]
+__all__ = ["TruthComparison", "compare_with_truth"]
 
 
 class TruthComparison:
@@ -87,40 +87,3 @@ def compare_with_truth(table: pd.DataFrame, truth: pd.DataFrame, *,
             "rms_z": float(np.sqrt(np.mean(zz ** 2))), "max_abs_z": float(np.abs(zz).max()),
             "chi2_p": float(stats.chi2.sf(float(np.sum(zz ** 2)), n))})
     return TruthComparison(pd.DataFrame(rows), pd.DataFrame(summary), unmatched)
-
-
-def _scaled(value: float, unit: str) -> str:
-    """A position error in micrometres, an angle error in degrees."""
-    if unit == "m":
-        return f"{value * 1e6:+.3f} µm"
-    return f"{value:+.5f}°" if unit == "deg" else f"{value:+.4g} {unit}"
-
-
-def comparison_markdown(cmp: TruthComparison) -> list[str]:
-    """The report's section: the shot-wide figures per channel, and the stations whose
-    error is beyond 3 sigma."""
-    lines = ["## Measured minus truth", "",
-             "Per channel over the measured stations (truth_comparison.csv has every station). "
-             "z = error / reported sigma; for independent errors with honest sigmas the "
-             "shot-wide mean z is 0 ± 1/√n and the rms z is 1.", "",
-             "| channel | n | mean error | rms error | mean z | rms z | max abs z | p (chi²) |",
-             "|---|---|---|---|---|---|---|---|"]
-    for r in cmp.summary.itertuples():
-        lines.append(f"| {r.channel} | {r.n} | {_scaled(r.mean_error, r.unit)} | "
-                     f"{_scaled(r.rms_error, r.unit).lstrip('+')} | "
-                     f"{r.mean_z:+.2f} ± {r.mean_z_sigma:.2f} | {r.rms_z:.2f} | "
-                     f"{r.max_abs_z:.2f} | {r.chi2_p:.3g} |")
-    lines.append("")
-    big = []
-    for c in channel_registry.OBSERVED:
-        col = f"{c.name}_error_sigma"
-        if col not in cmp.per_station:
-            continue
-        for st, z in zip(cmp.per_station["station"], cmp.per_station[col], strict=True):
-            if np.isfinite(z) and abs(z) > 3.0:
-                big.append(f"- station {int(st)} {c.name}: {z:+.2f} sigma")
-    if big:
-        lines += ["Beyond 3 sigma:", "", *big, ""]
-    if cmp.unmatched:
-        lines += [f"Stations without a truth row (not compared): {cmp.unmatched}", ""]
-    return lines

@@ -5,8 +5,8 @@ nonrolling-axis correction), 1-DOF pitch fits, overlapping sectional fits, the
 Kryloff-Bogoliuboff nonlinear reduction, linear-theory coefficients from the fitted arms,
 Murphy's cubic correlator, the Nonplanar Ratio, the cg transfer and seed 001's pure-roll
 (roll lock-in) reduction by differential corrections (docs/pureroll.md). Plain numpy in, frozen
-dataclasses out; no file I/O. May import only the numerical core (numpy, scipy,
-cadra.conventions, cadra.units, cadra.numfmt).
+dataclasses out; no file I/O (their text reports: :mod:`cadra.report.motion`). May import only
+numpy, scipy, cadra.conventions, cadra.units and cadra.numfmt.
 """
 
 from cadra.motion.coefficients import (
@@ -41,15 +41,14 @@ from cadra.motion.pureroll import (
     mdc_fit,
     pure_roll_coefficients,
 )
-from cadra.motion.report import coefficients_report, fit_report
 from cadra.motion.sectional import Sections, sectional_epicyclic, sectional_pitch
 
 __all__ = [
     "Arm", "CgSeriesFit", "CubicCorrelator", "EpicyclicFit", "FlightConditions", "KBResult",
     "Layout", "LinearCoefficients", "MomentDerivatives", "MotionFitError", "NonplanarRatio",
-    "PitchFit", "RollCoefficients", "RollFit", "Sections", "SwerveFit", "coefficients_report",
+    "PitchFit", "RollCoefficients", "RollFit", "Sections", "SwerveFit",
     "cubic_correlator", "energy_balance_amplitude", "fit_cg_series", "fit_epicyclic", "fit_pitch",
-    "fit_report", "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
+    "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
     "limit_cycle_amplitude_eq31", "linear_coefficients", "mdc_fit", "nonplanar_ratio",
     "nonplanar_ratio_of_fit", "nonrolling_angle", "nonrolling_rate", "pitch_coefficients",
     "planar_coefficients", "pure_roll_coefficients", "sectional_epicyclic", "sectional_pitch",

@@ -5,7 +5,9 @@ conditions (or a seed-004 shot whose Tables 2/3 rows supply them), the aerodynam
 truth, the launch conditions, optional effects, optional per-station biases to inject into the
 images and the render settings. :func:`simulate_shot` flies the 6-DOF model (the same code the
 fitter uses), finds the light-sheet spark times and returns the exact per-station truth;
-:func:`write_shot` renders and writes everything, atomically, refusing to overwrite.
+:func:`render_images` renders its shadowgraphs in memory (the images stage one measures, with
+what each shows), and :func:`write_shot` writes everything, atomically, refusing to overwrite;
+both render the same images from the spec's seed.
 
 Station biases (``[station_biases]``) are injected where each view's scene is built
 (:func:`station_scenes`): a position bias displaces the model in the facility frame relative to
@@ -123,6 +125,40 @@ class SimulatedShot:
     truth: pd.DataFrame
     station_biases: dict = field(default_factory=dict)
     image_states: np.ndarray | None = None   # (n, 13) states at the sparks + time biases
+    #: the rendered shadowgraphs, ``(station, view)`` -> ``uint8``/``uint16`` array, and what
+    #: each shows (the ``truth_images.csv`` table): set by :func:`render_images`, else None
+    images: dict | None = field(default=None, repr=False)
+    image_truth: pd.DataFrame | None = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        rendered = f", {len(self.images)} images" if self.images else ""
+        return (f"<SimulatedShot {self.spec.shot_id}: {len(self.stations)} stations of "
+                f"{self.facility.name}, {self.body.kind}, truth model {self.model.name}"
+                f"{rendered}>")
+
+    def shot_file(self, image_paths: dict | None = None):
+        """The shot's record (:class:`cadra.io.shotfile.ShotFile`: body, mass properties, air,
+        the recorded spark times), with ``image_paths`` (``station -> {view: path}``) as
+        its image files (default: none; the images are in memory)."""
+        from cadra.io.shotfile import MassProperties, ShotFile, StationRecord
+
+        image_paths = image_paths or {}
+        records = tuple(StationRecord(station=st, time_s=float(t),
+                                      images=dict(image_paths.get(st, {})))
+                        for st, t in zip(self.stations, self.times_s, strict=True))
+        mass = MassProperties(
+            mass_kg=self.spec.mass_kg, cg_model_m=np.asarray(self.spec.cg_model_m),
+            inertia_model_kg_m2=np.asarray(self.spec.inertia_model_kg_m2))
+        return ShotFile(
+            shot_id=self.spec.shot_id, model=self.spec.model, mass=mass,
+            pressure_pa=self.spec.pressure_pa, temperature_k=self.spec.temperature_k,
+            facility=self.spec.facility, stations=records,
+            notes=(f"synthetic shot simulated by cadra from "
+                   f"{self.spec.source_path or 'a spec'}; truth aero model "
+                   f"{self.spec.aero_model}; effects {list(self.rigid.effects.active)}"
+                   + ("; station biases injected (station_biases.csv)"
+                      if self.station_biases else "")),
+            source_path=None)
 
     def station_bias(self, station: int) -> tuple[float, float, float, float]:
         """The injected bias ``(x_m, y_m, z_m, time_s)`` of station id ``station`` (m, s)."""
@@ -319,61 +355,78 @@ def render_station_views(shot: SimulatedShot, k: int, rng: np.random.Generator,
     return items
 
 
+def station_images(shot: SimulatedShot, progress: bool = False):
+    """Each station's rendered views in order, ``(k, items)`` (:func:`render_station_views`),
+    all from one generator seeded by the spec (what :func:`render_images` keeps and
+    :func:`write_shot` writes: the same images either way)."""
+    from cadra.synthetic.render_config import RenderConfig
+
+    render_config = RenderConfig.from_dict({"seed": shot.spec.seed, **shot.spec.render})
+    rng = np.random.default_rng([shot.spec.seed, 1])
+    iterator = range(len(shot.stations))
+    if progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(iterator, desc=f"rendering {shot.spec.shot_id}", unit="station")
+    for k in iterator:
+        yield k, render_station_views(shot, k, rng, render_config)
+
+
+def render_images(shot: SimulatedShot, progress: bool = False) -> SimulatedShot:
+    """``shot`` with its shadowgraphs rendered in memory: ``images`` (``(station, view)`` ->
+    ``uint8``/``uint16`` array) and ``image_truth`` (what each image shows, biases
+    included: ``truth_images.csv``'s table)."""
+    from dataclasses import replace
+
+    images, truth = {}, []
+    for _, items in station_images(shot, progress):
+        for item in items:
+            images[(item["station"], item["view"])] = item["image"]
+            truth.append(item["truth"])
+    return replace(shot, images=images, image_truth=pd.DataFrame(truth))
+
+
 def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool = True,
                overwrite: bool = False, progress: bool = True) -> Path:
     """Write the shot file, truth tables and (optionally) the rendered images to ``out_dir``.
 
     Files: ``shot.toml`` (recorded spark times), ``truth.csv`` (exact unbiased truth),
     ``truth_images.csv`` (with images: what each image shows, biases included),
-    ``station_biases.csv`` (only if the spec injects biases) and ``spec.toml``.
+    ``station_biases.csv`` (only if the spec injects biases) and ``spec.toml``. Images
+    already rendered in memory (:func:`render_images`) are written as they are; else they are
+    rendered here, station by station.
 
     Everything is written into a temporary sibling directory and moved into place at the end,
     so an interrupted or failed run leaves nothing behind; an existing ``out_dir`` is refused
     unless ``overwrite``.
     """
     from cadra.io.atomic import atomic_output_dir
-    from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, save_shot
+    from cadra.io.shotfile import save_shot
     from cadra.synthetic.render import write_image
-    from cadra.synthetic.render_config import RenderConfig
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use overwrite=True)")
     with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
-        records = []
+        paths: dict[int, dict[str, str]] = {}
         image_truth = []
-        render_config = RenderConfig.from_dict({"seed": shot.spec.seed, **shot.spec.render})
-        rng = np.random.default_rng([shot.spec.seed, 1])
-        iterator = range(len(shot.stations))
-        if progress and images:
-            from tqdm import tqdm
-
-            iterator = tqdm(iterator, desc=f"rendering {shot.spec.shot_id}", unit="station")
-        for k in iterator:
-            paths = {}
-            if images:
-                (tmp / "images").mkdir(exist_ok=True)
-                for item in render_station_views(shot, k, rng, render_config):
+        if images:
+            (tmp / "images").mkdir()
+            if shot.images is not None:
+                rendered = [(None, [{"station": st, "view": v, "image": img}
+                                    for (st, v), img in shot.images.items()])]
+            else:
+                rendered = station_images(shot, progress)
+            for _, items in rendered:
+                for item in items:
                     rel = f"images/st{item['station']:02d}_{item['view']}.png"
                     write_image(tmp / rel, item["image"])
-                    paths[item["view"]] = rel
-                    image_truth.append(item["truth"])
-            records.append(StationRecord(station=shot.stations[k],
-                                         time_s=float(shot.times_s[k]), images=paths))
-        mass = MassProperties(
-            mass_kg=shot.spec.mass_kg, cg_model_m=np.asarray(shot.spec.cg_model_m),
-            inertia_model_kg_m2=np.asarray(shot.spec.inertia_model_kg_m2))
-        shotfile = ShotFile(
-            shot_id=shot.spec.shot_id, model=shot.spec.model, mass=mass,
-            pressure_pa=shot.spec.pressure_pa, temperature_k=shot.spec.temperature_k,
-            facility=shot.spec.facility, stations=tuple(records),
-            notes=(f"synthetic shot simulated by cadra from "
-                   f"{shot.spec.source_path or 'a spec'}; truth aero model "
-                   f"{shot.spec.aero_model}; effects {list(shot.rigid.effects.active)}"
-                   + ("; station biases injected (station_biases.csv)"
-                      if shot.station_biases else "")),
-            source_path=None)
-        save_shot(shotfile, tmp / "shot.toml")
+                    paths.setdefault(item["station"], {})[item["view"]] = rel
+                    if "truth" in item:
+                        image_truth.append(item["truth"])
+            if shot.image_truth is not None:
+                image_truth = shot.image_truth.to_dict("records")
+        save_shot(shot.shot_file(paths), tmp / "shot.toml")
         shot.truth.to_csv(tmp / "truth.csv", index=False, float_format="%.12g")
         if shot.station_biases:
             shot.biases_table().to_csv(tmp / "station_biases.csv", index=False,
@@ -387,5 +440,5 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
 
 
 __all__ = ["BIAS_KEYS", "BIAS_POSITION_MAX_M", "BIAS_TIME_MAX_S", "EXPOSURE_S", "FilmPlacement",
-           "ShotSpec", "SimulatedShot", "SpecError", "load_shot_spec", "rigid_body",
-           "simulate_shot", "spec_from_dict", "write_shot"]
+           "ShotSpec", "SimulatedShot", "SpecError", "load_shot_spec", "render_images",
+           "rigid_body", "simulate_shot", "spec_from_dict", "station_images", "write_shot"]

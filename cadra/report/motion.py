@@ -1,6 +1,11 @@
-"""What ``cadra2 motion`` writes and prints: tables, report, plots (docs/motion.md). Reads only
-what :func:`cadra.flight.classic.analyse_shot` stored; plots with matplotlib's object API
-(imported lazily), never pyplot."""
+"""The classic motion reduction's outputs: text reports, tables, the report page and plots
+(docs/motion.md).
+
+:func:`fit_report` and :func:`coefficients_report` are plain text in lmfit's ``fit_report``
+habit (value ± sigma in the one format of :func:`cadra.numfmt.pm`, the fit statistics, the
+correlations above a threshold); :func:`write_outputs` writes what ``cadra2 motion`` writes,
+reading only what :func:`cadra.flight.classic.analyse_shot` stored.
+"""
 
 from __future__ import annotations
 
@@ -11,7 +16,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cadra.io.atomic import atomic_output_dir
+from cadra.io.toml_file import toml_text
+from cadra.motion import EpicyclicFit, KBResult, LinearCoefficients
 from cadra.numfmt import pm
+from cadra.report import figures, markdown
 
 DEG = math.degrees(1.0)
 #: the coefficients: (attribute, column stem with unit, label in the report)
@@ -101,8 +110,6 @@ def _form(r) -> str:
 
 def shot_lines(r, verbose: bool = False) -> list[str]:
     """The console's account of one shot."""
-    from cadra.motion import fit_report
-
     f, u = r.fit, _unit(r)
     lines = [f"{r.shot_id}: {_form(r)} fit in {r.variable}, {f.n_points} stations, rms "
              f"{f.rms * DEG:.3g} deg, chi^2/dof {f.chi2_dof:.3g}"]
@@ -157,21 +164,21 @@ def report_markdown(results) -> str:
                   f"spin {c.spin_rad_s:g} rad/s" if c.spin_rad_s else "spin not given"]
                   + ([f"C_D {c.drag_coefficient:.4g} (from the deceleration)"]
                      if c.drag_coefficient is not None else [])) + ".", "",
-              "| arm | K (deg) | φ₀ (deg) | λ (1/" + u + ") | ω (rad/" + u + ") |",
-              "|---|---|---|---|---|"]
-        for name, a in _arms(r):
-            lam = pm(a.lam, a.lam_sigma) if name != "trim" else "0 (held)"
-            om = pm(a.omega, a.omega_sigma) if name != "trim" else f"{a.omega:.6g} (given)"
-            L.append(f"| {name} | {pm(a.K * DEG, a.K_sigma * DEG)} | "
-                     f"{pm(a.phase * DEG, a.phase_sigma * DEG)} | {lam} | {om} |")
+              ]
+        L += markdown.table(
+            ("arm", "K (deg)", "φ₀ (deg)", f"λ (1/{u})", f"ω (rad/{u})"),
+            ((name, pm(a.K * DEG, a.K_sigma * DEG), pm(a.phase * DEG, a.phase_sigma * DEG),
+              pm(a.lam, a.lam_sigma) if name != "trim" else "0 (held)",
+              pm(a.omega, a.omega_sigma) if name != "trim" else f"{a.omega:.6g} (given)")
+             for name, a in _arms(r)))
         L += ["", f"Nonplanar Ratio (bounded form, the two arms): {r.npr.npr:.4f} (seed 002 eq. 18 "
               f"as printed: {r.npr.seed_ratio:.4g}).", ""]
         if r.coefficients is not None:
-            L += ["| coefficient (linear theory) | value ± σ |", "|---|---|"]
-            for attr, _, label in LINEAR:
-                v = getattr(r.coefficients, attr)
-                if v is not None:
-                    L.append(f"| {label} | {pm(v, getattr(r.coefficients, attr + '_sigma'))} |")
+            L += markdown.table(
+                ("coefficient (linear theory)", "value ± σ"),
+                ((label, pm(getattr(r.coefficients, attr),
+                            getattr(r.coefficients, attr + "_sigma")))
+                 for attr, _, label in LINEAR if getattr(r.coefficients, attr) is not None))
             L.append("")
         if r.kb is not None:
             L += [f"Kryloff-Bogoliuboff reduction, C = C_0 + C_2 |α|² (|α| in rad), "
@@ -179,10 +186,10 @@ def report_markdown(results) -> str:
                   f"{r.sections.step}, frequency-variation correction on"
                   + ("; the constant damping and Magnus terms corrected for the flight path's "
                      "turning by lift (C_Lα from the swerve)" if r.kb_lift_corrected else "")
-                  + ":", "", "| coefficient | value ± σ |", "|---|---|"]
-            for attr, _, label in KB:
-                L.append(f"| {label} | {pm(getattr(r.kb, attr), getattr(r.kb, attr + '_sigma'))}"
-                         " |")
+                  + ":", ""]
+            L += markdown.table(("coefficient", "value ± σ"),
+                                ((label, pm(getattr(r.kb, attr), getattr(r.kb, attr + "_sigma")))
+                                 for attr, _, label in KB))
             L.append("")
         if r.notes:
             L += ["Not computed, or approximated:", ""] + [f"- {n}" for n in r.notes] + [""]
@@ -196,11 +203,9 @@ def _grid(n: int):
 
 def plot_yaw_card(results, path) -> None:
     """α against β (deg): measured points with their sigmas and the fitted epicycle."""
-    from matplotlib.figure import Figure
-
     rows, cols = _grid(len(results))
-    fig = Figure(figsize=(4.6 * cols, 4.4 * rows), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    fig, axes = figures.subplots(rows, cols, figsize=(4.6 * cols, 4.4 * rows), squeeze=False)
+    axes = np.atleast_1d(axes).ravel()
     for ax, r in zip(axes, results, strict=False):
         fine = np.linspace(r.s[0], r.s[-1], 40 * r.s.size)
         xi = r.fit.predict(fine)
@@ -221,15 +226,12 @@ def plot_yaw_card(results, path) -> None:
         ax.legend(fontsize=8)
     for ax in axes[len(results):]:
         ax.set_visible(False)
-    fig.savefig(path, dpi=110)
+    figures.save(fig, path)
 
 
 def plot_arms(results, path) -> None:
     """The arms' magnitudes K_j e^{λ_j u} and the measured |ξ| against distance."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7.5, 4.5), layout="constrained")
-    ax = fig.subplots()
+    fig, ax = figures.subplots(figsize=(7.5, 4.5))
     for k, r in enumerate(results):
         fine = np.linspace(r.s[0], r.s[-1], 400)
         x_fine = np.interp(fine, r.s, r.x_m)
@@ -247,16 +249,13 @@ def plot_arms(results, path) -> None:
     ax.set_ylim(bottom=0)
     ax.set_title("Arms against distance")
     ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
+    figures.save(fig, path)
 
 
 def plot_sectional(results, path) -> None:
     """Per section: the effective C_mα and C_mq + C_mα̇ against the amplitude (Murphy's δ_e),
     with the K-B lines C_0 + C_2 δ_e²."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(9, 4), layout="constrained")
-    a1, a2 = fig.subplots(1, 2)
+    fig, (a1, a2) = figures.subplots(1, 2, figsize=(9, 4))
     for k, r in enumerate(results):
         if r.sections is None or r.kb is None:
             continue
@@ -281,15 +280,12 @@ def plot_sectional(results, path) -> None:
         ax.set_xlabel("amplitude δ_e (deg)")
         ax.legend(fontsize=8)
     fig.suptitle("Sectional coefficients against amplitude")
-    fig.savefig(path, dpi=110)
+    figures.save(fig, path)
 
 
 def write_outputs(results, out_dir: str | os.PathLike, *, overwrite: bool = False,
                   command: dict | None = None) -> list[str]:
     """Every file, atomically; returns their names."""
-    from cadra.io.atomic import atomic_output_dir
-    from cadra.io.toml_file import toml_text
-
     files = ["report.md", "angles.csv", "arms.csv", "coefficients.csv", "yaw_card.png",
              "arms.png"]
     sectional = any(r.kb is not None for r in results)
@@ -310,3 +306,70 @@ def write_outputs(results, out_dir: str | os.PathLike, *, overwrite: bool = Fals
                 toml_text(config, "cadra2 motion: the command's settings"), encoding="utf-8")
             files.append("config.toml")
     return files
+
+
+def fit_report(fit: EpicyclicFit, min_correlation: float = 0.5) -> str:
+    """The arms (K and φ_0 in degrees, λ and ω per unit of the fit's variable), the fit
+    statistics and the correlations with |ρ| ≥ ``min_correlation``."""
+    unit = "1/s" if fit.variable == "time" else "1/m"
+    form = ("12-constant" if fit.layout.curvature else "10-constant") if fit.layout.trim else (
+        "epicyclic" + (" + ω̇" if fit.layout.curvature else ""))
+    lines = [f"{form} fit in {fit.variable}: {fit.n_points} points, {len(fit.names)} constants,"
+             f" {fit.nfev} evaluations",
+             f"  rms {math.degrees(fit.rms):.4g}° (α {math.degrees(fit.rms_alpha):.4g}°, "
+             f"β {math.degrees(fit.rms_beta):.4g}°), χ²/dof {fit.chi2_dof:.4g} "
+             f"({'covariance scaled by it' if fit.covariance_scaled else 'formal covariance'})"]
+    if fit.nonrolling_iterations:
+        lines.append(f"  nonrolling-axis correction: {fit.nonrolling_iterations} iteration(s), "
+                     f"|φ̂| ≤ {math.degrees(float(np.max(np.abs(fit.nonrolling)))):.3g}°")
+    for j in range(1, fit.layout.arms + 1):
+        a = fit.arm(j)
+        row = (f"  arm {j}: K {pm(math.degrees(a.K), math.degrees(a.K_sigma), 'deg')}, "
+               f"φ0 {pm(math.degrees(a.phase), math.degrees(a.phase_sigma), 'deg')}, "
+               f"λ {pm(a.lam, a.lam_sigma, unit)}, "
+               f"ω {pm(a.omega, a.omega_sigma, 'rad' + unit[1:])}")
+        if fit.layout.curvature:
+            row += f", ω̇ {pm(a.omega_dot, a.omega_dot_sigma)}"
+        lines.append(row)
+    if fit.layout.trim:
+        a = fit.arm(0)
+        lines.append(f"  trim arm: K {pm(math.degrees(a.K), math.degrees(a.K_sigma), 'deg')}, "
+                     f"φ0 {pm(math.degrees(a.phase), math.degrees(a.phase_sigma), 'deg')}, "
+                     f"p {pm(a.omega, a.omega_sigma if fit.layout.free_trim_rate else None)}")
+    lines.append(f"  (amplitudes referred to {fit.variable} {fit.s_ref:.6g})")
+    corr = fit.correlation
+    pairs = [(abs(corr[i, k]), fit.names[i], fit.names[k], corr[i, k])
+             for i in range(len(fit.names)) for k in range(i + 1, len(fit.names))
+             if np.isfinite(corr[i, k]) and abs(corr[i, k]) >= min_correlation]
+    if pairs:
+        lines.append(f"  correlations |ρ| ≥ {min_correlation}:")
+        lines += [f"    {a} – {b}: {r:+.3f}" for _, a, b, r in sorted(pairs, reverse=True)]
+    return "\n".join(lines)
+
+
+def coefficients_report(lc: LinearCoefficients | None = None, kb: KBResult | None = None) -> str:
+    """Linear-theory coefficients and/or a K-B reduction, value ± sigma per line."""
+    lines = []
+    if lc is not None:
+        lines += ["linear theory (per rad):",
+                  f"  C_mα        {pm(lc.Cm_alpha, lc.Cm_alpha_sigma)}",
+                  f"  C_mq + C_mα̇ {pm(lc.Cmq_sum, lc.Cmq_sum_sigma)}",
+                  f"  C_mpα       {pm(lc.Cm_p_alpha, lc.Cm_p_alpha_sigma)}",
+                  f"  spin from the fit {pm(lc.spin_from_fit, lc.spin_from_fit_sigma, 'rad/s')}"]
+        if lc.C_L_alpha is not None:
+            lines.append(f"  C_Lα        {pm(lc.C_L_alpha, lc.C_L_alpha_sigma)}")
+    if kb is not None:
+        lines.append(f"Kryloff-Bogoliuboff, C = C_0 + C_2 |α|² (|α| in rad), {kb.n_sections} "
+                     f"sections, frequency-variation correction "
+                     f"{'on' if kb.frequency_correction else 'off'}:")
+        for name, label in (("Cm_alpha", "C_mα       "), ("Cmq_sum", "C_mq + C_mα̇"),
+                            ("Cm_p_alpha", "C_mpα      ")):
+            c0 = pm(getattr(kb, name + "0"), getattr(kb, name + "0_sigma"))
+            c2 = pm(getattr(kb, name + "2"), getattr(kb, name + "2_sigma"))
+            lines.append(f"  {label} C_0 {c0}, C_2 {c2}")
+    return "\n".join(lines)
+
+
+__all__ = ["angles_table", "arms_table", "coefficients_report", "coefficients_table",
+           "console_lines", "fit_report", "plot_arms", "plot_sectional", "plot_yaw_card",
+           "report_markdown", "shot_lines", "write_outputs"]

@@ -29,6 +29,7 @@ from cadra.channels import BY_NAME, POSITION, wrap_angle
 from cadra.fitting.histories import fitted_histories
 from cadra.fitting.result import FitResult
 from cadra.flight.data import CHANNELS, ShotData
+from cadra.report import figures
 
 #: display names of the coefficients (mathtext)
 COEFFICIENT_LABELS = {"CD": "$C_D$", "CL": "$C_L$", "CC": "$C_C$", "Cl": "$C_l$",
@@ -47,12 +48,11 @@ class RenderingUnavailable(RuntimeError):
 
 
 def _new_figure(fig, figsize):
+    """``fig`` cleared for reuse, or a new figure of the one style."""
     if fig is not None:
         fig.clear()
         return fig
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=figsize, layout="constrained")
+    return figures.new_figure(figsize)
 
 
 def _histories(result, shots, histories):

@@ -17,9 +17,12 @@ block-arrow normal matrix, B^jk = 0 for j != k). Here:
 - :func:`equation_error_start` gives starting values (the smoothed record's acceleration
   regressed on the model's own terms); :func:`segmented_fit` runs the local fit and the
   stepwise global fit (the paper's start set, then the others 3-4 at a time, :data:`STEPS`);
-- :func:`coefficient_table`, :func:`correlation_table` (seed 003 Tables 2 and 3),
-  :func:`segment_table` (bias, rms and runs of sign per segment), :func:`steady_spins` (the
-  roots of the roll-averaged C_l(p)), :func:`write_tables`.
+- :func:`records_of` takes the records from roll-bearing shots (:class:`ShotData`), and
+  :func:`bearing_alpha` the bearing's angle of attack from their measured axes;
+- :func:`coefficient_table`, :func:`correlation_table` (seed 003 Tables 2 and 3, the paper's
+  beside them from ``cadra/data``, :mod:`cadra.io.seed003`), :func:`segment_table` (bias,
+  rms and runs of sign per segment), :func:`steady_spins` (the roots of the roll-averaged
+  C_l(p)); :mod:`cadra.report.roll` writes them.
 
 The model must give Cl linear in its parameters (``cadra/aero/models/seed003_romof.toml``);
 the record's roll angle is the aircraft roll about the nose axis, which on a roll bearing with
@@ -31,7 +34,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -39,12 +41,15 @@ from scipy.signal import savgol_filter
 
 from cadra import channels
 from cadra.aero import AeroModel
+from cadra.conventions import axis_from_inclinations
 from cadra.dynamics.setup import RigidBody
 from cadra.dynamics.trajectory import Launch
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES
 from cadra.fitting.solver import FitOptions
 from cadra.flight.data import ShotData
+from cadra.io import seed003
+from cadra.stats import runs_of_sign
 
 #: the paper's start set, then the remaining terms 3-4 at a time (Table 1's order)
 STEPS: tuple[tuple[str, ...], ...] = (
@@ -53,36 +58,9 @@ STEPS: tuple[tuple[str, ...], ...] = (
     ("S04", "S05", "C02", "C12"),
 )
 #: Table 2's order
-TABLE_ORDER = ("S01", "S02", "S03", "S04", "S05", "C00", "C01", "C02", "C10", "C11", "C12",
-               "C30", "C_ac", "C_as")
+TABLE_ORDER = seed003.table2_order()
 #: seed 003 Table 2 (alpha = 57 deg): value, standard deviation, printed signal/noise
-PAPER_TABLE2 = {
-    "S01": (0.88522, 0.00105, 840.3), "S02": (-0.15763, 0.00144, 110.6),
-    "S03": (0.14640, 0.00182, 80.5), "S04": (-0.04077, 0.00243, 16.8),
-    "S05": (0.04751, 0.00249, 19.1), "C00": (0.03010, 0.00006, 502.5),
-    "C01": (0.30695, 0.00112, 274.0), "C02": (-0.07565, 0.00159, 47.6),
-    "C10": (4.7992, 0.01855, 258.4), "C11": (-25.134, 0.25028, 100.4),
-    "C12": (40.287, 0.77884, 51.7), "C30": (-7493.7, 74.530, 100.5),
-    "C_ac": (-0.10675, 0.00031, 344.8), "C_as": (-0.04478, 0.00032, 140.0),
-}
-#: seed 003 Table 3, the upper triangle row by row (signed; the printed rho formula squares
-#: the sign away, the table does not)
-_TABLE3_ROWS = (
-    (0.037, -0.004, 0.116, -0.117, -0.139, 0.059, 0.295, 0.017, 0.149, 0.085, 0.022, -0.186,
-     -0.141),
-    (0.338, 0.073, 0.162, -0.135, -0.114, -0.195, 0.094, 0.046, 0.179, -0.032, -0.180, -0.226),
-    (0.181, 0.104, -0.123, -0.163, -0.131, 0.165, 0.114, -0.238, -0.068, -0.144, -0.146),
-    (-0.292, -0.036, -0.010, -0.200, -0.028, 0.041, 0.319, 0.017, -0.080, -0.043),
-    (-0.025, -0.212, -0.219, -0.041, -0.094, -0.064, 0.021, -0.091, 0.017),
-    (0.168, 0.037, 0.104, -0.095, -0.009, -0.161, 0.291, 0.072),
-    (0.092, 0.042, 0.075, 0.190, -0.036, 0.332, 0.287),
-    (-0.035, -0.022, -0.219, 0.014, 0.065, 0.082),
-    (0.840, 0.230, -0.696, 0.134, -0.033),
-    (0.427, -0.422, 0.120, -0.082),
-    (-0.115, 0.058, -0.031),
-    (-0.077, 0.0001),
-    (0.175,),
-)
+PAPER_TABLE2 = seed003.table2()
 #: a segment's free local unknowns: its roll angle about the axis and its roll rate
 ROLL_LOCALS = np.array([LOCAL_NAMES.index("rot_x_rad"), LOCAL_NAMES.index("p_rad_s")])
 SEGMENT_KINDS = ("oscillation", "speed-up", "steady", "saddle")
@@ -90,12 +68,7 @@ SEGMENT_KINDS = ("oscillation", "speed-up", "steady", "saddle")
 
 def paper_correlation() -> pd.DataFrame:
     """Seed 003 Table 3 as a full symmetric matrix (Table 2's order)."""
-    n = len(TABLE_ORDER)
-    R = np.eye(n)
-    for i, row in enumerate(_TABLE3_ROWS):
-        R[i, i + 1:] = row
-        R[i + 1:, i] = row
-    return pd.DataFrame(R, index=list(TABLE_ORDER), columns=list(TABLE_ORDER))
+    return seed003.table3()
 
 
 # ---------------------------------------------------------------------------- records
@@ -463,28 +436,9 @@ def correlation_table(result: FitResult) -> pd.DataFrame:
     return pd.DataFrame(R[np.ix_(idx, idx)], index=names, columns=names)
 
 
-def runs_of_sign(r: np.ndarray) -> dict:
-    """Runs of sign of the residuals ``r`` (zeros dropped): the number of runs, the longest
-    (points), the Wald-Wolfowitz expected count 1 + 2 n+ n- / n, and z = (runs - expected)
-    / sd (negative: fewer runs than white noise gives, i.e. correlated residuals)."""
-    s = np.sign(np.asarray(r, dtype=float))
-    s = s[s != 0]
-    n = s.size
-    if n == 0:
-        return {"n": 0, "runs": 0, "longest": 0, "expected": math.nan, "z": math.nan}
-    change = np.flatnonzero(s[1:] != s[:-1])
-    lengths = np.diff(np.r_[0, change + 1, n])
-    npos, nneg = int((s > 0).sum()), int((s < 0).sum())
-    exp = 1 + 2 * npos * nneg / n
-    var = (2 * npos * nneg * (2 * npos * nneg - n)) / (n * n * (n - 1)) if n > 1 else 0.0
-    z = (lengths.size - exp) / math.sqrt(var) if var > 0 else math.nan
-    return {"n": n, "runs": int(lengths.size), "longest": int(lengths.max()),
-            "expected": exp, "z": z}
-
-
 def segment_table(fit: SegmentedFit | FitResult) -> pd.DataFrame:
     """Per segment: record, kind, frames, time span, the roll residuals' bias and rms (deg),
-    the runs of sign (:func:`runs_of_sign`) and the longest run in seconds."""
+    the runs of sign (:func:`cadra.stats.runs_of_sign`) and the longest run in seconds."""
     result = fit.result if isinstance(fit, SegmentedFit) else fit
     kinds = ({s.shot_id: s.kind for s in fit.segments} if isinstance(fit, SegmentedFit)
              else {})
@@ -500,9 +454,9 @@ def segment_table(fit: SegmentedFit | FitResult) -> pd.DataFrame:
                      "frames": int(r.size), "t0_s": float(t[0]), "t1_s": float(t[-1]),
                      "bias_deg": math.degrees(float(r.mean())),
                      "rms_deg": math.degrees(float(np.sqrt(np.mean(r * r)))),
-                     "runs": runs["runs"], "expected_runs": runs["expected"],
-                     "runs_z": runs["z"], "longest_run": runs["longest"],
-                     "longest_run_s": runs["longest"] * dt})
+                     "runs": runs.runs, "expected_runs": runs.expected,
+                     "runs_z": runs.z, "longest_run": runs.longest,
+                     "longest_run_s": runs.longest * dt})
     return pd.DataFrame(rows).set_index("segment")
 
 
@@ -542,39 +496,6 @@ def steady_spin_sigmas(result: FitResult) -> pd.DataFrame:
     return tab.assign(sigma=sig)
 
 
-def markdown_table(df: pd.DataFrame, digits: int = 5) -> str:
-    """A pipe table of ``df`` (index as the first column), numbers to ``digits`` significant
-    figures."""
-    def cell(v):
-        if isinstance(v, (bool, np.bool_)):
-            return str(bool(v))
-        if isinstance(v, (int, np.integer)):
-            return str(int(v))
-        if isinstance(v, (float, np.floating)):
-            return "" if not np.isfinite(v) else f"{float(v):.{digits}g}"
-        return str(v)
-    head = [str(df.index.name or "")] + [str(c) for c in df.columns]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for i, row in df.iterrows():
-        lines.append("| " + " | ".join([cell(i)] + [cell(v) for v in row]) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def write_tables(tables: Mapping[str, pd.DataFrame], folder, *, digits: int = 5
-                 ) -> list[Path]:
-    """Each table as ``<name>.csv`` and ``<name>.md`` in ``folder`` (created); returns the
-    paths."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    out = []
-    for name, df in tables.items():
-        csv, md = folder / f"{name}.csv", folder / f"{name}.md"
-        df.to_csv(csv)
-        md.write_text(markdown_table(df, digits), encoding="utf-8")
-        out += [csv, md]
-    return out
-
-
 def seed003_tables(fit: SegmentedFit | FitResult) -> dict[str, pd.DataFrame]:
     """The report's tables: ``table2`` (:func:`coefficient_table`), ``table3``
     (:func:`correlation_table`), ``paper_table3`` (:func:`paper_correlation`), ``segments``
@@ -585,49 +506,58 @@ def seed003_tables(fit: SegmentedFit | FitResult) -> dict[str, pd.DataFrame]:
             "steady_spins": steady_spin_sigmas(result)}
 
 
-# ---------------------------------------------------------------------------- plot
+# ---------------------------------------------------------------------------- records of shots
 
 
-def plot_segmented_fit(sf: SegmentedFit, path) -> Path:
-    """Seed 003 Figs. 5-6 for one fit: each run's measured roll (0-360 deg) against frame,
-    the fit's values (the fit problem's, from its residual table) and the segment starts;
-    below, the residuals (deg)."""
-    import matplotlib
+def bearing_alpha(shots, alpha_deg: float | None) -> float:
+    """The bearing's angle of attack (rad): ``alpha_deg`` when given, else the angle between
+    the mean measured nose axis and the stream (+x of F)."""
+    if alpha_deg is not None:
+        if not (0.0 < alpha_deg < 90.0):
+            raise ValueError(f"alpha_deg (--alpha-deg): {alpha_deg:g} is not an angle of attack "
+                             "in (0, 90)")
+        return math.radians(alpha_deg)
+    th, ps = channels.NAMES.index("theta"), channels.NAMES.index("psi")
+    axes = [axis_from_inclinations(m[th], m[ps]) for s in shots for m in s.meas
+            if np.isfinite(m[th]) and np.isfinite(m[ps])]
+    if not axes:
+        raise ValueError("the records measure no nose axis (theta, psi): give --alpha-deg")
+    a = np.mean(axes, axis=0)
+    a /= np.linalg.norm(a)
+    if abs(a[1]) > math.sin(math.radians(0.5)):
+        raise ValueError(f"the measured axis is {math.degrees(math.asin(a[1])):.2f} deg out of "
+                         "the vertical plane: the segments' states put it in that plane; "
+                         "give --alpha-deg to accept that")
+    return math.acos(float(np.clip(a[0], -1.0, 1.0)))
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    res = sf.result.residuals
-    res = res[res["channel"] == "phi"]
-    names = sorted({s.record for s in sf.segments})
-    fig, axes = plt.subplots(2 * len(names), 1, figsize=(11, 3.2 * len(names)), sharex=False,
-                             gridspec_kw={"height_ratios": [3, 1] * len(names)})
-    for i, name in enumerate(names):
-        top, bot = axes[2 * i], axes[2 * i + 1]
-        g = res[res["shot_id"].str.startswith(name + ":")]
-        top.plot(g["station"], np.degrees(np.mod(g["measured"], 2 * np.pi)), ".", ms=2,
-                 label="measured")
-        top.plot(g["station"], np.degrees(np.mod(g["fitted"], 2 * np.pi)), ".", ms=1,
-                 color="k", label="fit")
-        for s in sf.segments:
-            if s.record == name:
-                top.axvline(s.start, color="0.8", lw=0.5, zorder=0)
-        top.set_ylabel(f"{name}: roll, deg")
-        top.set_ylim(0, 360)
-        top.legend(loc="upper right", fontsize=7)
-        bot.plot(g["station"], np.degrees(g["residual"]), ".", ms=1.5)
-        bot.set_ylabel("residual, deg")
-        bot.set_xlabel("frame")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+def records_of(shots):
+    """A :class:`~cadra.studies.segmented_roll.RollRecord` of each roll-bearing shot."""
+    k = channels.NAMES.index("phi")
+    out = []
+    for s in shots:
+        name = s.source.get("trajectory_file", s.shot_id)
+        if s.rigid.mode.kind != "roll_bearing":
+            raise ValueError(f"{name}: a {s.rigid.mode.kind!r} record; cadra2 roll fits roll "
+                             "bearings (the shot file's [test_mode] kind = 'roll_bearing')")
+        ok = np.isfinite(s.meas[:, k])
+        if ok.sum() < 8:
+            raise ValueError(f"{name}: {int(ok.sum())} frame(s) with a measured roll (phi); "
+                             "a roll record needs at least 8")
+        out.append(RollRecord(s.shot_id, s.t_s[ok], np.unwrap(s.meas[ok, k]),
+                              float(np.median(s.sigma[ok, k]))))
+    r0 = shots[0].rigid
+    for s in shots[1:]:
+        if (s.rigid.mode != r0.mode or not np.allclose(s.rigid.phys(), r0.phys())):
+            raise ValueError(f"{s.shot_id}: another body, air or bearing than "
+                             f"{shots[0].shot_id}'s; one segmented fit is one flight "
+                             "condition")
+    return out
 
 
 __all__ = ["PAPER_TABLE2", "ROLL_LOCALS", "STEPS", "TABLE_ORDER", "RollRecord", "Segment",
-           "SegmentedFit", "choose_segments", "coefficient_table", "correlation_table",
-           "equation_error_start", "fit_segments", "markdown_table", "paper_correlation",
-           "plot_segmented_fit",
-           "roll_constants", "runs_of_sign", "seed003_tables", "segment_shots",
-           "segment_states", "segment_table", "segmented_fit", "smoothed_roll",
-           "steady_spin_sigmas", "steady_spins", "write_tables", "zero_rate_points"]
+           "SegmentedFit", "bearing_alpha", "choose_segments", "coefficient_table",
+           "correlation_table", "equation_error_start", "fit_segments", "paper_correlation",
+           "records_of", "roll_constants", "seed003_tables", "segment_shots", "segment_states",
+           "segment_table", "segmented_fit", "smoothed_roll", "steady_spin_sigmas",
+           "steady_spins", "zero_rate_points"]

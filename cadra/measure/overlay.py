@@ -1,7 +1,9 @@
-"""Stage-one plots: the measured trajectory on one page and per-image overlays.
+"""Per-image overlays of stage one: what was found in each shadowgraph, drawn on it.
 
-Plot functions take plain tables/arrays, return the figure or image, never show anything, and
-import matplotlib lazily (Agg), so headless use never loads a GUI stack.
+Made in the station's own task (:func:`cadra.measure.station.measure_station`), beside the
+image it reads, and returned as PNG bytes, so a worker never ships the image back. Drawn with
+OpenCV on the image's own pixels (no figure): fitted wires green, silhouette red, reference
+point and axis yellow, centroid cyan, the figures or the failure reason as text.
 """
 
 from __future__ import annotations
@@ -10,43 +12,7 @@ import math
 
 import numpy as np
 
-
-def trajectory_figure(traj, truth=None):
-    """One page: x-z and x-y paths (cm), theta and psi (deg) vs x, with 1-sigma error bars.
-
-    ``traj`` is a trajectory-measurement table (docs/stage1.md columns); ``truth`` an optional
-    table with ``x_m, y_m, z_m, theta_deg, psi_deg`` drawn as a line.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    ok = traj[traj["ok"]] if "ok" in traj else traj
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True, constrained_layout=True)
-    panels = (
-        (axes[0, 0], "z_m", "sigma_z_m", 100.0, "z (cm, + up)", "side view: x-z"),
-        (axes[0, 1], "y_m", "sigma_y_m", 100.0, "y (cm, + port)", "top view: x-y"),
-        (axes[1, 0], "theta_deg", "sigma_theta_deg", 1.0, "theta (deg, + nose up)",
-         "inclination to the x-y plane"),
-        (axes[1, 1], "psi_deg", "sigma_psi_deg", 1.0, "psi (deg, + nose to port)",
-         "inclination to the x-z plane"),
-    )
-    for ax, col, scol, scale, label, title in panels:
-        if truth is not None and col in truth:
-            ax.plot(truth["x_m"], truth[col] * scale, "-", color="0.6", lw=1, label="truth")
-        ax.errorbar(ok["x_m"], ok[col] * scale, yerr=ok[scol] * scale, fmt="o", ms=4,
-                    color="C0", ecolor="C3", capsize=2, label="measured (1 sigma)")
-        bad = traj[~traj["ok"]] if "ok" in traj else traj.iloc[:0]
-        for x in bad["x_m"].dropna() if "x_m" in bad else ():
-            ax.axvline(x, color="C3", alpha=0.3)
-        ax.set_ylabel(label)
-        ax.set_title(title, fontsize=10)
-        ax.grid(alpha=0.3)
-    for ax in axes[1]:
-        ax.set_xlabel("x (m, downrange)")
-    axes[0, 0].legend(fontsize=8)
-    return fig
+from cadra.measure.template import outline_px
 
 
 def overlay_image(image, *, wire_lines=(), outline_px=None, ref_px=None, axis_px=None,
@@ -104,8 +70,6 @@ def view_overlay(image, result, template, station_id: int, crop_half_px: int = 2
     axis; below, the figures or the failure reason as text."""
     import cv2
 
-    from cadra.measure.template import outline_px
-
     fit = getattr(result, "fit", None)
     wires = getattr(result, "wires", None)
     lines = []
@@ -159,3 +123,6 @@ def view_overlay(image, result, template, station_id: int, crop_half_px: int = 2
                     cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 200) if "FAIL" in text else (0, 0, 0),
                     1, cv2.LINE_AA)
     return panel
+
+
+__all__ = ["encode_png", "overlay_image", "view_overlay"]

@@ -1,4 +1,4 @@
-"""Seed 004's analysis studies on top of the fitter: single fits, quasi-linear trends, hold-one.
+"""Seed 004's steps 1 and 2 on top of the fitter: single fits and quasi-linear trends.
 
 Seed 004 ("Data Reduction and Analysis") reduces the range data in three steps:
 
@@ -14,9 +14,10 @@ Seed 004 ("Data Reduction and Analysis") reduces the range data in three steps:
    points. The line's intercept is the small-amplitude value (seed 004 used it for the peak of
    C_mq at sigma = 0).
 3. Multi-fits with the nonlinear forms so chosen (:func:`cadra.fitting.solver.fit`), and
-   **hold-one-parameter studies** (:func:`hold_one_study`, :func:`plot_hold_one`; seed 004
-   "Uncertainties", Fig. 15): hold one parameter at each of several values, refit the rest on
-   all shots, and tabulate the fit quality and the other parameters against the held value.
+   **hold-one-parameter studies** (:mod:`cadra.studies.holdone`; seed 004 "Uncertainties",
+   Fig. 15).
+
+Plots and the written folder: :mod:`cadra.report.studies`.
 
 Everything here is a module-level function over plain data (:class:`ShotData`,
 :class:`cadra.aero.AeroModel`, numbers, pandas tables), so a scheduler (Dask, a process pool)
@@ -35,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -49,7 +50,6 @@ from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import Integration
 from cadra.fitting.solver import FitOptions, fit
 from cadra.flight.data import CHANNELS, ShotData
-from cadra.numfmt import pm
 
 #: an initial-state source: per-shot (13,) states, or ``f(shot, model) -> (13,) state``
 InitialStates = Sequence[np.ndarray] | Callable[[ShotData, AeroModel], np.ndarray]
@@ -62,6 +62,8 @@ LIFTING_CG_OFFSET_M = 1e-6
 
 #: channel -> (display scale from SI, display unit), from the channel registry
 _CHANNEL_SCALE = {c.name: (c.display_scale, c.display_unit) for c in OBSERVED}
+#: a single fit whose chi^2/nu exceeds this is flagged: its sigmas are not meaningful
+SINGLE_FIT_CHI2_WARN = 10.0
 
 
 # --------------------------------------------------------------------------- helpers
@@ -81,7 +83,7 @@ def linear_template_for(shot: ShotData) -> AeroModel:
                               else "linear_template_sigma")
 
 
-def _initial_state(initial_states: InitialStates, k: int, shot: ShotData,
+def initial_state_of(initial_states: InitialStates, k: int, shot: ShotData,
                    model: AeroModel) -> np.ndarray:
     if callable(initial_states):
         y = initial_states(shot, model)
@@ -94,7 +96,7 @@ def _initial_state(initial_states: InitialStates, k: int, shot: ShotData,
     return y
 
 
-def _check_count(shots, initial_states):
+def check_count(shots, initial_states):
     if not callable(initial_states) and len(initial_states) != len(shots):
         raise ValueError(f"{len(shots)} shots but {len(initial_states)} initial states")
 
@@ -237,7 +239,7 @@ def sigma_residual_rms_deg(result: FitResult, shots: Sequence[ShotData],
     return math.degrees(math.sqrt(float(np.mean(np.square(diffs)))))
 
 
-def _rms_columns(rms: dict) -> dict:
+def rms_columns(rms: dict) -> dict:
     out = {}
     for ch in CHANNELS:
         scale, unit = _CHANNEL_SCALE[ch]
@@ -245,7 +247,7 @@ def _rms_columns(rms: dict) -> dict:
     return out
 
 
-def _parameter_columns(result: FitResult, exclude: str | None = None) -> dict:
+def parameter_columns(result: FitResult, exclude: str | None = None) -> dict:
     out = {}
     scaled = result.aero_sigma_scaled
     for n, v, s, ss in zip(result.aero_names, result.aero_values, result.aero_sigma, scaled,
@@ -296,8 +298,8 @@ def single_fit(shot: ShotData, model: AeroModel, initial_state: np.ndarray | Non
            "message": res.message, "iterations": res.iterations, "chi2": res.chi2,
            "n_observations": res.n_observations, "dof": res.dof,
            "reduced_chi2": res.reduced_chi2}
-    row.update(_parameter_columns(res))
-    row.update(_rms_columns(sf.rms))
+    row.update(parameter_columns(res))
+    row.update(rms_columns(sf.rms))
     row.update(amplitude_measures(shot, res.model, sf.state, sf.t0_s, samples=samples,
                                   integration=options.integration,
                                   extras=res.extras_at_values()))
@@ -326,9 +328,9 @@ def single_fits(shots: Sequence[ShotData], model: AeroModel, initial_states: Ini
     :func:`quasi_linear_summary`.
     """
     if initial_states is not None:
-        _check_count(shots, initial_states)
+        check_count(shots, initial_states)
     rows = [single_fit(sd, model, None if initial_states is None
-                       else _initial_state(initial_states, k, sd, model),
+                       else initial_state_of(initial_states, k, sd, model),
                        options=options, samples=samples)
             for k, sd in enumerate(shots)]
     return pd.DataFrame(rows)
@@ -426,194 +428,38 @@ def quasi_linear_summary(table: pd.DataFrame, coefficient: str = "Cmq_0",
     return out
 
 
-def _figure(*args, figsize, **kw):
-    """A fresh :class:`matplotlib.figure.Figure` and its axes (``Figure.subplots``): no pyplot
-    state, so nothing is kept alive or counted after the caller drops the figure."""
-    from matplotlib.figure import Figure
+@dataclass(frozen=True)
+class SingleFitChecks:
+    """What a :func:`single_fits` table can be used for (:func:`check_single_fits`).
 
-    fig = Figure(figsize=figsize, layout="constrained")
-    return fig, fig.subplots(*args, **kw)
+    ``trends``: whether the quasi-linear trends can be computed (at least two converged
+    single fits: they fit a straight line through the shots' coefficients); ``trends_note``:
+    why not, in words ("" when they can); ``warnings``: per shot, fits that did not converge
+    and fits whose chi^2/nu exceeds :data:`SINGLE_FIT_CHI2_WARN`."""
 
+    trends: bool
+    trends_note: str
+    warnings: tuple[str, ...]
 
-def plot_quasi_linear(table: pd.DataFrame, coefficient: str = "Cmq_0",
-                      against: str = "alpha_rms_deg", ax=None, **summary_kw):
-    """Average coefficient against amplitude, 1-sigma error bars, the weighted line.
-
-    Points labelled with their shot ids; the legend gives the line's slope, intercept and
-    chi^2 p-value (:func:`quasi_linear_summary`, whose keywords ``summary_kw`` are passed on).
-    Returns the figure (never shown).
-    """
-    s = quasi_linear_summary(table, coefficient, against, **summary_kw)
-    if ax is None:
-        fig, ax = _figure(figsize=(6.5, 4.5))
-    else:
-        fig = ax.figure
-    ax.errorbar(s["x"], s["y"], yerr=s["sigma"], fmt="o", ms=5, capsize=3, color="C0",
-                ecolor="C0", label=f"single fits ({s['n']})")
-    for xi, yi, sid in zip(s["x"], s["y"], s["shot_id"], strict=True):
-        ax.annotate(str(sid), (xi, yi), textcoords="offset points", xytext=(4, 4),
-                    fontsize=7, color="0.3")
-    if math.isfinite(s["slope"]):
-        xs = np.linspace(0.0, max(float(np.max(s["x"])), 1e-12) * 1.05, 50)
-        p = "" if not math.isfinite(s["p_value"]) else f", p = {s['p_value']:.2g}"
-        ax.plot(xs, s["intercept"] + s["slope"] * xs, "-", color="C3", lw=1,
-                label=(f"line: {pm(s['intercept'], s['intercept_sigma'])} "
-                       f"+ ({pm(s['slope'], s['slope_sigma'])}) x{p}"))
-    ax.set_xlabel(against)
-    ax.set_ylabel(f"{coefficient} (quasi-linear)")
-    ax.set_title(f"{coefficient} vs {against}", fontsize=10)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    return fig
+    @property
+    def messages(self) -> tuple[str, ...]:
+        """Every message: the trends' note first, then the shots' warnings."""
+        return ((self.trends_note,) if self.trends_note else ()) + self.warnings
 
 
-# --------------------------------------------------------------------------- step 3
-
-
-def hold_one_refit(shots: Sequence[ShotData], model: AeroModel, initial_states, name: str,
-                   value: float, *, options: FitOptions | None = None
-                   ) -> tuple[dict, FitResult]:
-    """One hold-one refit: ``name`` held at ``value`` (SI), the other free parameters and every
-    shot's state refitted on all ``shots`` together.
-
-    Returns ``(row, result)``: the row of :func:`hold_one_study` and the fit result.
-    """
-    options = options or FitOptions()
-    m = model.with_vary({name: False}).with_values({name: float(value)})
-    res = fit(list(shots), m, [np.asarray(y, dtype=float) for y in initial_states],
-              options=options)
-    row = {"held": name, "value": float(value), "status": res.status,
-           "converged": bool(res), "iterations": res.iterations, "chi2": res.chi2,
-           "n_observations": res.n_observations, "dof": res.dof,
-           "reduced_chi2": res.reduced_chi2}
-    row.update(_rms_columns(res.rms()))
-    row["sigma_rms_deg"] = sigma_residual_rms_deg(res, shots, options.integration)
-    row.update(_parameter_columns(res, exclude=name))
-    return row, res
-
-
-def hold_one_study(shots: Sequence[ShotData], model: AeroModel, initial_states: InitialStates,
-                   name: str, values: Sequence[float], *,
-                   options: FitOptions | None = None) -> pd.DataFrame:
-    """Seed 004 Fig. 15: hold one parameter at each value, refit the rest on all shots.
-
-    Parameters
-    ----------
-    shots : the shots of the multi-fit.
-    model : the model; its free parameters other than ``name`` are refitted.
-    initial_states : per shot a (13,) state at its epoch, or a callable
-        ``(shot, model) -> (13,) state``.
-    name : the held parameter.
-    values : the values to hold it at (SI; radians for an angle parameter).
-    options : fit options.
-
-    The values are visited in increasing order. The first refit starts from ``model``'s
-    values and ``initial_states``; each later one from the previous converged refit's
-    parameters and states (continuation: neighbouring held values have neighbouring
-    solutions). After a refit that did not converge the next starts again from the given
-    start.
-
-    Returns
-    -------
-    DataFrame sorted by ``value``: ``held``, ``value``, ``status``, ``converged``,
-    ``iterations``, ``chi2``, ``n_observations``, ``dof``, ``reduced_chi2``, residual rms
-    ``x_rms_m, y_rms_m, z_rms_m, theta_rms_deg, psi_rms_deg``, ``sigma_rms_deg``
-    (:func:`sigma_residual_rms_deg`), and every other free parameter's value, ``_sigma`` and
-    ``_sigma_scaled``.
-    """
-    if name not in model.names:
-        raise KeyError(f"hold_one_study: the model has no parameter {name!r}")
-    _check_count(shots, initial_states)
-    vals = np.asarray(values, dtype=float)
-    if vals.ndim != 1 or vals.size == 0 or not np.all(np.isfinite(vals)):
-        raise ValueError("hold_one_study: values must be a non-empty list of finite numbers")
-    start_states = [_initial_state(initial_states, k, sd, model) for k, sd in enumerate(shots)]
-    cur_model, cur_states = model, start_states
-    rows = []
-    for v in np.sort(vals):
-        row, res = hold_one_refit(shots, cur_model, cur_states, name, float(v),
-                                  options=options)
-        rows.append(row)
-        if res:
-            cur_model = res.model.with_vary({name: model.parameter(name).vary})
-            cur_states = [sf.state for sf in res.shots]
-        else:
-            cur_model, cur_states = model, start_states
-    return pd.DataFrame(rows).reset_index(drop=True)
-
-
-def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
-    """Fig. 15 style: fit quality and the other parameters against the held value.
-
-    ``ax`` None: a new figure with one panel of residual rms (theta, psi, sigma in deg) and
-    one panel per other free parameter (value with 1-sigma bars). A single Axes: only the rms
-    panel, drawn there. A sequence of Axes: the rms panel and then the parameter panels, as
-    many as given. Non-converged refits are drawn hollow. Returns the figure (never shown).
-    """
-    name = name or (str(table["held"].iloc[0]) if "held" in table and len(table) else "held")
-    t = table.sort_values("value")
-    x = t["value"].to_numpy(float)
-    ok = t["status"].to_numpy() == "converged" if "status" in t else np.ones(len(t), bool)
-    skip = {"held", "value", "status", "converged", "iterations", "chi2", "n_observations",
-            "dof", "reduced_chi2"}
-    params = [c for c in t.columns if c not in skip and not c.endswith(("_sigma", "_scaled"))
-              and not c.endswith(("_rms_m", "_rms_deg")) and f"{c}_sigma" in t]
-    if ax is None:
-        n = 1 + len(params)
-        ncol = min(n, 3)
-        nrow = math.ceil(n / ncol)
-        fig, axs = _figure(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
-        axes = list(axs.ravel())
-        for a in axes[n:]:
-            a.set_visible(False)
-        axes = axes[:n]
-    elif hasattr(ax, "plot"):
-        axes = [ax]
-        fig = ax.figure
-    else:
-        axes = list(ax)
-        fig = axes[0].figure
-    a0 = axes[0]
-    for col, style in (("theta_rms_deg", "C0"), ("psi_rms_deg", "C1"), ("sigma_rms_deg", "C3")):
-        if col in t and np.any(np.isfinite(t[col].to_numpy(float))):
-            y = t[col].to_numpy(float)
-            a0.plot(x, y, "-", color=style, lw=1, label=col.replace("_rms_deg", " rms"))
-            a0.plot(x[ok], y[ok], "o", color=style, ms=4)
-            a0.plot(x[~ok], y[~ok], "o", mfc="none", color=style, ms=4)
-    a0.set_xlabel(f"{name} (held)")
-    a0.set_ylabel("residual rms (deg)")
-    a0.set_title("fit quality", fontsize=10)
-    a0.grid(alpha=0.3)
-    a0.legend(fontsize=7)
-    for a, p in zip(axes[1:], params, strict=False):
-        y = t[p].to_numpy(float)
-        e = t[f"{p}_sigma"].to_numpy(float)
-        e = np.where(np.isfinite(e), e, 0.0)
-        a.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, color="C0", lw=1)
-        if (~ok).any():
-            a.plot(x[~ok], y[~ok], "o", mfc="none", color="C0", ms=4)
-        a.set_xlabel(f"{name} (held)")
-        a.set_ylabel(p)
-        a.grid(alpha=0.3)
-    return fig
-
-
-#: a single fit whose chi^2/nu exceeds this is flagged: its sigmas are not meaningful
-SINGLE_FIT_CHI2_WARN = 10.0
-
-
-def single_fit_warnings(table: pd.DataFrame) -> list[str]:
-    """Plain warnings on a :func:`single_fits` table where a result is meaningless: fewer than
-    two converged shots for the quasi-linear trends (the line starts ``quasi-linear``), fits
-    that did not converge, and fits whose chi^2/nu exceeds :data:`SINGLE_FIT_CHI2_WARN` (the
-    model or the sigmas do not describe the data: the covariance sigmas mean nothing)."""
-    out = []
+def check_single_fits(table: pd.DataFrame) -> SingleFitChecks:
+    """Where a :func:`single_fits` table's results are meaningless (:class:`SingleFitChecks`):
+    fewer than two converged shots for the quasi-linear trends, fits that did not converge,
+    and fits whose chi^2/nu exceeds :data:`SINGLE_FIT_CHI2_WARN` (the model or the sigmas do
+    not describe the data: the covariance sigmas mean nothing)."""
     n_ok = int((table["status"] == "converged").sum())
+    note = ""
     if n_ok < 2:
-        out.append(f"quasi-linear trends not computed: they fit a straight line through the "
-                   f"shots' coefficients against their amplitude, which needs at least two "
-                   f"converged single fits at different amplitudes ({len(table)} shot(s) "
-                   f"given, {n_ok} converged); give more shots of the same case")
+        note = (f"quasi-linear trends not computed: they fit a straight line through the "
+                f"shots' coefficients against their amplitude, which needs at least two "
+                f"converged single fits at different amplitudes ({len(table)} shot(s) "
+                f"given, {n_ok} converged); give more shots of the same case")
+    out = []
     for _, row in table.iterrows():
         if row["status"] != "converged":
             out.append(f"{row['shot_id']}: fit {row['status']} ({row['message']}); its row is "
@@ -623,77 +469,21 @@ def single_fit_warnings(table: pd.DataFrame) -> list[str]:
                        "the linear model or the sigmas do not describe this shot, so its "
                        "sigmas are not meaningful (the *_sigma_scaled columns inflate them by "
                        "sqrt(chi^2/nu); a nonlinear model may be needed)")
-    return out
+    return SingleFitChecks(n_ok >= 2, note, tuple(out))
 
-
-def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir, *,
-                      overwrite: bool = False) -> list[str]:
-    """Write seed 004 steps 1-2 to ``out_dir`` atomically: ``single_fits.csv``, the
-    quasi-linear trend of every free coefficient vs alpha_rms and sigma_rms
-    (``quasi_linear.json``, ``plots/quasi_linear_<coef>_<against>.png``) and ``report.md``.
-    Returns the report's lines."""
-    import json
-
-    from cadra.io.atomic import atomic_output_dir
-
-    against = [c for c in ("alpha_rms_deg", "sigma_rms_deg") if c in table]
-    names = model.free_names()
-    lines = [f"# Single fits with {model.name} (seed 004 step 1) and quasi-linear "
-             "trends (step 2)", "",
-             "| shot | status | chi2/dof | " + " | ".join(names) + " |",
-             "|---|---|---|" + "---|" * len(names)]
-    for _, row in table.iterrows():
-        cells = [pm(row[n], row[n + "_sigma"]) for n in names]
-        lines.append(f"| {row['shot_id']} | {row['status']} | "
-                     f"{row['reduced_chi2']:.3g} | " + " | ".join(cells) + " |")
-    lines += ["", "## Quasi-linear trends (weighted straight line vs amplitude)", "",
-              "| coefficient | against | slope ± σ | intercept ± σ | p (line) |",
-              "|---|---|---|---|---|"]
-    summaries = {}
-    warns = single_fit_warnings(table)
-    if warns and warns[0].startswith("quasi-linear"):   # one line saying why, not NaN rows
-        lines = lines[:-4] + ["", "## Quasi-linear trends", "", warns.pop(0)]
-        against = []
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
-        table.to_csv(tmp / "single_fits.csv", index=False)
-        (tmp / "plots").mkdir()
-        for name in names:
-            for col in against:
-                try:
-                    q = quasi_linear_summary(table, name, col)
-                except ValueError as exc:
-                    lines.append(f"| {name} | {col} | {exc} | | |")
-                    continue
-                summaries[f"{name}:{col}"] = q
-                lines.append(f"| {name} | {col} | {pm(q['slope'], q['slope_sigma'])} | "
-                             f"{pm(q['intercept'], q['intercept_sigma'])} | "
-                             f"{q['p_value'] if q['p_value'] is not None else '—'} |")
-                plot_quasi_linear(table, name, col).savefig(
-                    tmp / "plots" / f"quasi_linear_{name}_{col}.png", dpi=110)
-        (tmp / "quasi_linear.json").write_text(
-            json.dumps(summaries, indent=2,
-                       default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)),
-            encoding="utf-8")
-        if warns:
-            lines += ["", "## Warnings", "", *(f"- {w}" for w in warns)]
-        (tmp / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return lines
 
 __all__ = [
     "LINE_P_THRESHOLD",
     "SINGLE_FIT_CHI2_WARN",
+    "InitialStates",
+    "SingleFitChecks",
     "aero_angle_history",
     "amplitude_measures",
+    "check_single_fits",
     "fitted_states",
-    "hold_one_refit",
-    "hold_one_study",
     "linear_template_for",
-    "plot_hold_one",
-    "plot_quasi_linear",
     "quasi_linear_summary",
     "sigma_residual_rms_deg",
     "single_fit",
-    "single_fit_warnings",
     "single_fits",
-    "write_single_fits",
 ]

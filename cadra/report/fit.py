@@ -28,7 +28,7 @@ file                           contents
 
 The pure helpers (:func:`results_dict`, :func:`residuals_table`, :func:`report_markdown`,
 :func:`fitted_histories`) take plain data and do no I/O; plots live in
-:mod:`cadra.fitting.plots` (matplotlib and pyvista imported lazily).
+:mod:`cadra.report.fit_plots` (matplotlib and pyvista imported lazily).
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local, observables
 from cadra.flight.data import CHANNELS, ShotData
 from cadra.numfmt import pm
+from cadra.report import figures, markdown
 
 #: results.json format tag
 RESULTS_FORMAT = "cadra.fit-results/1"
@@ -278,7 +279,7 @@ def coefficient_markdown(table: pd.DataFrame) -> str:
     A1 ± σ | ... | other (held values marked "(held)", unused cells blank)."""
     ks = sorted(int(c[1:]) for c in table.columns if c[0] == "A" and c[1:].isdigit())
     head = ["coefficient", "form"] + [f"A{k} ± σ" for k in ks] + ["other"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    rows = []
     for row in table.itertuples(index=False):
         d = row._asdict()
         cells = [f"{d['coefficient']}", f"`{d['form']}`"]
@@ -291,8 +292,8 @@ def coefficient_markdown(table: pd.DataFrame) -> str:
             else:
                 cells.append(pm(float(v), float(d.get(f"A{k}_sigma"))))
         cells.append(str(d.get("other") or ""))
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines)
+        rows.append(cells)
+    return "\n".join(markdown.table(head, rows))
 
 
 def _bounds_text(p) -> str:
@@ -334,7 +335,6 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     parameter to hold) and warnings; each shot's fitted state at the epoch; residual rms per
     shot and channel (µm, deg); links to the plots (``plot_files``: key -> relative path).
     """
-    deg = 180.0 / math.pi
     name = title or f"{result.model.name}: " + ", ".join(s.shot_id for s in result.shots)
     L = [f"# Stage-two fit: {name}", ""]
     if result.converged:
@@ -343,15 +343,16 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
         L += [f"**Status: {result.status.upper()} — NOT A RESULT.** {result.message}. The "
               "values below are the best point the fit reached; do not use them as "
               "coefficients.", ""]
-    L += ["## Fit statistics", "",
-          "| quantity | value |", "|---|---|",
-          f"| χ² | {result.chi2:.6g} |",
-          f"| degrees of freedom | {result.dof} ({result.n_observations} measurements − "
-          f"{result.n_free} free unknowns) |",
-          f"| reduced χ² | {result.reduced_chi2:.4g} |",
-          f"| shots | {len(result.shots)} |",
-          f"| iterations | {result.iterations} |",
-          f"| elapsed | {result.elapsed_s:.2f} s |", ""]
+    L += ["## Fit statistics", ""]
+    L += markdown.table(("quantity", "value"), (
+        ("χ²", f"{result.chi2:.6g}"),
+        ("degrees of freedom", f"{result.dof} ({result.n_observations} measurements − "
+                               f"{result.n_free} free unknowns)"),
+        ("reduced χ²", f"{result.reduced_chi2:.4g}"),
+        ("shots", len(result.shots)),
+        ("iterations", result.iterations),
+        ("elapsed", f"{result.elapsed_s:.2f} s")))
+    L.append("")
     L += phases_note(result)
     vc = result.options.get("variance_components")
     if vc:
@@ -359,12 +360,11 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
               f"Each channel's sigmas were rescaled by the factor its own residuals ask for "
               f"({vc['rounds']} refit round(s)); χ²/ν with stage one's own sigmas was "
               f"{vc['reduced_chi2_before']:.4g}. The sigmas above include the rescaling; a "
-              "scale far from 1 is a finding about the stage-one sigmas (docs/fitting.md).", "",
-              "| channel | sigma scale | variance factor | degrees of freedom |",
-              "|---|---|---|---|"]
-        for ch, f in vc["factors"].items():
-            L.append(f"| {ch} | ×{vc['sigma_scale'][ch]:.3f} | "
-                     f"{pm(f, vc['factor_sigma'][ch])} | {vc['dof'][ch]:.1f} |")
+              "scale far from 1 is a finding about the stage-one sigmas (docs/fitting.md).", ""]
+        L += markdown.table(
+            ("channel", "sigma scale", "variance factor", "degrees of freedom"),
+            ((ch, f"×{vc['sigma_scale'][ch]:.3f}", pm(f, vc["factor_sigma"][ch]),
+              f"{vc['dof'][ch]:.1f}") for ch, f in vc["factors"].items()))
         L.append("")
     if math.isfinite(result.reduced_chi2) and result.reduced_chi2 > 2.0:
         L += [f"Reduced χ² = {result.reduced_chi2:.3g} > 2: the sigmas or the model do not "
@@ -376,9 +376,8 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     sig_s = dict(zip(result.aero_names, result.aero_sigma_scaled, strict=True))
     L += ["## Parameters", "",
           "Values SI (angles in rad); σ from (JᵀWJ)⁻¹; σ coloured: sandwich estimate for "
-          "correlated residuals; σ scaled: σ·√(χ²/dof) when that exceeds 1.", "",
-          "| parameter | value ± σ | σ (%) | σ coloured | σ scaled | initial | bounds | flags |",
-          "|---|---|---|---|---|---|---|---|"]
+          "correlated residuals; σ scaled: σ·√(χ²/dof) when that exceeds 1.", ""]
+    rows = []
     for n in result.aero_names:
         p = result.model.parameter(n)
         flags = []
@@ -394,9 +393,10 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
             flags.append("UNDETERMINED")
         if any(d["hold"] == n for d in result.near_singular):
             flags.append("hold suggested")
-        L.append(f"| {n} | {pm(p.value, sig[n])} | {_pct(p.value, sig[n])} | "
-                 f"{sig_c[n]:.2g} | {sig_s[n]:.2g} | {init} | {_bounds_text(p)} | "
-                 f"{', '.join(flags)} |")
+        rows.append((n, pm(p.value, sig[n]), _pct(p.value, sig[n]), f"{sig_c[n]:.2g}",
+                     f"{sig_s[n]:.2g}", init, _bounds_text(p), ", ".join(flags)))
+    L += markdown.table(("parameter", "value ± σ", "σ (%)", "σ coloured", "σ scaled",
+                         "initial", "bounds", "flags"), rows)
     held = [p for p in result.model.parameters if p.name not in sig]
     if held:
         L += ["", "Held: " + ", ".join(
@@ -407,9 +407,8 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     corr = result.high_correlations(REPORT_CORRELATION)
     L += [f"## Correlations (|r| ≥ {REPORT_CORRELATION})", ""]
     if corr:
-        L += ["| a | b | r |", "|---|---|---|"]
-        L += [f"| {a} | {b} | {r:+.4f} |" for a, b, r in
-              sorted(corr, key=lambda t: -abs(t[2]))]
+        L += markdown.table(("a", "b", "r"), ((a, b, f"{r:+.4f}") for a, b, r in
+                                               sorted(corr, key=lambda t: -abs(t[2]))))
     else:
         L.append("None.")
     L.append("")
@@ -435,51 +434,42 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     L += ["## Fitted state at each shot's epoch", "",
           "Reference point (what the images show) in the facility frame; θ, ψ nose-axis "
           "inclinations; α, β, σ classical (0 = heat shield into the wind; CEV α = 180° − α).",
-          "",
-          "| shot | station | t0 (s) | x (m) | y (mm) | z (mm) | V (m/s) | θ (deg) | ψ (deg) "
-          "| p, q, r (rad/s) | α, β, σ (deg) | Mach |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          ""]
+    cells_rows = []
     for r in rows:
         x, y, z = r["reference_point_m"]
         sx, sy, sz = r["reference_point_sigma_m"]
         rates = ", ".join(pm(float(v), float(s)) if np.isfinite(s) else f"{v:.4g}"
                           for v, s in zip(r["rates_rad_s"], r["rates_sigma_rad_s"],
                                           strict=True))
-        L.append(f"| {r['shot_id']} | {r['epoch_station']} | {r['t0_s']:.6f} | "
-                 f"{pm(x, sx)} | {pm(y * 1e3, sy * 1e3)} | {pm(z * 1e3, sz * 1e3)} | "
-                 f"{r['speed_m_s']:.3f} | {pm(r['theta_deg'], r['theta_sigma_deg'])} | "
-                 f"{pm(r['psi_deg'], r['psi_sigma_deg'])} | {rates} | "
-                 f"{r['alpha_deg']:.2f}, {r['beta_deg']:.2f}, {r['sigma_deg']:.2f} | "
-                 f"{r['mach']:.4f} |")
+        cells_rows.append((
+            r["shot_id"], r["epoch_station"], f"{r['t0_s']:.6f}", pm(x, sx),
+            pm(y * 1e3, sy * 1e3), pm(z * 1e3, sz * 1e3), f"{r['speed_m_s']:.3f}",
+            pm(r["theta_deg"], r["theta_sigma_deg"]), pm(r["psi_deg"], r["psi_sigma_deg"]),
+            rates, f"{r['alpha_deg']:.2f}, {r['beta_deg']:.2f}, {r['sigma_deg']:.2f}",
+            f"{r['mach']:.4f}"))
+    L += markdown.table(("shot", "station", "t0 (s)", "x (m)", "y (mm)", "z (mm)", "V (m/s)",
+                         "θ (deg)", "ψ (deg)", "p, q, r (rad/s)", "α, β, σ (deg)", "Mach"),
+                        cells_rows)
     L.append("")
 
     # one column per channel of the registry, in the order ``cells`` writes them (the roll
     # column shows "—" for a body whose roll is not measured)
-    heads = [f"{BY_NAME[ch].label} ({'µm' if BY_NAME[ch].kind == 'position' else 'deg'})"
-             for ch in CHANNELS]
-    L += ["## Residual rms", "",
-          "| shot | n | χ² | " + " | ".join(heads) + " |",
-          "|---|---|---|" + "---|" * len(heads)]
+    heads = [f"{BY_NAME[ch].label} ({BY_NAME[ch].residual_label})" for ch in CHANNELS]
+    L += ["## Residual rms", ""]
 
-    def cells(rms: Mapping[str, float]) -> str:
-        out = []
-        for ch in CHANNELS:
-            v = rms.get(ch, math.nan)
-            if not math.isfinite(v):
-                out.append("—")
-            elif BY_NAME[ch].kind == "position":
-                out.append(f"{v * 1e6:.3g}")
-            else:
-                out.append(f"{v * deg:.3g}")
-        return " | ".join(out)
+    def cells(rms: Mapping[str, float]) -> list[str]:
+        return [f"{v * BY_NAME[ch].residual_scale:.3g}" if math.isfinite(v) else "—"
+                for ch in CHANNELS for v in (rms.get(ch, math.nan),)]
 
-    for sf in result.shots:
-        L.append(f"| {sf.shot_id} | {sf.n_observations} | {sf.chi2:.4g} | {cells(sf.rms)} |")
+    rms_rows = [(sf.shot_id, sf.n_observations, f"{sf.chi2:.4g}", *cells(sf.rms))
+                for sf in result.shots]
     if len(result.shots) > 1:
-        L.append(f"| all | {result.n_observations} | {result.chi2:.4g} | "
-                 f"{cells(result.rms())} |")
+        rms_rows.append(("all", result.n_observations, f"{result.chi2:.4g}",
+                         *cells(result.rms())))
     dof = result.dof_by_channel()
-    L.append(f"| noise floor | dof {result.dof} | — | {cells(result.noise_floor())} |")
+    rms_rows.append(("noise floor", f"dof {result.dof}", "—", *cells(result.noise_floor())))
+    L += markdown.table(("shot", "n", "χ²", *heads), rms_rows)
     L += ["", "Noise floor: the rms a correct model leaves on noise of the stated σ, "
           "σ√(1 − leverage); the fit absorbs the rest. Degrees of freedom per channel: "
           + ", ".join(f"{ch} {v:.1f}" for ch, v in dof.items() if math.isfinite(v)) + "."]
@@ -500,6 +490,29 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
           "correlation_coloured.csv, residuals.csv (angles in deg, `unit` column)"
           + (", reference_pulls.csv" if reference_lines else "") + ".", ""]
     return "\n".join(L)
+
+
+def reference_markdown(cmp) -> list[str]:
+    """The report's section on the reference."""
+    L = ["## Against the reference", "",
+         f"Reference: `{cmp.label}`. Pull = (fit − reference) / √(σ_fit² + σ_ref²); "
+         "σ_ref is 0 for a model file (values only).", ""]
+    rows = []
+    for r in cmp.table.itertuples():
+        ref = pm(r.reference, r.reference_sigma) if r.reference_sigma > 0 else f"{r.reference:.6g}"
+        pct = f" ({r.difference_percent:+.2f} %)" if np.isfinite(r.difference_percent) else ""
+        rows.append((r.parameter, pm(r.fit, r.sigma), ref, f"{r.difference:+.4g}{pct}",
+                     f"{r.pull:+.2f}"))
+    L += markdown.table(("parameter", "fit", "reference", "difference", "pull"), rows)
+    n = len(cmp.table)
+    within = int((np.abs(cmp.table["pull"]) <= 2).sum()) if n else 0
+    L += ["", f"{within} of {n} within 2σ. Joint χ² of agreement (the parameters' "
+          f"correlations counted) = {cmp.chi2:.2f} for {cmp.dof} degrees of freedom, "
+          f"p = {cmp.p:.3g}" + (" — **the fit and the reference disagree**"
+                                if np.isfinite(cmp.p) and cmp.p < 0.01 else "") + ".", ""]
+    if cmp.not_compared:
+        L += ["Not in the reference (not compared): " + ", ".join(cmp.not_compared), ""]
+    return L
 
 
 # --------------------------------------------------------------------------- writer
@@ -566,8 +579,6 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
         data = results_dict(result, shots, start_model=start_model, title=title)
         reference_lines: list[str] = []
         if cmp is not None:
-            from cadra.fitting.reference import reference_markdown
-
             cmp.table.to_csv(tmp / "reference_pulls.csv", index=False, float_format="%.10g")
             data["reference"] = _plain({"label": cmp.label, "chi2": cmp.chi2, "dof": cmp.dof,
                                         "p": cmp.p, "not_compared": list(cmp.not_compared),
@@ -597,14 +608,14 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
 
 
 def _write_plots(result, shots, plot_dir: Path, *, bodies, reference_model, title):
-    from cadra.fitting import plots as P
+    from cadra.report import fit_plots as P
 
     plot_dir.mkdir()
     files: dict[str, str] = {}
     notes: list[str] = []
 
     def save(key, fig):
-        fig.savefig(plot_dir / PLOT_FILES[key], dpi=110)
+        figures.save(fig, plot_dir / PLOT_FILES[key])
         files[key] = f"plots/{PLOT_FILES[key]}"
 
     histories = fitted_histories(result, shots)
@@ -625,5 +636,6 @@ def _write_plots(result, shots, plot_dir: Path, *, bodies, reference_model, titl
 
 
 __all__ = ["CHANNEL_OUTPUT_UNITS", "PLOT_FILES", "RESULTS_FORMAT",
-           "coefficient_markdown", "fitted_histories", "report_markdown", "residuals_table",
+           "coefficient_markdown", "fitted_histories", "reference_markdown", "report_markdown",
+           "residuals_table",
            "results_dict", "shot_epoch_table", "write_fit_outputs"]

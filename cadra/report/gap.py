@@ -8,14 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cadra.flight.data import CHANNELS
+from cadra.channels import BY_NAME, NAMES
 from cadra.gap.score import size_text
 from cadra.gap.where import by_group
 from cadra.io.atomic import atomic_output_dir
-
-_UNIT = {"x": ("µm", 1e6), "y": ("µm", 1e6), "z": ("µm", 1e6),
-         "theta": ("deg", 180 / math.pi), "psi": ("deg", 180 / math.pi),
-         "phi": ("deg", 180 / math.pi)}
+from cadra.report import figures, markdown
 
 
 def summary_markdown(dg, result, where_tables=None) -> str:
@@ -23,20 +20,22 @@ def summary_markdown(dg, result, where_tables=None) -> str:
     L = ["# Gap diagnosis", "", f"**{dg.verdict}**", "",
          f"Fit: {result.status}, {len(result.shots)} shot(s), chi^2/dof "
          f"{dg.reduced_chi2_before:.3f} -> {dg.reduced_chi2_after:.3f} after the effects "
-         "added.", "", "## How much: residual rms per channel", "",
-         "| channel | before | after | noise floor after | σ (median) | dof after |",
-         "|---|---|---|---|---|---|"]
+         "added.", "", "## How much: residual rms per channel", ""]
     sig = result.residuals.groupby("channel")["sigma"].median()
     final = dg.fit_after if dg.fit_after is not None else result
     floor, dof = final.noise_floor(), final.dof_by_channel()
-    for ch in CHANNELS:
-        u, f = _UNIT[ch]
+    rows = []
+    for ch in NAMES:
+        c = BY_NAME[ch]
+        u, f = c.residual_label, c.residual_scale
         b, a = dg.rms_before.get(ch, math.nan), dg.rms_after.get(ch, math.nan)
         if math.isnan(b):
             continue
-        L.append(f"| {ch} | {b * f:.4g} {u} | {a * f:.4g} {u} | "
-                 f"{floor.get(ch, math.nan) * f:.4g} {u} | "
-                 f"{sig.get(ch, math.nan) * f:.4g} {u} | {dof.get(ch, math.nan):.1f} |")
+        rows.append((ch, f"{b * f:.4g} {u}", f"{a * f:.4g} {u}",
+                     f"{floor.get(ch, math.nan) * f:.4g} {u}",
+                     f"{sig.get(ch, math.nan) * f:.4g} {u}", f"{dof.get(ch, math.nan):.1f}"))
+    L += markdown.table(("channel", "before", "after", "noise floor after", "σ (median)",
+                         "dof after"), rows)
     L += ["", "Noise floor: the rms a correct model leaves on noise of the stated σ, "
           "σ√(1 − leverage) (the fit absorbs the rest); dof: the channel's share of the "
           "degrees of freedom. A channel with few (many free parameters act on it) has an rms "
@@ -44,20 +43,21 @@ def summary_markdown(dg, result, where_tables=None) -> str:
     L += _evidence_section(dg)
     L += ["", "## Effects added (greedy, each significant)", ""]
     if dg.added:
-        L += ["| round | effect | size ± σ | p (F test) | Δχ² |", "|---|---|---|---|---|"]
+        rows = []
         for a in dg.added:
             size = size_text(a)
             if a.get("aliases"):
                 size += f"; indistinguishable here: {', '.join(a['aliases'])}"
-            L.append(f"| {a['round']} | {a['effect']} | {size} | {a['p_value']:.2g} | "
-                     f"{a['dchi2']:.1f} |")
+            rows.append((a["round"], a["effect"], size, f"{a['p_value']:.2g}",
+                         f"{a['dchi2']:.1f}"))
+        L += markdown.table(("round", "effect", "size ± σ", "p (F test)", "Δχ²"), rows)
     else:
         L.append("None.")
     worst = by_group(dg.where, ["station", "channel"]).head(6)
-    L += ["", "## Where the remaining residual lies (largest normalized rms)", "",
-          "| station | channel | rms / σ |", "|---|---|---|"]
-    for r in worst.itertuples():
-        L.append(f"| {r.station} | {r.channel} | {r.rms_normalized:.2f} |")
+    L += ["", "## Where the remaining residual lies (largest normalized rms)", ""]
+    L += markdown.table(("station", "channel", "rms / σ"),
+                        ((r.station, r.channel, f"{r.rms_normalized:.2f}")
+                         for r in worst.itertuples()))
     if where_tables is not None:
         L += ["", "## Where the fit as given misses (tests on its normalized residual)", ""]
         L += [f"- {x}" for x in where_tables["findings"]] or ["- no significant runs, "
@@ -70,14 +70,14 @@ def summary_markdown(dg, result, where_tables=None) -> str:
               "where_frequency.csv (pitch / yaw / roll content), where_cross_shot.csv, "
               "where_by_station.csv, where_stage_one.csv (when stage one's files are given); "
               "plot: where.png."]
-    L += ["", "## Ranking (first round, best first)", "",
-          "| candidate | Δχ² | p (adjusted) | ΔBIC | refit | size ± σ |",
-          "|---|---|---|---|---|---|"]
-    for _, row in dg.ranking.head(15).iterrows():
-        alias = " (alias of the first)" if row.get("alias_of_best", False) else ""
-        L.append(f"| {row['candidate']}{alias} | {row['dchi2']:.1f} | "
-                 f"{row['p_adjusted']:.2g} | {row['dbic']:.1f} | "
-                 f"{'yes' if row['refit'] else 'linear'} | {row['size']} |")
+    L += ["", "## Ranking (first round, best first)", ""]
+    L += markdown.table(
+        ("candidate", "Δχ²", "p (adjusted)", "ΔBIC", "refit", "size ± σ"),
+        ((row["candidate"] + (" (alias of the first)" if row.get("alias_of_best", False)
+                              else ""),
+          f"{row['dchi2']:.1f}", f"{row['p_adjusted']:.2g}", f"{row['dbic']:.1f}",
+          "yes" if row["refit"] else "linear", row["size"])
+         for _, row in dg.ranking.head(15).iterrows()))
     return "\n".join(L) + "\n"
 
 
@@ -88,10 +88,11 @@ def _evidence_section(dg) -> list[str]:
     if ev is None or not len(ev):
         return []
     L = ["", "## Every test of the residual after the effects (family-wise α over them all)",
-         "", "| family | tests | significant | smallest p (adjusted) |", "|---|---|---|---|"]
-    for fam, grp in ev.groupby("family", sort=False):
-        L.append(f"| {fam} | {len(grp)} | {int(grp['significant'].sum())} | "
-                 f"{grp['p_adjusted'].min():.2g} |")
+         ""]
+    L += markdown.table(("family", "tests", "significant", "smallest p (adjusted)"),
+                        ((fam, len(grp), int(grp["significant"].sum()),
+                          f"{grp['p_adjusted'].min():.2g}")
+                         for fam, grp in ev.groupby("family", sort=False)))
     L += ["", "Families: global χ²; per channel; per station and channel (χ² over the shots); "
           "cross-shot repetition (mean over the shots, z test); runs of sign; content at the "
           "motion frequencies. Each has a share of α, split over its tests (docs/gap.md). "
@@ -112,13 +113,10 @@ def _evidence_section(dg) -> list[str]:
 def plot_where(dg, result, path) -> None:
     """Normalized residual per station and channel (mean over shots), before and after the
     effects were added: where the gap lies, at a glance."""
-    from matplotlib.figure import Figure
-
     before = result.residuals.groupby(["station", "channel"])["normalized"].mean().unstack()
     after = dg.where.groupby(["station", "channel"])["normalized"].mean().unstack()
-    chans = [c for c in CHANNELS if c in before.columns]
-    fig = Figure(figsize=(9, 4.5), layout="constrained")
-    axes = fig.subplots(1, 2, sharey=True)
+    chans = [c for c in NAMES if c in before.columns]
+    fig, axes = figures.subplots(1, 2, figsize=(9, 4.5), sharey=True)
     lim = max(3.0, float(np.nanmax(np.abs(before[chans].to_numpy()))))
     for ax, table, title in ((axes[0], before, "fit as given"),
                              (axes[1], after, "after the effects added")):
@@ -132,7 +130,7 @@ def plot_where(dg, result, path) -> None:
     axes[0].set_ylabel("station")
     fig.colorbar(im, ax=axes, label="mean residual / σ")
     fig.suptitle("Where the residual lies")
-    fig.savefig(path, dpi=110)
+    figures.save(fig, path)
 
 
 def write_diagnosis(dg, result, out_dir: str | os.PathLike, *, overwrite: bool = False,

@@ -1,0 +1,141 @@
+"""What ``cadra2``'s subcommands share: the data options, the shots and model they name, every
+input a command reads (for the output guard) and how a refused input is reported."""
+
+from __future__ import annotations
+
+import sys
+from contextlib import suppress
+from pathlib import Path
+
+#: what a refused input raises (FitDataError, SpecError, CalibrationError and a missing model
+#: are ValueErrors; unknown parameter names KeyErrors)
+REFUSED = (ValueError, KeyError, FileNotFoundError)
+
+
+def quiet(args) -> bool:
+    return bool(getattr(args, "quiet", False))
+
+
+def verbose(args) -> bool:
+    return bool(getattr(args, "verbose", False)) and not quiet(args)
+
+
+def say(args, *lines: str) -> None:
+    """Print unless -q (the result/status line is printed with plain ``print``)."""
+    if lines and not quiet(args):
+        print("\n".join(lines))
+
+
+def refused(prog: str, exc: Exception) -> int:
+    """Print why the input was refused; exit status 1."""
+    msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+    print(f"{prog}: {msg}", file=sys.stderr)
+    return 1
+
+
+def add_data_options(p, *, model: bool = True) -> None:
+    """Trajectories, output, shot files, holds/frees/bounds, iteration budget, sigma floors,
+    --overwrite: what every fitting subcommand takes."""
+    p.add_argument("trajectories", nargs="+",
+                   help="stage one's trajectory.csv files (or their directories)")
+    p.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
+    p.add_argument("--shot", action="append",
+                   help="shot file of each trajectory, same order (default: the one the "
+                        "trajectory file names)")
+    if model:
+        p.add_argument("--hold", action="append", metavar="NAME[=VALUE]",
+                       help="hold a parameter (at VALUE, in the model file's unit)")
+        p.add_argument("--free", action="append", metavar="NAME",
+                       help="free a held parameter")
+        p.add_argument("--bound", action="append", metavar="NAME=LO:HI",
+                       help="bounds of a parameter (file unit; either side may be empty)")
+        p.add_argument("--max-iterations", type=int, default=60,
+                       help="most Levenberg-Marquardt iterations per fit phase (a fit whose "
+                            "data are finer than film level runs two phases: docs/cli.md)")
+    p.add_argument("--sigma-time-s", type=float, default=0.0,
+                   help="spark-time sigma, s (adds V sigma_t to the x sigma)")
+    p.add_argument("--min-sigma-position-m", type=float, default=0.0,
+                   help="floor of the stage-one position sigmas, m")
+    p.add_argument("--min-sigma-angle-deg", type=float, default=0.0,
+                   help="floor of the stage-one angle sigmas, deg")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+
+
+def add_start_option(parser) -> None:
+    parser.add_argument(
+        "--start", choices=("auto", "linear", "epicyclic"), default="auto",
+        help="where the starting values come from: 'linear', damped sines fitted to theta "
+             "and psi (one frequency); 'epicyclic', the epicyclic fit's two arms and the "
+             "spin they imply (a spinning body; the sign of C_m_alpha of a gyroscopically "
+             "stable one); 'auto', the arms for a shot whose arms show a spin, the damped "
+             "sines otherwise (docs/fitting.md, \"Starting values\")")
+
+
+def model_of(args):
+    """The aero model named by --model (bundled name or file) with --hold/--free/--bound."""
+    from cadra.aero import resolve_model
+    from cadra.fitting.inputs import apply_holds
+
+    return apply_holds(resolve_model(args.model), getattr(args, "hold", None),
+                       getattr(args, "free", None), getattr(args, "bound", None))
+
+
+def shots_of(args):
+    """The shots named on the command line and their trajectory files."""
+    from cadra.flight.load import load_shots
+
+    return load_shots(args.trajectories, args.shot, sigma_time_s=args.sigma_time_s,
+                      min_sigma_position_m=args.min_sigma_position_m,
+                      min_sigma_angle_deg=args.min_sigma_angle_deg)
+
+
+def input_paths(args) -> list[Path]:
+    """Every file and folder the command reads, for the output guard (best effort: an input
+    that cannot be read here is reported by the command itself, before it writes). The
+    station history is an input of every command that may read it."""
+    from cadra.io.facility_file import resolve_facility_path
+    from cadra.io.shotfile import load_shot
+
+    paths: list[Path] = []
+    readable = (ValueError, KeyError, OSError)
+
+    def facility(name: str) -> None:
+        with suppress(*readable):
+            paths.append(Path(resolve_facility_path(name)))
+
+    if args.command == "simulate":
+        from cadra.synthetic.simulate import load_shot_spec
+
+        paths.append(Path(args.spec))
+        with suppress(*readable):
+            spec = load_shot_spec(args.spec)
+            facility(spec.facility)
+            if Path(spec.aero_model).exists():
+                paths.append(Path(spec.aero_model))
+        return paths
+    from cadra.flight.load import trajectory_and_shot
+
+    given = args.shot or []
+    paths += [Path(p) for p in (*args.trajectories, *given)]
+    for k, item in enumerate(args.trajectories):
+        with suppress(*readable):
+            traj, shot_path = trajectory_and_shot(item, given[k] if k < len(given) else None)
+            paths += [traj, shot_path]
+            shot = load_shot(shot_path)
+            paths += [shot.image_path(rec.station, view)
+                      for rec in shot.stations for view in rec.images]
+            facility(shot.facility)
+    for name in ("model", "bias_table", "reference"):
+        value = getattr(args, name, None)
+        if value and Path(value).exists():
+            paths.append(Path(value))
+    if args.command == "calibrate" or getattr(args, "stations_root", None):
+        from cadra.calibration.history import stations_root
+
+        with suppress(*readable):  # the station history (calibrate, fit --bias-table)
+            paths.append(stations_root(getattr(args, "stations_root", None)) / "stations")
+    return paths
+
+
+__all__ = ["REFUSED", "add_data_options", "add_start_option", "input_paths", "model_of",
+           "quiet", "refused", "say", "shots_of", "verbose"]

@@ -1,0 +1,77 @@
+"""``cadra2 diagnose TRAJECTORY [...] --model MODEL -o OUT_DIR``: fit, then rank the library of
+unmodelled effects by score tests and nonlinear refits, add the significant ones, and say
+where any remaining gap lies (:func:`cadra.gap.score.diagnose_gap`,
+:func:`cadra.gap.where.where_analysis`; docs/gap.md); written by
+:func:`cadra.report.gap.write_diagnosis`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cadra.cli._inputs import (
+    REFUSED,
+    add_data_options,
+    add_start_option,
+    model_of,
+    quiet,
+    refused,
+    say,
+    shots_of,
+    verbose,
+)
+
+
+def add_parser(sub, subcommand) -> None:
+    diag = subcommand(
+        sub, "diagnose", run,
+        "where the fit misses, which unmodelled effect, how far it shrinks",
+        "Fit, then rank a library of unmodelled effects (dynamics, aero, station) by score "
+        "tests and nonlinear refits, add the significant ones, and say where any remaining "
+        "gap lies (docs/gap.md).")
+    add_data_options(diag)
+    diag.add_argument("--model", required=True, help="aero model (bundled name or file)")
+    diag.add_argument("--alpha", type=float, default=0.01,
+                      help="family-wise significance of adding an effect")
+    add_start_option(diag)
+
+
+def run(args) -> int:
+    """``cadra2 diagnose`` (module doc); returns the exit status."""
+    from cadra.fitting import FitOptions, fit_shots
+    from cadra.flight.starts import start_estimates
+    from cadra.gap.score import diagnose_gap
+    from cadra.gap.where import where_analysis
+    from cadra.io.trajectory import load_trajectory
+    from cadra.report.gap import write_diagnosis
+
+    out = Path(args.output)
+    try:
+        model = model_of(args)
+        shots, trajs = shots_of(args)
+        # a fit short of convergence is still diagnosed: diagnose_gap continues it with more
+        # budget and, if it still falls short, runs from its best point and says so
+        result, _ = fit_shots(shots, model, estimates=start_estimates(shots, args.start),
+                              options=FitOptions(max_iterations=args.max_iterations))
+        dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=not quiet(args))
+        stage_one = {}
+        for sd, traj in zip(shots, trajs, strict=True):
+            table = load_trajectory(traj).table
+            if "x_consistency" in table:
+                stage_one[sd.shot_id] = table
+        base = dg.fit_given if dg.fit_given is not None else result
+        tables = where_analysis(base, shots, base.residuals, stage_one or None)
+    except REFUSED as exc:
+        return refused("cadra2 diagnose", exc)
+    write_diagnosis(dg, base, out, overwrite=args.overwrite, where_tables=tables)
+    print(dg.verdict)
+    if not quiet(args):
+        ranking = dg.ranking if verbose(args) else dg.ranking.head(8)[
+            ["candidate", "dchi2", "p_adjusted", "size"]]
+        print(ranking.to_string(index=False))
+        for line in tables["findings"]:
+            print(f"where: {line}")
+    say(args, f"wrote {out}/ (report.md, ranking.csv, where*.csv, where.png)")
+    return 0
+
+
+__all__ = ["add_parser", "run"]

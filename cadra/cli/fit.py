@@ -1,0 +1,128 @@
+"""``cadra2 fit TRAJECTORY [TRAJECTORY ...] --model MODEL -o OUT_DIR``: least-squares
+differential correction of the model's free parameters and each shot's initial state to
+stage one's measurements (docs/fitting.md): :func:`cadra.fitting.fit_shots` from the starting
+estimates :func:`cadra.flight.starts.start_estimates` gives, written by
+:func:`cadra.report.fit.write_fit_outputs` and printed as :meth:`FitResult.report` says."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from cadra.cli._format import warn
+from cadra.cli._inputs import (
+    REFUSED,
+    add_data_options,
+    add_start_option,
+    model_of,
+    quiet,
+    refused,
+    say,
+    shots_of,
+    verbose,
+)
+
+#: chi^2/nu above which a converged fit is said not to describe the data
+CHI2_WARN = 2.0
+
+
+def add_parser(sub, subcommand) -> None:
+    fit = subcommand(
+        sub, "fit", run, "fit aerodynamic coefficients to measured trajectories",
+        "Least-squares differential correction of the model's free parameters and each "
+        "shot's initial state to stage one's measurements: one trajectory file is a single "
+        "fit, several a multi-fit. Data finer than film level are fitted in two phases (first "
+        "with the sigmas floored at 0.1 mm and 0.1 deg, then with stage one's own), each with "
+        "its own progress bar. Writes the coefficient table, covariances, residuals, report "
+        "and plots (docs/fitting.md). Exit status 1 if the fit did not converge.")
+    add_data_options(fit)
+    fit.add_argument("--model", required=True,
+                     help="aero model: a bundled name (cadra2 models lists them) or a model "
+                          "file (docs/aero_models.md)")
+    fit.add_argument("--no-auto-start", action="store_true",
+                     help="start from the model file's values, not linear-theory estimates")
+    add_start_option(fit)
+    fit.add_argument("--no-plots", action="store_true", help="tables and report only")
+    fit.add_argument("--bias-table", default=None, metavar="current|FILE",
+                     help="correct the measurements by a station bias table: 'current' (the "
+                          "facility history's latest entry) or a bias-table CSV (default: "
+                          "none)")
+    fit.add_argument("--stations-root", default=None, metavar="DIR",
+                     help="directory holding stations/<facility>/ (default: $CADRA_STATIONS_ROOT"
+                          ", else the repository holding facilities/; as for calibrate)")
+    fit.add_argument("--variance-components", action="store_true",
+                     help="after convergence, rescale each channel's sigmas (x, y, z, theta, "
+                          "psi) by the factor its residuals ask for and refit: coefficient "
+                          "sigmas that carry the noise the data show when stage one's sigmas "
+                          "are off; the factors are reported (default: off, stage one's "
+                          "sigmas as they are)")
+    fit.add_argument("--reference", default=None, metavar="MODEL|FIT_DIR",
+                     help="compare with a reference: a model (bundled name or file: values "
+                          "only) or an earlier cadra2 fit's output folder (values, sigmas and "
+                          "covariance); adds a pulls table and a joint chi^2 to the report and "
+                          "draws it on the coefficient plots (default: none)")
+
+
+def run(args) -> int:
+    """``cadra2 fit`` (module doc); returns the exit status."""
+    from cadra.calibration.bias_table import correct_by_bias_table
+    from cadra.fitting import FitOptions, fit_shots
+    from cadra.flight.starts import start_estimates
+    from cadra.io.toml_file import toml_text
+    from cadra.report.fit import write_fit_outputs
+
+    out = Path(args.output)
+    try:
+        model = model_of(args)
+        shots, _ = shots_of(args)
+        notes = []
+        if args.bias_table:
+            shots, note = correct_by_bias_table(shots, args.bias_table, args.stations_root)
+            notes.append(note)
+        options = FitOptions(max_iterations=args.max_iterations, progress=not quiet(args))
+        reference = None
+        if args.reference:
+            from cadra.fitting.reference import load_reference
+
+            reference = load_reference(args.reference)   # before the fit: fail early
+        estimates = None if args.no_auto_start else start_estimates(shots, args.start)
+        result, start = fit_shots(shots, model, options=options,
+                                  auto_start=not args.no_auto_start,
+                                  variance_components=args.variance_components,
+                                  estimates=estimates)
+        if result.options.get("variance_components") and result.problem is not None:
+            shots = list(result.problem.shots)   # the rescaled sigmas the fit used
+    except REFUSED as exc:
+        return refused("cadra2 fit", exc)
+    config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
+    extra = {"model_fitted.toml": toml_text(result.model.to_dict(), "CADRA aerodynamic model "
+                                            "(docs/aero_models.md): the fitted values, written "
+                                            "by cadra2 fit"),
+             "config.toml": toml_text(config, "cadra2 fit: the command's settings")}
+    write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
+                      start_model=start, extra_files=extra, notes=notes, reference=reference)
+    print_result(result, args)
+    say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
+    return 0 if result.converged else 1
+
+
+def print_result(result, args) -> None:
+    """The status line (stdout when converged, stderr otherwise) and the warnings (stderr,
+    also under -q), then unless -q the result's report (:meth:`FitResult.report`)."""
+    line = result.status_line()
+    if result.converged:
+        print(line)
+    else:
+        print(f"cadra2 fit: NOT CONVERGED: {line} (the best point reached is written, marked "
+              "as not converged)", file=sys.stderr)
+    if result.converged and result.reduced_chi2 > CHI2_WARN:
+        warn("cadra2 fit", f"chi^2/nu = {result.reduced_chi2:.3g} > {CHI2_WARN:g}: the sigmas "
+             "or the model do not describe the data; use the scaled or coloured sigmas "
+             "(report.md)")
+    for w in result.warnings:
+        warn("cadra2 fit", w)
+    if not quiet(args):
+        print(result.report(verbose=verbose(args), status=False, warnings=False))
+
+
+__all__ = ["add_parser", "print_result", "run"]

@@ -1,0 +1,102 @@
+"""Seed 004's hold-one-parameter study (Fig. 15; "Uncertainties").
+
+Hold one parameter at each of several values, refit the rest on all shots, and tabulate the
+fit quality and the other parameters against the held value (:func:`hold_one_study`; the plot:
+:func:`cadra.report.studies.plot_hold_one`). :func:`hold_one_refit` is the per-value unit a
+scheduler can ship.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from cadra.aero import AeroModel
+from cadra.fitting.result import FitResult
+from cadra.fitting.solver import FitOptions, fit
+from cadra.flight.data import ShotData
+from cadra.studies.single import (
+    InitialStates,
+    check_count,
+    initial_state_of,
+    parameter_columns,
+    rms_columns,
+    sigma_residual_rms_deg,
+)
+
+
+def hold_one_refit(shots: Sequence[ShotData], model: AeroModel, initial_states, name: str,
+                   value: float, *, options: FitOptions | None = None
+                   ) -> tuple[dict, FitResult]:
+    """One hold-one refit: ``name`` held at ``value`` (SI), the other free parameters and every
+    shot's state refitted on all ``shots`` together.
+
+    Returns ``(row, result)``: the row of :func:`hold_one_study` and the fit result.
+    """
+    options = options or FitOptions()
+    m = model.with_vary({name: False}).with_values({name: float(value)})
+    res = fit(list(shots), m, [np.asarray(y, dtype=float) for y in initial_states],
+              options=options)
+    row = {"held": name, "value": float(value), "status": res.status,
+           "converged": bool(res), "iterations": res.iterations, "chi2": res.chi2,
+           "n_observations": res.n_observations, "dof": res.dof,
+           "reduced_chi2": res.reduced_chi2}
+    row.update(rms_columns(res.rms()))
+    row["sigma_rms_deg"] = sigma_residual_rms_deg(res, shots, options.integration)
+    row.update(parameter_columns(res, exclude=name))
+    return row, res
+
+
+def hold_one_study(shots: Sequence[ShotData], model: AeroModel, initial_states: InitialStates,
+                   name: str, values: Sequence[float], *,
+                   options: FitOptions | None = None) -> pd.DataFrame:
+    """Seed 004 Fig. 15: hold one parameter at each value, refit the rest on all shots.
+
+    Parameters
+    ----------
+    shots : the shots of the multi-fit.
+    model : the model; its free parameters other than ``name`` are refitted.
+    initial_states : per shot a (13,) state at its epoch, or a callable
+        ``(shot, model) -> (13,) state``.
+    name : the held parameter.
+    values : the values to hold it at (SI; radians for an angle parameter).
+    options : fit options.
+
+    The values are visited in increasing order. The first refit starts from ``model``'s
+    values and ``initial_states``; each later one from the previous converged refit's
+    parameters and states (continuation: neighbouring held values have neighbouring
+    solutions). After a refit that did not converge the next starts again from the given
+    start.
+
+    Returns
+    -------
+    DataFrame sorted by ``value``: ``held``, ``value``, ``status``, ``converged``,
+    ``iterations``, ``chi2``, ``n_observations``, ``dof``, ``reduced_chi2``, residual rms
+    ``x_rms_m, y_rms_m, z_rms_m, theta_rms_deg, psi_rms_deg``, ``sigma_rms_deg``
+    (:func:`sigma_residual_rms_deg`), and every other free parameter's value, ``_sigma`` and
+    ``_sigma_scaled``.
+    """
+    if name not in model.names:
+        raise KeyError(f"hold_one_study: the model has no parameter {name!r}")
+    check_count(shots, initial_states)
+    vals = np.asarray(values, dtype=float)
+    if vals.ndim != 1 or vals.size == 0 or not np.all(np.isfinite(vals)):
+        raise ValueError("hold_one_study: values must be a non-empty list of finite numbers")
+    start_states = [initial_state_of(initial_states, k, sd, model) for k, sd in enumerate(shots)]
+    cur_model, cur_states = model, start_states
+    rows = []
+    for v in np.sort(vals):
+        row, res = hold_one_refit(shots, cur_model, cur_states, name, float(v),
+                                  options=options)
+        rows.append(row)
+        if res:
+            cur_model = res.model.with_vary({name: model.parameter(name).vary})
+            cur_states = [sf.state for sf in res.shots]
+        else:
+            cur_model, cur_states = model, start_states
+    return pd.DataFrame(rows).reset_index(drop=True)
+
+
+__all__ = ["hold_one_refit", "hold_one_study"]
