@@ -15,9 +15,9 @@ from __future__ import annotations
 import math
 
 from cadra.body import Body
-from cadra.measure.locate import locate_model, pose_from_coarse
-from cadra.measure.silhouette_lsq import FitSettings, ViewFit, fit_silhouette
-from cadra.measure.template import make_template
+from cadra.measure.silhouette.fit import FitSettings, ViewFit, fit_silhouette
+from cadra.measure.silhouette.locate import locate_model, pose_from_coarse
+from cadra.measure.silhouette.template import make_template
 from cadra.synthetic.cases import ViewCase
 from cadra.synthetic.render_config import RenderConfig
 

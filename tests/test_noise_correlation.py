@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from cadra.body import capsule, sphere
-from cadra.measure.edge_segments import outline_geometry, stage_a
-from cadra.measure.noise_correlation import noise_autocovariance, segment_covariance
-from cadra.measure.silhouette_lsq import FitSettings
-from cadra.measure.template import make_template, outline_px
+from cadra.measure.silhouette.edges import outline_geometry, stage_a
+from cadra.measure.silhouette.fit import FitSettings
+from cadra.measure.silhouette.noise import noise_autocovariance, segment_covariance
+from cadra.measure.silhouette.template import make_template, outline_px
 from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.crb import grain_correlation_kernel
 from cadra.synthetic.render import RenderConfig, render

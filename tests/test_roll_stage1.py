@@ -25,7 +25,7 @@ from cadra.measure.roll import (
 )
 from cadra.measure.shot import with_roll_track
 from cadra.measure.station import StationResult, measure_station
-from cadra.measure.wires import wire_mask
+from cadra.measure.wires.fit import wire_mask
 from cadra.synthetic.crb_roll import roll_crb
 from cadra.synthetic.render_config import RenderConfig
 from cadra.synthetic.simulate import (

@@ -1,4 +1,4 @@
-"""The wire centroid's sub-pixel phase bias (cadra.measure.wire_phase), against closed forms
+"""The wire centroid's sub-pixel phase bias (cadra.measure.wires.phase), against closed forms
 and noise-free renders.
 
 A noise-free render leaves only the deterministic error of each wire's line: on a wire that
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from test_wires import FAC, QUIET, VIEWS, drift_px, make_image, true_affine, true_offset_px
 
-from cadra.measure.wire_phase import phase_gain, sampling_bias_px, systematic_cov
-from cadra.measure.wires import measure_wires
+from cadra.measure.wires.fit import measure_wires
+from cadra.measure.wires.phase import phase_gain, sampling_bias_px, systematic_cov
 
 
 @pytest.mark.parametrize("width", [1.0, 1.5, 1.97, 2.6, 3.3])

@@ -1,4 +1,4 @@
-"""The wires' profile model (cadra.measure.wire_profile) against the renderer's exact lines.
+"""The wires' profile model (cadra.measure.wires.profile) against the renderer's exact lines.
 
 Two wires 40 px apart across a 600 px strip, one parallel to the pixel rows (one sub-pixel
 phase all along: the case a centroid cannot average), one drifting 3 px across them. Formed
@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from test_wires import FAC, make_image, true_affine
 
-from cadra.measure.wire_profile import Formation, WireProfiles, fit_centres, fit_formation
-from cadra.measure.wires import _centroids, measure_wires
+from cadra.measure.wires.fit import _centroids, measure_wires
+from cadra.measure.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.synthetic.scene import wire_polygon
 

@@ -1,4 +1,4 @@
-"""A bow shock along a fiducial wire (cadra.measure.wire_straightness).
+"""A bow shock along a fiducial wire (cadra.measure.wires.straightness).
 
 In a supersonic shot the bow shock's shadowgraph line (a dark/bright pair, ~10 % contrast)
 stands ahead of the model and, near its vertex, runs almost parallel to a wire across the
@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from test_wires import FAC, affine_error_m, circle, make_image, true_affine, true_offset_px
 
-import cadra.measure.wire_straightness as straightness
+import cadra.measure.wires.straightness as straightness
 from cadra.geometry import apply_affine
-from cadra.measure.wires import measure_wires
+from cadra.measure.wires.fit import measure_wires
 from cadra.synthetic.render import RenderConfig, Scene, render
 
 MACH, RADIUS_PX, V_CENTRE_PX = 1.1, 100.0, 600.0

@@ -1,4 +1,4 @@
-"""Fiducial wires and the image->plane affine (cadra.measure.wires), against exact truth.
+"""Fiducial wires and the image->plane affine (cadra.measure.wires.fit), against exact truth.
 
 Images come from the synthetic renderer: the wires are drawn with a known, perturbed affine
 (``cadra.synthetic.simulate.film_affine``: ~4 px shift, 0.05 deg rotation, 5e-4 scale, 1-sigma), so
@@ -28,7 +28,7 @@ import pytest
 from cadra.facility.reference import fit_affine_to_wires
 from cadra.geometry import apply_affine
 from cadra.io.facility_file import load_facility
-from cadra.measure.wires import WireMeasurement, measure_wires, wire_mask
+from cadra.measure.wires.fit import WireMeasurement, measure_wires, wire_mask
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.synthetic.simulate import FilmPlacement, film_affine
 

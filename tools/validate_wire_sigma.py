@@ -2,7 +2,7 @@
 
 Renders wire-only views like ``tests/test_wires.py``'s (HFFAF station 1 top and 5 side, a
 perturbed film affine per placement, default realism), measures them with
-:func:`cadra.measure.wires.measure_wires` and compares the solved map of the image centre
+:func:`cadra.measure.wires.fit.measure_wires` and compares the solved map of the image centre
 (where the model flies) with the true map, in units of the reported
 ``WireMeasurement.position_sigma_m`` (a along the range, b across it). Each placement is
 rendered twice: with the default noise, and noise-free (same wires, same placement), whose
@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_wires import FAC, QUIET, VIEWS, make_image, true_affine  # noqa: E402
 
 from cadra.geometry import apply_affine  # noqa: E402
-from cadra.measure.wires import measure_wires  # noqa: E402
+from cadra.measure.wires.fit import measure_wires  # noqa: E402
 from cadra.synthetic.render import RenderConfig  # noqa: E402
 
 

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from cadra.measure.template import outline_px
+from cadra.measure.silhouette.template import outline_px
 
 
 def overlay_image(image, *, wire_lines=(), outline_px=None, ref_px=None, axis_px=None,

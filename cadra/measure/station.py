@@ -8,13 +8,13 @@ its images as arrays or paths, the body's spec dict, settings) returning a
 1. take the image (an array, :func:`cadra.measure.loading.station_image`, or a file,
    :func:`cadra.measure.loading.load_station_image`; a bad one fails that view with its
    reason);
-2. locate the model roughly (:func:`cadra.measure.locate.locate_model`) with the view's
+2. locate the model roughly (:func:`cadra.measure.silhouette.locate.locate_model`) with the view's
    nominal projection;
 3. find and fit the fiducial wires, solve the image->plane affine and so the view's
-   :class:`~cadra.optics.projection.Projection` (:func:`cadra.measure.wires.measure_wires`),
+   :class:`~cadra.optics.projection.Projection` (:func:`cadra.measure.wires.fit.measure_wires`),
    the model's box excluded;
-4. fit the silhouette (method a, :mod:`cadra.measure.silhouette_lsq`) and the area centroid
-   (method b, :mod:`cadra.measure.centroid`) with the wires masked.
+4. fit the silhouette (method a, :mod:`cadra.measure.silhouette.fit`) and the area centroid
+   (method b, :mod:`cadra.measure.silhouette.centroid`) with the wires masked.
 
 The two views are then alternated: each view's outline depends on the axis' tilt out of its
 plane, which the other view measures; two or three rounds converge (the outline depends on the
@@ -45,9 +45,9 @@ from cadra.conventions import axis_from_projected_angles
 from cadra.facility.reference import Station
 from cadra.measure.combine import StationPose, ViewPose, combine_views
 from cadra.measure.loading import load_station_image, station_image
-from cadra.measure.locate import locate_model, pose_from_coarse
-from cadra.measure.silhouette_lsq import FitSettings, ViewFit, fit_silhouette
-from cadra.measure.template import make_template, outline_px
+from cadra.measure.silhouette.fit import FitSettings, ViewFit, fit_silhouette
+from cadra.measure.silhouette.locate import locate_model, pose_from_coarse
+from cadra.measure.silhouette.template import make_template, outline_px
 from cadra.optics.projection import Projection
 
 VIEWS = ("top", "side")
@@ -78,7 +78,7 @@ class ViewResult:
     ok: bool
     reason: str
     fit: ViewFit | None = None
-    wires: object | None = None            # cadra.measure.wires.WireMeasurement
+    wires: object | None = None            # cadra.measure.wires.fit.WireMeasurement
     affine: np.ndarray | None = None       # image -> plane actually used
     tilt_rad: float = 0.0
     warnings: tuple[str, ...] = ()
@@ -184,7 +184,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
     ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
     so template, changed much since ``prev``: its edge profile was fitted to mismatched fins)."""
-    from cadra.measure.wires import measure_wires, wire_mask
+    from cadra.measure.wires.fit import measure_wires, wire_mask
 
     masks = {} if masks is None else masks
 

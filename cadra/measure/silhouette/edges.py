@@ -9,7 +9,7 @@ image-wide as ``D = r L + c`` by default; s the edge width; ``a L h`` the diffra
 :func:`_edge_profile`) gives the segment's edge offset ``delta`` along the outward normal with
 its variance (:func:`stage_a`). The edge width and the fringe amplitude are fitted per image,
 each as ``x0 + x4 cos(4 theta)`` (theta the normal's angle to the pixel grid). The method is
-described in :mod:`cadra.measure.silhouette_lsq` and docs/stage1.md; all lengths in pixels.
+described in :mod:`cadra.measure.silhouette.fit` and docs/stage1.md; all lengths in pixels.
 """
 
 from __future__ import annotations
@@ -446,6 +446,35 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
 
 
 @dataclass(frozen=True, eq=False)
+class StageAState:
+    """Stage A's final state, what the offsets' covariance is computed from
+    (:func:`cadra.measure.silhouette.noise.segment_covariance`): the band's pixels (their
+    linear index ``lin`` into the image, intensity ``I``, signed distance ``d`` to the outline,
+    segment ``k``, weight ``w``), each segment's levels ``L``, ``D`` and offset ``delta``,
+    the edge profile ``prof`` and its cos 4θ factors ``c4``, the fringe width ratio, whether
+    the dark level is tied, and the ring coefficients ``rc``."""
+
+    lin: np.ndarray
+    I: np.ndarray
+    d: np.ndarray
+    k: np.ndarray
+    w: np.ndarray
+    L: np.ndarray
+    D: np.ndarray
+    delta: np.ndarray
+    prof: np.ndarray
+    c4: np.ndarray
+    fringe_ratio: float
+    tied: bool
+    rc: np.ndarray
+
+    def kernel_args(self) -> tuple:
+        """The arguments of the compiled influence kernel after ``lin``, in its order."""
+        return (self.I, self.d, self.k, len(self.delta), self.w, self.L, self.D, self.delta,
+                self.prof, self.c4, self.fringe_ratio, self.tied, self.rc)
+
+
+@dataclass(frozen=True, eq=False)
 class EdgeSegments:
     """Per-segment edge offsets of one pose iteration (stage A)."""
 
@@ -462,7 +491,7 @@ class EdgeSegments:
     noise_coef: np.ndarray    # variance model v0 + v1 m + v2 m^2 (m = model intensity)
     profile: np.ndarray       # global edge profile (s0, a0, s4, a4), see _gn_accumulate
     #: per-pixel arrays for the centroid method, and (``FitSettings.covariance`` =
-    #: "correlated" or "predicted") ``state``, stage A's final state for noise_correlation
+    #: "correlated" or "predicted") ``state``, stage A's final :class:`StageAState`
     pixels: dict = field(default_factory=dict)
 
 
@@ -493,11 +522,15 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     """Stage A at one trial outline: every usable segment's edge offset with its variance.
 
     ``img`` float (H, W); ``geo`` the outline (:func:`outline_geometry`); ``settings`` the
-    :class:`cadra.measure.silhouette_lsq.FitSettings`; ``exclude`` True on pixels not to use;
+    :class:`cadra.measure.silhouette.fit.FitSettings`; ``exclude`` True on pixels not to use;
     ``profile0`` the starting edge profile ``(s0, a0, s4, a4)``; ``noise_coef`` a previous
     noise model (a warm start: fewer rounds); ``band_px`` overrides ``settings.band_px``
-    (``FitSettings.band_for``). None when fewer than 8 segments are usable."""
-    lin, d, e, t = band_pixels(geo, band_px or settings.band_px, img.shape)
+    (``FitSettings.band_for``; None: the settings' own). None when fewer than 8 segments
+    are usable."""
+    band = settings.band_px if band_px is None else float(band_px)
+    if not band > 0:
+        raise ValueError(f"band_px: the pixel band's half-width must be positive, got {band}")
+    lin, d, e, t = band_pixels(geo, band, img.shape)
     if len(lin) == 0:
         return None
     # the true outline bulges beyond each chord of a curved stretch by kappa l^2 t (1 - t) / 2
@@ -558,10 +591,10 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     nn = np.hypot(nx, ny)
     pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
     if settings.covariance in ("correlated", "predicted"):
-        # the final state, for measure.noise_correlation (the final pose's sigma only)
-        pixels["state"] = (lin[use], I_u, d_u, k, w, L, D, delta, prof, c4,
-                           float(settings.fringe_width_ratio), settings.dark_level == "tied",
-                           rc)
+        # the final state, for measure.silhouette.noise (the final pose's sigma only)
+        pixels["state"] = StageAState(lin[use], I_u, d_u, k, w, L, D, delta, prof, c4,
+                                      float(settings.fringe_width_ratio),
+                                      settings.dark_level == "tied", rc)
     return EdgeSegments(delta_px=delta, var_px2=var_delta, normal=np.column_stack([nx / nn,
                                                                                   ny / nn]),
                         foot_px=np.column_stack([fx, fy]), kappa=kap, bright=L, dark=D,

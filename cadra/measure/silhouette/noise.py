@@ -6,7 +6,7 @@ Neighbouring segments share the grain at their common end; a pose fit, which sum
 offset, sees that correlation, and the offsets' residuals cannot show it (the pose absorbs
 it). :func:`noise_autocovariance` measures the noise, :func:`offset_covariance` propagates it
 through each pixel's influence on its segment's offset (``EdgeSegments.pixels``, kept by
-:func:`cadra.measure.edge_segments.stage_a`); :func:`segment_covariance` applies it to a
+:func:`cadra.measure.silhouette.edges.stage_a`); :func:`segment_covariance` applies it to a
 stage-A result and :func:`segment_correlation` normalizes that.
 Pure functions of arrays (picklable inputs).
 """
@@ -17,7 +17,7 @@ import cv2
 import numba
 import numpy as np
 
-from cadra.measure.edge_segments import (
+from cadra.measure.silhouette.edges import (
     EdgeSegments,
     Outline,
     _edge_profile,
@@ -147,11 +147,11 @@ def segment_covariance(seg: EdgeSegments, width: int, acov, pixel_var=None) -> n
     stage A's final state (``seg.pixels["state"]``, kept when ``FitSettings.covariance`` is
     "correlated"). ``pixel_var(m)``: the pixels' noise variance at model intensity ``m``
     (default: the fitted noise model, ``1 / w``)."""
-    lin, I, d, k, w, L, D, delta, prof, c4, ratio, tied, rc = seg.pixels["state"]
+    st = seg.pixels["state"]
     K = len(seg.delta_px)
-    infl, m = _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc)
-    w_noise = w if pixel_var is None else 1.0 / pixel_var(m)
-    return offset_covariance(lin, width, k, K, infl, w_noise, m, acov)
+    infl, m = _offset_influence(*st.kernel_args())
+    w_noise = st.w if pixel_var is None else 1.0 / pixel_var(m)
+    return offset_covariance(st.lin, width, st.k, K, infl, w_noise, m, acov)
 
 
 def segment_correlation(seg: EdgeSegments, width: int, acov) -> np.ndarray:

@@ -9,7 +9,7 @@ Stage one's main method (seed 004, "Data Reduction and Analysis"; docs/stage1.md
     + outside; L the local bright level, D the dark level, tied to it image-wide as
     ``D = r L + c`` by default (``FitSettings.dark_level``: a free D per segment costs each
     offset ~12 % of its sigma); s the edge width) gives the segment's edge offset ``delta``
-    along the outward normal, with its variance (stage A, :mod:`cadra.measure.edge_segments`).
+    along the outward normal, with its variance (stage A, :mod:`cadra.measure.silhouette.edges`).
     ``a L h`` is the diffraction fringe: a bright band outside the edge and a dark one inside,
     the second derivative of a blurred step. The edge width and the fringe amplitude are
     fitted per image, each as ``x0 + x4 cos(4 theta)`` (theta the normal's
@@ -28,9 +28,10 @@ Stage one's main method (seed 004, "Data Reduction and Analysis"; docs/stage1.md
     at each pose). Uncertainty: Newey-West sandwich over the contour-ordered segment residuals,
     so correlated noise (film grain) and misfit show up in the sigma.
 
-Method (b), the area centroid, is :mod:`cadra.measure.centroid`; the outline template
-:mod:`cadra.measure.template`; stage A (the per-segment edge offsets and their numba kernels)
-:mod:`cadra.measure.edge_segments`; the first guess :mod:`cadra.measure.locate`.
+Method (b), the area centroid, is :mod:`cadra.measure.silhouette.centroid`; the outline
+template :mod:`cadra.measure.silhouette.template`; stage A (the per-segment edge offsets and
+their numba kernels) :mod:`cadra.measure.silhouette.edges`; the first guess
+:mod:`cadra.measure.silhouette.locate`.
 
 Geometry is in the *view plane* (metres in F, docs/conventions.md) through the view's
 :class:`~cadra.optics.projection.Projection` (for a parallel view: the image's wire affine);
@@ -51,14 +52,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cadra.measure.centroid import centroid_pose
-from cadra.measure.edge_segments import outline_geometry, stage_a
-from cadra.measure.noise_correlation import (
+from cadra.measure.silhouette.centroid import centroid_pose
+from cadra.measure.silhouette.edges import outline_geometry, stage_a
+from cadra.measure.silhouette.noise import (
     noise_autocovariance,
     segment_correlation,
     segment_covariance,
 )
-from cadra.measure.template import Template, outline_px, pose_px
+from cadra.measure.silhouette.template import Template, outline_px, pose_px
 from cadra.optics.projection import Projection
 
 __all__ = ["FitSettings", "ViewFit", "fit_silhouette"]
@@ -83,7 +84,7 @@ class FitSettings:
     outlier_sigma: float = 4.0      # segment offsets beyond this many robust sigma are dropped
     hac_lags: int = 3               # Newey-West lags over contour-ordered segments
     #: "predicted" (default): the offsets' covariance predicted from the image's measured
-    #: noise (measure.noise_correlation), scaled up, never down, by their reduced chi^2
+    #: noise (measure.silhouette.noise), scaled up, never down, by their reduced chi^2
     #: about it; "correlated": the formal covariance times the offsets' reduced chi^2, with
     #: the predicted correlation between segments; "scaled": that without the correlation;
     #: "sandwich": Newey-West over the contour-ordered segments (the pre-issue-18 sigma)

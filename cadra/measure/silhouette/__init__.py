@@ -1,0 +1,18 @@
+"""The model's pose in one shadowgraph from its silhouette (docs/stage1.md):
+
+- :mod:`~cadra.measure.silhouette.template`: the body's outline template in a view, and its
+  pixel outline at a pose;
+- :mod:`~cadra.measure.silhouette.locate`: the coarse location, the fit's first guess;
+- :mod:`~cadra.measure.silhouette.edges`: stage A, per-segment edge offsets about a trial
+  outline, with the blurred-edge model of a whole polygon;
+- :mod:`~cadra.measure.silhouette.noise`: the image noise's correlation and the offsets'
+  covariance it makes;
+- :mod:`~cadra.measure.silhouette.fit`: the silhouette least squares (method a),
+  :func:`fit_silhouette`;
+- :mod:`~cadra.measure.silhouette.centroid`: the pose from the shadow's area moments
+  (method b).
+"""
+
+from cadra.measure.silhouette.fit import FitSettings, ViewFit, fit_silhouette
+
+__all__ = ["FitSettings", "ViewFit", "fit_silhouette"]
