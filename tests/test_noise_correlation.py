@@ -18,7 +18,7 @@ from cadra.measure.silhouette.template import make_template, outline_px
 from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.crb import grain_correlation_kernel
 from cadra.synthetic.render import RenderConfig, render
-from cadra.validation import case_errors, measure_case
+from cadra.validation.views import case_errors, measure_case
 
 M2 = capsule("M2")
 LAGS_CHECKED = [(1, 0), (0, 1), (1, 1), (-1, 1), (2, 0), (0, 2), (2, 1), (3, 0)]

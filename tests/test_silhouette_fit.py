@@ -18,7 +18,7 @@ from cadra.measure.silhouette.template import make_template, outline_px
 from cadra.optics.projection import ParallelProjection
 from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.render import RenderConfig
-from cadra.validation import NO_INVERSE_CRIME, case_errors, measure_case
+from cadra.validation.views import NO_INVERSE_CRIME, case_errors, measure_case
 
 SPHERE = sphere(0.03556)
 M2 = capsule("M2")

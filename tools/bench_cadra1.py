@@ -15,7 +15,7 @@ Sections (all on the M2 capsule, 3.556 cm = 280 px across, and a sphere of the s
    same images, and its error over CADRA's;
 3. "no inverse crime": renders with settings the measurement does not model (Airy-like and
    disk PSFs, a stronger diffraction fringe, coarser film grain, heavy clutter);
-   image formations it does model but away from the default (cadra.validation.IMAGE_FORMATION:
+   image formations it does model but away from the default (cadra.validation.views.IMAGE_FORMATION:
    0.4 px and 2 px optics blur, 2.5x the fringe) and a small model (a 6 mm sphere, ~47 px),
    each once broken; their sigma / rms in ``formation_sigma_ratio_min/max``;
 4. speed: one 16-station two-view shot (32 images of 1600x1200) measured on one core, against
@@ -49,7 +49,7 @@ def _cases(body, n, config, seed, keep=0, baseline=False):
     not all fit in memory). Returns (errors, sigmas, baseline errors or None, fit times, the
     first ``keep`` cases)."""
     from cadra.synthetic.cases import random_view_case
-    from cadra.validation import case_errors, measure_case
+    from cadra.validation.views import case_errors, measure_case
 
     rng = np.random.default_rng(seed)
     E, S, B, T, kept = [], [], [], [], []
@@ -121,7 +121,7 @@ def _ratio_se(B, E, n_boot=400, seed=0):
 def accuracy(n_default, n_variant, n_crb):
     from cadra.body import capsule, sphere
     from cadra.synthetic.render import RenderConfig
-    from cadra.validation import IMAGE_FORMATION, NO_INVERSE_CRIME
+    from cadra.validation.views import IMAGE_FORMATION, NO_INVERSE_CRIME
 
     bodies = {"sphere": sphere(0.03556), "capsule": capsule("M2")}
     out = {}
@@ -245,7 +245,7 @@ def main() -> int:
     s, c = acc["sphere"], acc["capsule"]
     variant_rms = {f"{b}_{k}_rms_max": max(v["rms"]) for b, r in acc.items()
                    for k, v in r["variants"].items()}
-    from cadra.validation import IMAGE_FORMATION
+    from cadra.validation.views import IMAGE_FORMATION
 
     formation = [x for r in acc.values() for k, v in r["variants"].items()
                  if k in IMAGE_FORMATION or k == SMALL_MODEL for x in v["sigma_ratio"]]

@@ -6,7 +6,7 @@ with the image's true affine), with the renderer's exact truth. The frame's view
 affine come from the default facility's scale; the film placement perturbs the affine as
 :func:`cadra.synthetic.simulate.film_affine` does for whole shots. Same scene code as whole shots
 (:func:`cadra.synthetic.simulate.view_scene`). Measuring a case is the harness layer's job
-(:func:`cadra.validation.measure_case`): this module never imports stage one.
+(:func:`cadra.validation.views.measure_case`): this module never imports stage one.
 """
 
 from __future__ import annotations
