@@ -6,6 +6,7 @@ is, so a change that imports upward or closes a circle fails here with import-li
 account of the offending import chain.
 """
 
+import ast
 import subprocess
 import sys
 from pathlib import Path
@@ -36,3 +37,50 @@ def test_no_file_over_the_line_limit_unless_it_holds_one_concept():
                 long[path.relative_to(ROOT).as_posix()] = n
     unexplained = {p: n for p, n in long.items() if p not in ONE_CONCEPT_FILES}
     assert not unexplained, f"files over {MAX_LINES} lines: {unexplained}"
+
+
+def _cli_imports(path: Path) -> list[str]:
+    """What a file imports from ``cadra.cli``, as ``module:name`` (a module imported whole
+    as ``module:*``)."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module and (
+                node.module == "cadra.cli" or node.module.startswith("cadra.cli.")):
+            out += [f"{node.module}:{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            out += [f"{a.name}:*" for a in node.names if a.name.startswith("cadra.cli")]
+    return out
+
+
+def test_tests_and_tools_reach_the_command_lines_only_through_main():
+    """The command lines hold no library logic anyone needs: a test or a tool imports from
+    ``cadra.cli`` only a console script's ``main`` (the library never does: the contract
+    "The command lines are thin" in pyproject.toml)."""
+    bad = {}
+    for folder in ("tests", "tools"):
+        for path in (ROOT / folder).rglob("*.py"):
+            names = [n for n in _cli_imports(path)
+                     if n.split(":")[1] != "main" or n.split(":")[0] == "cadra.cli"]
+            if names:
+                bad[path.relative_to(ROOT).as_posix()] = names
+    assert not bad, bad
+
+
+def test_no_test_or_tool_bends_the_import_path():
+    """Shared code is imported from the package: no test or tool puts a folder on sys.path,
+    loads a file by path, or imports another test module."""
+    test_modules = {p.stem for p in (ROOT / "tests").glob("test_*.py")}
+    bad = {}
+    for folder in ("tests", "tools"):
+        for path in (ROOT / folder).rglob("*.py"):
+            text = path.read_text(encoding="utf-8")
+            found = [w for w in ("sys.path", "spec_from_file_location", "importlib.util")
+                     if w in text and path.name != "test_architecture.py"]
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, ast.ImportFrom) and node.module in test_modules:
+                    found.append(f"from {node.module} import")
+                elif isinstance(node, ast.Import):
+                    found += [f"import {a.name}" for a in node.names if a.name in test_modules]
+            if found:
+                bad[path.relative_to(ROOT).as_posix()] = found
+    assert not bad, bad

@@ -1,6 +1,6 @@
-"""Every bad input a clear message (issue 17 items 3 and 6): aero model files, trajectory files
-and shot files. Each test asserts that the project's own error type is raised and that its
-message names the file and the culprit (key, coefficient and term, station and column).
+"""Every bad input a clear message: aero model files, trajectory files and shot files. Each
+test asserts that the project's own error type is raised and that its message names the file
+and the culprit (key, coefficient and term, station and column).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ def _model(expr: str, source: str = "m.toml", **values):
 
 def test_a_700_term_sum_loads_and_evaluates():
     """A long polynomial is legitimate: 700 terms (700 levels deep) load, compile and agree
-    with the reference evaluator (was a RecursionError)."""
+    with the reference evaluator (no RecursionError)."""
     model = _model(" + ".join(["a*sin(sigma)"] * 700))
     got = model.evaluate(0.1, 0.0, 0.1, 0.5)["CD"]
     assert got == pytest.approx(700 * np.sin(0.1), rel=1e-12)
@@ -124,23 +124,11 @@ SHOT = "sample_shots/m2_2429/shot.toml"
 def _trajectory(tmp_path, n=6, edit=None):
     """A trajectory file of the first ``n`` stations of the M2-2429 sample's truth; ``edit``
     changes the table (file units) before it is written."""
-    import pandas as pd
+    from cadra.validation.truth_files import write_trajectory_file
 
-    from cadra.io.trajectory import COLUMNS, trajectory_to_csv
-
-    t = pd.read_csv("sample_shots/m2_2429/truth.csv").iloc[:n]
-    t = t[["station", "t_s", "x_m", "y_m", "z_m", "theta_deg", "psi_deg"]].copy()
-    t["status"] = "ok"
-    for c, v in (("sigma_x_m", 1e-4), ("sigma_y_m", 1e-4), ("sigma_z_m", 1e-4),
-                 ("sigma_theta_deg", 0.1), ("sigma_psi_deg", 0.1)):
-        t[c] = v
-    t["x_top_minus_side_m"], t["x_consistency"], t["reason"], t["warnings"] = 0.0, 0.0, "", ""
-    t = t[list(COLUMNS)].astype(object)
-    if edit is not None:
-        edit(t)
-    p = tmp_path / "trajectory.csv"
-    p.write_text(trajectory_to_csv(t, {"shot_id": "M2-2429"}))
-    return p
+    return write_trajectory_file("sample_shots/m2_2429/truth.csv", None,
+                                 tmp_path / "trajectory.csv", shot_id="M2-2429",
+                                 rows=slice(None, n), edit=edit)
 
 
 def _set(row, column, value):
@@ -313,7 +301,8 @@ def test_cadra1_truth_missing_or_invalid_is_one_line(tmp_path, capsys, content):
 
 
 def test_a_body_without_volume_is_refused(tmp_path):
-    """Found by tools/fuzz_parsers.py: a 4e-243 cm sphere (volume 0) divided by zero."""
+    """A 4e-243 cm sphere (volume 0; an input of tools/fuzz_parsers.py): refused, not a
+    division by zero."""
     from cadra.io.shotfile import ShotFileError, load_shot
 
     p = _shot(tmp_path, SPHERE_TEXT.replace("d_cm = 2.0", "d_cm = 0.378e-242"))

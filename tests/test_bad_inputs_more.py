@@ -1,11 +1,10 @@
 """Regression tests for what the property-based parser tests (tests/test_fuzz_parsers.py,
 tools/fuzz_parsers.py) found in the facility file, shot specifications, truth tables, bias
 tables and station histories: one concrete input each, refused with the file's own error
-class, the message naming the file and the key, row or column (issue 17 item 6)."""
+class, the message naming the file and the key, row or column."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
 from pathlib import Path
@@ -23,11 +22,9 @@ from cadra.calibration.table import (
 from cadra.io.facility_file import FacilityFileError, load_facility
 from cadra.io.spec_file import SpecError, load_shot_spec
 from cadra.io.trajectory import TrajectoryFileError, load_truth
+from cadra.validation.fuzz import bias_tables
 
 ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("fuzz_parsers", ROOT / "tools" / "fuzz_parsers.py")
-fuzz = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fuzz)
 
 
 # --- bias-table CSV -------------------------------------------------------------------------
@@ -36,7 +33,7 @@ _spec.loader.exec_module(fuzz)
 @pytest.fixture
 def table_text(tmp_path):
     """A valid bias-table CSV (16 stations) written by ``save_bias_table``."""
-    return save_bias_table(fuzz.bias_tables()[0], tmp_path / "ok.csv").read_text()
+    return save_bias_table(bias_tables()[0], tmp_path / "ok.csv").read_text()
 
 
 def _cell(text: str, row: int, column: str, value: str) -> str:
@@ -77,7 +74,7 @@ def test_bias_table_text_cell_names_row_and_column(tmp_path, table_text):
 
 
 def test_bias_table_station_not_an_id(tmp_path, table_text):
-    """1e300 as a station id: was a RuntimeWarning (invalid cast) out of numpy."""
+    """1e300 as a station id: refused by row, not a RuntimeWarning (invalid cast) out of numpy."""
     p = tmp_path / "t.csv"
     p.write_text(_cell(table_text, 3, "station", "1e300"))
     with pytest.raises(StationHistoryError, match=r"t\.csv: stations: row 3: 1e\+300 is not "
@@ -86,7 +83,8 @@ def test_bias_table_station_not_an_id(tmp_path, table_text):
 
 
 def test_bias_table_integer_beyond_float(tmp_path, table_text):
-    """A 400-digit integer: was an OverflowError (int too large to convert to float)."""
+    """A 400-digit integer: refused by station and channel, not an OverflowError (int too large
+    to convert to float)."""
     p = tmp_path / "t.csv"
     p.write_text(_cell(table_text, 4, "sigma_time_s", "9" * 400))
     with pytest.raises(StationHistoryError, match=r"t\.csv: station 4 time: sigma inf must "
@@ -107,7 +105,7 @@ def test_bias_table_nonfinite_bias_names_station(tmp_path, table_text):
 
 def _history_with(tmp_path, change) -> Path:
     """A one-entry history whose entry is changed by ``change(dict)`` and signed again."""
-    path = append_entry(fuzz.bias_tables()[1], tmp_path)
+    path = append_entry(bias_tables()[1], tmp_path)
     obj = json.loads(path.read_text())
     obj.pop("sha256")
     change(obj)
@@ -116,7 +114,8 @@ def _history_with(tmp_path, change) -> Path:
 
 
 def test_history_integer_beyond_float(tmp_path):
-    """Was an OverflowError (int too large to convert to float)."""
+    """A 332-digit integer: refused by line and key, not an OverflowError (int too large to
+    convert to float)."""
     _history_with(tmp_path, lambda d: d["bias_x_m"].__setitem__(1, 2**1100))
     with pytest.raises(StationHistoryError, match=rf"{HISTORY_FILENAME}: line 1: "
                                                   r"bias_x_m\[1\]: an integer of 332 digits"):
@@ -124,7 +123,8 @@ def test_history_integer_beyond_float(tmp_path):
 
 
 def test_history_station_beyond_int64(tmp_path):
-    """Was an OverflowError (Python int too large to convert to C long)."""
+    """2**70 as a station id: refused, not an OverflowError (Python int too large to convert to
+    C long)."""
     _history_with(tmp_path, lambda d: d["stations"].__setitem__(0, 2**70))
     with pytest.raises(StationHistoryError, match=rf"{HISTORY_FILENAME}: line 1: stations: "
                                                   rf"{2**70} is not a station id"):
@@ -132,10 +132,10 @@ def test_history_station_beyond_int64(tmp_path):
 
 
 def test_history_number_beyond_float(tmp_path):
-    """``1e400`` (inf when parsed) in a line: was a ValueError from the canonical JSON
-    ("Out of range float values are not JSON compliant"), then "not valid JSON"; now named by
-    line, entry and key."""
-    path = append_entry(fuzz.bias_tables()[1], tmp_path)
+    """``1e400`` (inf when parsed) in a line: named by line, entry and key (neither a
+    ValueError from the canonical JSON, "Out of range float values are not JSON compliant",
+    nor "not valid JSON")."""
+    path = append_entry(bias_tables()[1], tmp_path)
     path.write_text(re.sub(r'"bias_x_m":\[[^,\]]+', '"bias_x_m":[1e400', path.read_text()))
     with pytest.raises(StationHistoryError, match=re.escape(
             f"{HISTORY_FILENAME}: line 1 (entry 1): key bias_x_m[0]: 1e400 is not a finite "
@@ -147,7 +147,8 @@ def test_history_number_beyond_float(tmp_path):
 
 
 def test_truth_integer_beyond_float(tmp_path):
-    """Was an OverflowError from pandas (a Python int in an object column)."""
+    """A 401-digit integer in a truth table: refused, not an OverflowError from pandas (a Python
+    int in an object column)."""
     lines = (ROOT / "sample_shots" / "m2_2429" / "truth.csv").read_text().splitlines()
     cells = lines[2].split(",")
     cells[lines[0].split(",").index("y_m")] = "9" * 401
@@ -173,7 +174,8 @@ FACILITY = (ROOT / "facilities" / "hffaf.toml").read_text()
 
 
 @pytest.mark.parametrize("old, new, culprit", [
-    # a shear of 1e300 with the right determinant: was a RuntimeWarning (overflow in matmul)
+    # a shear of 1e300 with the right determinant: refused, not a RuntimeWarning (overflow in
+    # matmul)
     ("[0.0, -0.000127, 0.0761365]]", "[1e300, -0.000127, 0.0761365]]",
      r"stations\[0\]\.views\.top\.image_to_plane\[1\]\[0\]: 1e\+300 is implausibly large"),
     ("[[0.000127, 0.0, -0.1015365]", "[[0.000127, 0.0, -1e300]",
@@ -194,7 +196,7 @@ def test_facility_implausible_numbers(tmp_path, old, new, culprit):
 
 
 def test_spec_inertia_beyond_plausible(tmp_path):
-    """[1e308, 1e308, 1e308]: was a RuntimeWarning (overflow) in the inertia check."""
+    """[1e308, 1e308, 1e308]: refused, not a RuntimeWarning (overflow) in the inertia check."""
     text = (ROOT / "sample_shots" / "specs" / "sphere_bias_1.toml").read_text()
     p = tmp_path / "spec.toml"
     p.write_text(re.sub(r"^inertia_g_cm2 = .*$", "inertia_g_cm2 = [1e308, 1e308, 1e308]",

@@ -1,5 +1,5 @@
-"""Plausibility checks where a unit slip is likely, and non-finite numbers refused by location
-(issue 17, item 3): the inertia tensor's magnitude, a station bias's size, a history number
+"""Plausibility checks where a unit slip is likely, and non-finite numbers refused by location:
+the inertia tensor's magnitude, a station bias's size, a history number
 beyond a float, and the model's diameter against the image scale at load time. Each test
 asserts the message names the culprit (key, station and channel, line and entry)."""
 
@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from cadra.io.shotfile import ShotFileError, load_shot
+from cadra.validation.fuzz import bias_tables
+from cadra.validation.truth_files import sphere_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 SPHERE = ROOT / "sample_shots" / "sphere_1" / "shot.toml"
@@ -34,8 +36,9 @@ def _write(tmp_path: Path, text: str, name: str = "shot.toml") -> Path:
     ("[[13.153, 0.0, 0.0], [0.0, 13.153, 0.0], [0.0, 0.0, 2e9]]", "[2][2] = 2e+09"),
 ])
 def test_inertia_beyond_plausible_is_refused_before_the_numerics(tmp_path, tensor, culprit):
-    """Components like 1e308 overflowed in the symmetry and eigenvalue checks (RuntimeWarning,
-    an error under this suite's warnings-as-errors); now refused by magnitude first."""
+    """Components like 1e308 are refused by magnitude before the symmetry and eigenvalue
+    checks, where they would overflow (a RuntimeWarning, an error under this suite's
+    warnings-as-errors)."""
     text = SPHERE.read_text().replace(
         "[[13.153, 0.0, 0.0], [0.0, 13.153, 0.0], [0.0, 0.0, 13.153]]", tensor)
     p = _write(tmp_path, text)
@@ -71,28 +74,18 @@ def test_validate_inertia_raises_no_warning():
 def _two_entry_history(tmp_path):
     from cadra.calibration.history import append_entry
 
-    fuzz = _fuzz()
-    first, second = fuzz.bias_tables()[:2]
+    first, second = bias_tables()[:2]
     append_entry(first, tmp_path)
     return append_entry(second, tmp_path)
-
-
-def _fuzz():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("fuzz_parsers",
-                                                  ROOT / "tools" / "fuzz_parsers.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.mark.parametrize("column, index, text", [
     ("bias_y_m", 2, "1e400"), ("sigma_z_m", 0, "-1e999"), ("bias_time_s", 2, "NaN"),
     ("sigma_x_m", 1, "Infinity"), ("sigma_x_m", 1, "-Infinity")])
 def test_history_nonfinite_named_by_entry_and_key(tmp_path, column, index, text):
-    """Was "line 2: not valid JSON ... refusing to guess" (1e400 parsed to inf and was refused
-    as if the line were corrupted); now the entry and key holding the number."""
+    """A number beyond a float (1e400 parses to inf) is named by the entry and key holding it,
+    not refused as if the line were corrupted ("line 2: not valid JSON ... refusing to
+    guess")."""
     from cadra.calibration.history import HISTORY_FILENAME, load_history
     from cadra.calibration.table import StationHistoryError
 
@@ -116,7 +109,7 @@ def _csv_with(tmp_path, station: int, column: str, value: str) -> Path:
     """A valid 16-station bias-table CSV with one cell replaced."""
     from cadra.calibration.table import save_bias_table
 
-    text = save_bias_table(_fuzz().bias_tables()[0], tmp_path / "ok.csv",
+    text = save_bias_table(bias_tables()[0], tmp_path / "ok.csv",
                            overwrite=True).read_text()
     head = [line for line in text.splitlines() if line.startswith("#")]
     rows = [line.split(",") for line in text.splitlines() if not line.startswith("#")]
@@ -136,7 +129,7 @@ def _csv_with(tmp_path, station: int, column: str, value: str) -> Path:
 ])
 def test_bias_table_absurd_bias_names_station_and_channel(tmp_path, station, column, value,
                                                           shown):
-    """Was accepted: a finite bias of 1e30 m (or 25 cm, or 20 ms) loaded and was applied."""
+    """A finite but absurd bias (1e30 m, 25 cm, 20 ms) is refused, not loaded and applied."""
     from cadra.calibration.table import StationHistoryError, load_bias_table
 
     p = _csv_with(tmp_path, station, column, value)
@@ -164,33 +157,13 @@ def test_history_absurd_bias_names_line_station_and_channel(tmp_path):
         load_history(tmp_path, "hffaf")
 
 
-def _trajectory(folder: Path, shot_file: Path = SPHERE, shot_id: str = "SPH-1") -> Path:
-    """Stage one's trajectory file of the sphere sample, from its exact truth (no images)."""
-    import pandas as pd
-
-    from cadra.io.trajectory import COLUMNS, trajectory_to_csv
-
-    t = pd.read_csv(SPHERE.parent / "truth.csv")
-    t = t[["station", "t_s", "x_m", "y_m", "z_m", "theta_deg", "psi_deg"]].copy()
-    t["status"] = "ok"
-    for c, v in (("sigma_x_m", 1e-4), ("sigma_y_m", 1e-4), ("sigma_z_m", 1e-4),
-                 ("sigma_theta_deg", 0.1), ("sigma_psi_deg", 0.1)):
-        t[c] = v
-    t["x_top_minus_side_m"], t["x_consistency"], t["reason"], t["warnings"] = 0.0, 0.0, "", ""
-    folder.mkdir(parents=True, exist_ok=True)
-    p = folder / "trajectory.csv"
-    p.write_text(trajectory_to_csv(t[list(COLUMNS)], {"shot_id": shot_id,
-                                                      "shot_file": str(shot_file)}))
-    return p
-
-
 def test_absurd_bias_table_is_refused_by_cadra2_fit(tmp_path, capsys):
     """The CLI path: ``cadra2 fit --bias-table FILE`` refuses it with exit status 1 before any
     fit, one line naming the file, station and channel; nothing written."""
     from cadra.cli.cadra2 import main
 
     table = _csv_with(tmp_path, 4, "bias_x_m", "1e30")
-    traj = _trajectory(tmp_path / "stage1")
+    traj = sphere_trajectory(tmp_path / "stage1")
     status = main(["fit", str(traj), "--model", "sphere", "--bias-table", str(table),
                    "-o", str(tmp_path / "out")])
     err = capsys.readouterr().err
@@ -212,8 +185,8 @@ SIZE_MESSAGE = ("model.d_cm = 20.0: the model's diameter, 20 cm, is more than 0.
 
 
 def test_cadra1_refuses_a_model_larger_than_the_field_of_view(tmp_path, capsys):
-    """Was caught only by ``cadra1 --check``; ``cadra1`` went on to measure. Now exit 2, one
-    line naming the file, the key and the figures, nothing written."""
+    """Not only ``cadra1 --check``: ``cadra1`` itself refuses it before measuring, exit 2,
+    one line naming the file, the key and the figures, nothing written."""
     from cadra.cli.cadra1 import main
 
     shot = _write(tmp_path, BIG_SPHERE, "big.toml")
@@ -230,7 +203,7 @@ def test_cadra2_refuses_a_model_larger_than_the_field_of_view(tmp_path, capsys, 
     from cadra.cli.cadra2 import main
 
     shot = _write(tmp_path, BIG_SPHERE, "big.toml")
-    traj = _trajectory(tmp_path / "stage1", shot_file=shot)
+    traj = sphere_trajectory(tmp_path / "stage1", shot_file=shot)
     extra = ["--model", "sphere"] if command == "fit" else ["--stations-root", str(tmp_path)]
     status = main([command, str(traj), *extra, "-o", str(tmp_path / "out")])
     assert status == 1

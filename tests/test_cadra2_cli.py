@@ -15,25 +15,9 @@ from cadra.aero import save_model
 from cadra.cli.cadra2 import main
 from cadra.io.trajectory import COLUMNS, write_trajectory
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
+from cadra.validation.truth_files import write_trajectory_file
 
 SPECS = Path("sample_shots/specs")
-
-
-def _trajectory(shot, shot_file: Path, path: Path, rng, *, sp=1e-4, sa_deg=0.1, rows=None):
-    t = shot.truth if rows is None else shot.truth.iloc[rows]
-    n = len(t)
-    table = pd.DataFrame({
-        "station": t["station"].to_numpy(), "t_s": t["t_s"].to_numpy(), "status": "ok",
-        "x_m": t["x_m"] + rng.normal(0, sp, n), "y_m": t["y_m"] + rng.normal(0, sp, n),
-        "z_m": t["z_m"] + rng.normal(0, sp, n),
-        "theta_deg": t["theta_deg"] + rng.normal(0, sa_deg, n),
-        "psi_deg": t["psi_deg"] + rng.normal(0, sa_deg, n),
-        "sigma_x_m": sp, "sigma_y_m": sp, "sigma_z_m": sp, "sigma_theta_deg": sa_deg,
-        "sigma_psi_deg": sa_deg, "x_top_minus_side_m": 0.0, "x_consistency": 0.0,
-        "reason": "", "warnings": ""})
-    write_trajectory(path, table.loc[:, list(COLUMNS)],
-                     {"shot_id": shot.spec.shot_id, "shot_file": str(shot_file.resolve())})
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +28,8 @@ def shots(tmp_path_factory):
     for name in ("m2_2429", "m2_2427"):
         sim = simulate_shot(load_shot_spec(SPECS / f"{name}.toml"))
         d = write_shot(sim, base / name, images=False, progress=False)
-        traj = _trajectory(sim, d / "shot.toml", base / f"{name}_trajectory.csv", rng)
+        traj = write_trajectory_file(sim, d / "shot.toml", base / f"{name}_trajectory.csv",
+                                     rng)
         out[name] = (sim, d / "shot.toml", traj)
     out["base"] = base
     return out
@@ -97,8 +82,8 @@ def test_files_that_do_not_belong_together(shots, capsys):
 
 def test_too_few_stations(shots, capsys):
     sim, shot_file, _ = shots["m2_2429"]
-    traj = _trajectory(sim, shot_file, shots["base"] / "short.csv",
-                       np.random.default_rng(1), rows=[0, 1, 2])
+    traj = write_trajectory_file(sim, shot_file, shots["base"] / "short.csv",
+                                 np.random.default_rng(1), rows=[0, 1, 2])
     out = shots["base"] / "short_fit"
     assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(out), "-q",
                  "--no-plots"]) == 1

@@ -378,7 +378,7 @@ def test_closed_stdout_is_quiet():
 def test_calibrate_warnings_survive_quiet(tmp_path, capsys):
     """A calibration warning (one sphere shot: timing biases not estimated) was printed on
     stdout and hidden by -q; now stderr, with -q, and stdout keeps the one status line."""
-    from test_bad_inputs_plausible import _trajectory
+    from cadra.validation.truth_files import sphere_trajectory as _trajectory
 
     traj = _trajectory(tmp_path / "stage1")
     assert cadra2_main(["calibrate", str(traj), "--stations-root", str(tmp_path), "-o",

@@ -52,7 +52,7 @@ def tree_hash(root: Path) -> str:
 def _trajectory(sim, shot_file: Path, out_dir: Path, rng) -> Path:
     """A stage-one folder for ``sim``: its exact truth plus seeded noise, written by
     tests/test_cadra2_cli.py's helper (no images needed, and the fit converges)."""
-    from test_cadra2_cli import _trajectory as trajectory_file
+    from cadra.validation.truth_files import write_trajectory_file as trajectory_file
 
     out_dir.mkdir()
     trajectory_file(sim, shot_file, out_dir / "trajectory.csv", rng)

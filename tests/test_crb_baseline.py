@@ -6,11 +6,6 @@ import numpy as np
 import pytest
 
 from cadra.body import capsule, silhouette
-from cadra.measure.baseline import (
-    otsu_moments,
-    polygon_centroid_offset,
-    reference_from_centroid,
-)
 from cadra.synthetic.crb import (
     grain_correlation_kernel,
     model_image,
@@ -25,6 +20,11 @@ from cadra.synthetic.render import (
     quantize,
     render,
     render_clean,
+)
+from cadra.validation.otsu import (
+    otsu_moments,
+    polygon_centroid_offset,
+    reference_from_centroid,
 )
 
 SCALE_M_PER_PX = 1.27e-4

@@ -1,9 +1,9 @@
 """Two implementations, one answer: CADRA's fitter against the SciPy reference fitter.
 
 :func:`cadra.fitting.solver.fit` (adaptive RK4, complex-step sensitivities, block-arrow
-Levenberg-Marquardt) and :func:`cadra.fitting.baseline.baseline_fit` (``solve_ivp`` DOP853 and
-``least_squares`` with finite differences, sharing only the equations of motion and the
-observation model) must find the same least-squares solution on the same data: shot M2-2429
+Levenberg-Marquardt) and :func:`cadra.validation.fit_baseline.baseline_fit` (``solve_ivp``
+DOP853 and ``least_squares`` with finite differences, sharing only the equations of motion and
+the observation model) must find the same least-squares solution on the same data: shot M2-2429
 (sample shot, seed 004 Table 4 M2 M0.70 truth) with film noise, four free aerodynamic
 parameters and the 12 state unknowns.
 
@@ -26,11 +26,11 @@ from cadra.dynamics.eom import air_data, derivative, rotation_fb
 from cadra.dynamics.integrate import inverse3
 from cadra.dynamics.layout import P_CG_OFFSET, P_INERTIA, P_WIND, P_WIND_GRAD
 from cadra.dynamics.setup import plane_code
-from cadra.fitting.baseline import baseline_fit, derivative_python, trajectory_ivp
 from cadra.fitting.sensitivity import apply_local, observables, predict
 from cadra.fitting.solver import fit
 from cadra.flight.data import FILM_SIGMAS, rigid_body_from_shot, shot_data_from_truth
 from cadra.io.shotfile import load_shot
+from cadra.validation.fit_baseline import baseline_fit, derivative_python, trajectory_ivp
 
 SHOT_DIR = "sample_shots/m2_2429"
 FREE = ("CD_A1", "CL_A1", "Cm_A1", "Cmq_A1")

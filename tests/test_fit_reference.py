@@ -1,4 +1,4 @@
-"""``cadra2 fit --reference``: pulls and a joint chi^2 against a reference (issue 18)."""
+"""``cadra2 fit --reference``: pulls and a joint chi^2 against a reference."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy import stats
-from test_cadra2_cli import _trajectory
 
 from cadra.cli.cadra2 import main
 from cadra.fitting.reference import Reference, compare_with_reference
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
+from cadra.validation.truth_files import write_trajectory_file
 
 SPECS = Path("sample_shots/specs")
 
@@ -49,7 +49,8 @@ def two_fits(tmp_path_factory):
     for name in ("m2_2429", "m2_2427"):
         sim = simulate_shot(load_shot_spec(SPECS / f"{name}.toml"))
         d = write_shot(sim, base / name, images=False, progress=False)
-        out[name] = (sim, _trajectory(sim, d / "shot.toml", base / f"{name}.csv", rng))
+        out[name] = (sim, write_trajectory_file(sim, d / "shot.toml", base / f"{name}.csv",
+                                               rng))
     first = base / "fit_2429"
     assert main(["fit", str(out["m2_2429"][1]), "--model", "m2_m070", "-o", str(first),
                  "-q", "--no-plots", "--reference", "m2_m070"]) == 0

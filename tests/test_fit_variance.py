@@ -71,14 +71,14 @@ def test_honest_sigmas_are_left_alone(sims):
 def test_cli_reports_the_scales(tmp_path, capsys):
     import json
 
-    from test_cadra2_cli import _trajectory
-
     from cadra.cli.cadra2 import main
     from cadra.synthetic.simulate import write_shot
+    from cadra.validation.truth_files import write_trajectory_file
 
     sim = simulate_shot(load_shot_spec(f"{SPECS}/m2_2429.toml"))
     d = write_shot(sim, tmp_path / "shot", images=False, progress=False)
-    traj = _trajectory(sim, d / "shot.toml", tmp_path / "t.csv", np.random.default_rng(2))
+    traj = write_trajectory_file(sim, d / "shot.toml", tmp_path / "t.csv",
+                                 np.random.default_rng(2))
     out = tmp_path / "fit"
     assert main(["fit", str(traj), "--model", "m2_m070", "-o", str(out), "--no-plots",
                  "--variance-components"]) == 0

@@ -1,18 +1,18 @@
-"""Property-based tests of the input parsers (issue 17 item 6): for the aero expression parser,
-aero model files, trajectory files, shot files, the facility reference file, shot
-specifications, truth tables, bias-table CSVs and station histories, generated inputs -- valid
-and broken (random text; valid files mutated: lines deleted, duplicated or swapped, values
-swapped or replaced by huge, tiny, NaN, inf, negative or wrong-typed ones, text spliced in,
-cut short; history entries with keys deleted, duplicated or mistyped) -- give a result
-or the parser's own error class, never another exception (nor a warning: warnings are errors).
+"""Property-based tests of the input parsers: for the aero expression parser, aero model files,
+trajectory files, shot files, the facility reference file, shot specifications, truth tables,
+bias-table CSVs and station histories, generated inputs -- valid and broken (random text;
+valid files mutated: lines deleted, duplicated or swapped, values swapped or replaced by huge,
+tiny, NaN, inf, negative or wrong-typed ones, text spliced in, cut short; history entries with
+keys deleted, duplicated or mistyped) -- give a result or the parser's own error class, never
+another exception (nor a warning: warnings are errors).
 
-CI runs 200 examples per parser; ``tools/fuzz_parsers.py`` (the same mutators) runs 10,000
-per parser, and the slow-marked test below runs it at 2,000.
+The seeds, mutators and parsers are :mod:`cadra.validation.fuzz`'s. CI runs 200 examples per
+parser; ``tools/fuzz_parsers.py`` (the same mutators) runs 10,000 per parser, and the
+slow-marked test below runs the fuzzer at 2,000.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import tempfile
 from pathlib import Path
 
@@ -20,10 +20,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-_TOOL = Path(__file__).resolve().parents[1] / "tools" / "fuzz_parsers.py"
-_spec = importlib.util.spec_from_file_location("fuzz_parsers", _TOOL)
-fuzz = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fuzz)
+from cadra.validation import fuzz
 
 ERRORS = fuzz.allowed()
 MODELS = fuzz.model_seeds()
@@ -275,10 +272,7 @@ def test_station_history_random_content(content):
 
 
 @pytest.mark.slow
-def test_fuzz_tool_many_inputs(capsys):
-    """The tool's own run (2,000 inputs per parser here; 10,000 from the command line)."""
-    import json
-
-    assert fuzz.main(["--n", "2000", "--seed", "1"]) == 0
-    last = capsys.readouterr().out.strip().splitlines()[-1]
-    assert json.loads(last)["uncaught"] == 0
+def test_fuzzer_many_inputs():
+    """The tool's run (2,000 inputs per parser here; 10,000 from the command line)."""
+    result = fuzz.run(fuzz.PARSERS, n=2000, seed=1, log=lambda line: None)
+    assert result["uncaught"] == 0

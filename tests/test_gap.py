@@ -18,6 +18,14 @@ from cadra.fitting import fit_shots
 from cadra.flight import shot_data_from_truth
 from cadra.gap.score import diagnose_gap
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
+from cadra.validation.gap_cases import BODY_PAIRS
+from cadra.validation.gap_scoring import (
+    body_truth_in_fit_frame,
+    exceed_pvalue,
+    linear_shrink,
+    magnitude_within_2sigma,
+    size_within_2sigma,
+)
 
 SP = 2.8e-7                      # m, stage one's capsule precision
 SA = np.radians(0.0012)          # rad
@@ -243,17 +251,6 @@ def test_motion_frequencies_of_a_multifit_name_every_shot_with_its_own_motion():
         assert f[sd.shot_id]["pitch"] == pytest.approx(f_truth, rel=0.25)
 
 
-def _validator():
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "tools" / "validate_gap.py"
-    spec = importlib.util.spec_from_file_location("validate_gap", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_validation_turns_body_truth_into_the_fits_frame():
     """The fit of a body of revolution has its own roll (no roll mark): the simulator's body
     effect must be expressed in the fit's body frame before it is compared. A fit frame
@@ -264,7 +261,6 @@ def test_validation_turns_body_truth_into_the_fits_frame():
 
     from scipy.spatial.transform import Rotation
 
-    vg = _validator()
     delta = np.radians(-150.9)
     a_truth = Rotation.from_euler("ZY", [8.7, 26.1], degrees=True)
     a_fit = a_truth * Rotation.from_euler("x", delta)
@@ -278,15 +274,15 @@ def test_validation_turns_body_truth_into_the_fits_frame():
     sim = SimpleNamespace(times_s=np.array([0.0, 0.06]), states=states)
     ey = np.array([0.0, np.cos(delta), np.sin(delta)])
     ez = np.array([0.0, -np.sin(delta), np.cos(delta)])
-    cg = vg.body_truth_in_fit_frame("cg", {"cg_offset_y_m": 0.0, "cg_offset_z_m": 1.64e-4},
-                                    sim, 0.03, q(a_fit))
+    cg = body_truth_in_fit_frame("cg", {"cg_offset_y_m": 0.0, "cg_offset_z_m": 1.64e-4},
+                                 sim, 0.03, q(a_fit))
     c = np.array([0.0, 0.0, 1.64e-4])
     assert cg["cg_offset_y_m"] == pytest.approx(ey @ c, abs=1e-15)
     assert cg["cg_offset_z_m"] == pytest.approx(ez @ c, abs=1e-15)
     a, b = 2.098e-9, 1.772e-9
     dI = np.array([[0, 0, 0], [0, a / 2, b], [0, b, -a / 2]])
-    ia = vg.body_truth_in_fit_frame("inertia_asym", {"Iyy_minus_Izz_kg_m2": a,
-                                                     "Iyz_kg_m2": b}, sim, 0.03, q(a_fit))
+    ia = body_truth_in_fit_frame("inertia_asym", {"Iyy_minus_Izz_kg_m2": a,
+                                                  "Iyz_kg_m2": b}, sim, 0.03, q(a_fit))
     assert ia["Iyy_minus_Izz_kg_m2"] == pytest.approx(ey @ dI @ ey - ez @ dI @ ez, rel=1e-9)
     assert ia["Iyz_kg_m2"] == pytest.approx(ey @ dI @ ez, rel=1e-9)
     # the principal difference does not depend on the frame
@@ -295,8 +291,8 @@ def test_validation_turns_body_truth_into_the_fits_frame():
     ex = np.array([1.0, 0.0, 0.0])
     P = np.zeros((3, 3))
     P[0, 2] = P[2, 0] = 5e-7
-    pr = vg.body_truth_in_fit_frame("products", {"Ixy_kg_m2@S": 0.0, "Ixz_kg_m2@S": 5e-7},
-                                    sim, 0.03, q(a_fit))
+    pr = body_truth_in_fit_frame("products", {"Ixy_kg_m2@S": 0.0, "Ixz_kg_m2@S": 5e-7},
+                                 sim, 0.03, q(a_fit))
     assert pr["Ixy_kg_m2@S"] == pytest.approx(ex @ P @ ey, rel=1e-9)
     assert pr["Ixz_kg_m2@S"] == pytest.approx(ex @ P @ ez, rel=1e-9)
 
@@ -306,40 +302,39 @@ def test_validation_compares_body_pairs_as_vectors_with_their_covariance():
     0.99999 (an M1-2393 trial). Off the truth along that valley is within two sigma (the
     data cannot tell), across it is not, whatever the component sigmas say; without a
     covariance the sigmas alone are used. A zero truth is a vector like any other."""
-    vg = _validator()
-    g = vg.BODY_PAIRS["inertia_asym"]
+    g = BODY_PAIRS["inertia_asym"]
     s1, s2, rho = 1.0e-8, 2.56e-8, 0.99999
     cov = [[s1 * s1, rho * s1 * s2], [rho * s1 * s2, s2 * s2]]
     truth = {"Iyy_minus_Izz_kg_m2": 4.1e-9, "Iyz_kg_m2": 4e-11}
     along = {"params": g[0], "sigma": [s1, s2], "covariance": cov,
              "size": [4.1e-9 + 2.4 * s1, 4e-11 + 2.4 * s2]}    # 2.4 sigma each, in step
-    assert vg.size_within_2sigma(along, truth, g)
-    assert not vg.size_within_2sigma(dict(along, covariance=None), truth, g)
+    assert size_within_2sigma(along, truth, g)
+    assert not size_within_2sigma(dict(along, covariance=None), truth, g)
     across = dict(along, size=[4.1e-9 + 0.01 * s1, 4e-11 - 0.01 * s2])
-    assert not vg.size_within_2sigma(across, truth, g)
-    assert vg.size_within_2sigma(dict(across, covariance=None), truth, g)
+    assert not size_within_2sigma(across, truth, g)
+    assert size_within_2sigma(dict(across, covariance=None), truth, g)
     # the size: the magnitude, by its profile over the orientation. With an isotropic sigma
     # (in (Iyy - Izz, 2 Iyz)) that is | |v| - t | <= 2 sigma; along the valley above, the
     # truth's magnitude is reached at 2.4 sigma in step, too far for one parameter
     iso = {"params": g[0], "size": [3e-9, 2e-9], "sigma": [1e-9, 0.5e-9],
            "covariance": [[1e-18, 0.0], [0.0, 0.25e-18]]}          # |(a, 2b)| = 5e-9
-    assert vg.magnitude_within_2sigma(iso, {g[0][0]: 3.1e-9, g[0][1]: 0.0}, g)
-    assert not vg.magnitude_within_2sigma(iso, {g[0][0]: 0.0, g[0][1]: 2.9e-9 / 2}, g)
-    assert vg.magnitude_within_2sigma(iso, {g[0][0]: 0.0, g[0][1]: 6.9e-9 / 2}, g)
-    assert not vg.magnitude_within_2sigma(along, truth, g)
+    assert magnitude_within_2sigma(iso, {g[0][0]: 3.1e-9, g[0][1]: 0.0}, g)
+    assert not magnitude_within_2sigma(iso, {g[0][0]: 0.0, g[0][1]: 2.9e-9 / 2}, g)
+    assert magnitude_within_2sigma(iso, {g[0][0]: 0.0, g[0][1]: 6.9e-9 / 2}, g)
+    assert not magnitude_within_2sigma(along, truth, g)
     # a zero truth (the other shots of a set): the 2-parameter 2-sigma quantile is
     # chi^2 = 6.18, so (2, 1.5) sigma (6.25) fails and (2, 1.4) sigma (5.96) passes
     zero = {"Ixy_kg_m2": 0.0, "Ixz_kg_m2": 0.0}
     pr = {"params": ("Ixy_kg_m2", "Ixz_kg_m2"), "size": [2e-9, 1.5e-9], "sigma": [1e-9, 1e-9],
           "covariance": [[1e-18, 0.0], [0.0, 1e-18]]}
-    assert not vg.size_within_2sigma(pr, zero, vg.BODY_PAIRS["products"])
+    assert not size_within_2sigma(pr, zero, BODY_PAIRS["products"])
     pr["size"] = [2e-9, 1.4e-9]
-    assert vg.size_within_2sigma(pr, zero, vg.BODY_PAIRS["products"])
+    assert size_within_2sigma(pr, zero, BODY_PAIRS["products"])
     # an effect that keeps its sign: the signed interval
     d = {"params": ("drho",), "size": [2e-3], "sigma": [1e-6],
          "interval_2sigma": [(1.9e-3, 2.1e-3, True)]}
-    assert vg.size_within_2sigma(d, {"drho": 2.05e-3})
-    assert not vg.size_within_2sigma(d, {"drho": -2.05e-3})
+    assert size_within_2sigma(d, {"drho": 2.05e-3})
+    assert not size_within_2sigma(d, {"drho": -2.05e-3})
 
 
 def test_verdict_gives_the_profile_interval_and_says_when_it_is_unsure():
@@ -394,7 +389,6 @@ def test_validation_predicts_the_shrink_ratio_from_the_fits_linearizations():
 
     import pandas as pd
 
-    vg = _validator()
     rng = np.random.default_rng(3)
     stations, chans = np.arange(1, 17), ["x", "y", "z"]
     keys = [("s", int(st), ch) for st in stations for ch in chans]
@@ -423,7 +417,7 @@ def test_validation_predicts_the_shrink_ratio_from_the_fits_linearizations():
                                / np.sum((sigma[ch == c, None] * rc[ch == c]) ** 2, axis=0))
                        for c in chans], axis=0)
 
-    lin = vg.linear_shrink(clean, after, noise, np.random.default_rng(4), draws=4000)
+    lin = linear_shrink(clean, after, noise, np.random.default_rng(4), draws=4000)
     predicted, prob = lin["ratio"], lin["prob"]
     e = np.array([noise[k] for k in keys])[:, None]
     assert predicted == pytest.approx(float(ratio(e)[0]), rel=1e-10)
@@ -437,7 +431,7 @@ def test_validation_predicts_the_shrink_ratio_from_the_fits_linearizations():
     assert 0.02 < mc < 0.98                 # the problem is one where the rate means something
     assert prob == pytest.approx(mc, abs=4 * math.sqrt(mc * (1 - mc) / 4000))
     # the same fit twice: ratio 1, never above the limit
-    same = vg.linear_shrink(clean, clean, noise, np.random.default_rng(4), draws=500)
+    same = linear_shrink(clean, clean, noise, np.random.default_rng(4), draws=500)
     assert same["ratio"] == pytest.approx(1.0, abs=1e-12) and same["prob"] == 0.0
     assert same["dchi2_mean"] == pytest.approx(0.0, abs=1e-9)
 
@@ -449,13 +443,12 @@ def test_validation_tail_probability_of_trials_above_the_limit():
 
     from scipy import stats
 
-    vg = _validator()
     rows = [{"shrink_ratio": 1.2 if i < 7 else 1.0, "shrink_exceed_prob": 0.3}
             for i in range(20)]
-    assert vg.exceed_pvalue(rows) == pytest.approx(stats.binom.sf(6, 20, 0.3), rel=1e-12)
+    assert exceed_pvalue(rows) == pytest.approx(stats.binom.sf(6, 20, 0.3), rel=1e-12)
     q = [0.1, 0.5, 0.02, 0.7, 0.33, 0.9]
     rows = [{"shrink_ratio": r, "shrink_exceed_prob": p}
             for r, p in zip([1.3, 1.0, 1.2, 1.05, 1.11, 1.0], q, strict=True)]
     brute = sum(math.prod(p if o else 1 - p for o, p in zip(out, q, strict=True))
                 for out in itertools.product([0, 1], repeat=len(q)) if sum(out) >= 3)
-    assert vg.exceed_pvalue(rows) == pytest.approx(brute, rel=1e-12)
+    assert exceed_pvalue(rows) == pytest.approx(brute, rel=1e-12)

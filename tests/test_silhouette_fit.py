@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from cadra.body import capsule, cone, sphere
-from cadra.measure.baseline import otsu_moments
 from cadra.measure.silhouette.fit import FitSettings, fit_silhouette
 from cadra.measure.silhouette.template import make_template, outline_px
 from cadra.optics.projection import ParallelProjection
 from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.render import RenderConfig
+from cadra.validation.otsu import otsu_moments
 from cadra.validation.views import NO_INVERSE_CRIME, case_errors, measure_case
 
 SPHERE = sphere(0.03556)

@@ -187,7 +187,7 @@ def test_fit_of_a_pitch_pivot_record_recovers_the_moment_slope_and_damping():
 def test_plain_python_baseline_refuses_a_mount():
     """The reference fitter's plain-Python RHS is free flight only: a mount is refused by
     name, not flown free."""
-    from cadra.fitting.baseline import python_rhs
+    from cadra.validation.fit_baseline import python_rhs
 
     m = model()
     body = RigidBody(**M1, mode=TestMode(kind="gimbal", stream_m_s=U))

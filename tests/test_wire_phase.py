@@ -12,10 +12,18 @@ single-gain model slightly under-sizes the bias near its jump); swept lines' sig
 
 import numpy as np
 import pytest
-from test_wires import FAC, QUIET, VIEWS, drift_px, make_image, true_affine, true_offset_px
 
 from cadra.measure.wires.fit import measure_wires
 from cadra.measure.wires.phase import phase_gain, sampling_bias_px, systematic_cov
+from cadra.validation.wire_images import (
+    FAC,
+    QUIET,
+    VIEWS,
+    drift_px,
+    make_image,
+    true_affine,
+    true_offset_px,
+)
 
 
 @pytest.mark.parametrize("width", [1.0, 1.5, 1.97, 2.6, 3.3])

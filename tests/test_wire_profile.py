@@ -11,12 +11,12 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_wires import FAC, make_image, true_affine
 
 from cadra.measure.wires.fit import _centroids, measure_wires
 from cadra.measure.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.synthetic.scene import wire_polygon
+from cadra.validation.wire_images import FAC, make_image, true_affine
 
 QUIET = RenderConfig(read_noise_sigma=0.0, shot_noise_sigma=0.0, film_grain_sigma=0.0,
                      scratches=0, dust=0, bow_shock=False, wake=False, bit_depth=16,

@@ -14,12 +14,19 @@ import math
 
 import numpy as np
 import pytest
-from test_wires import FAC, affine_error_m, circle, make_image, true_affine, true_offset_px
 
 import cadra.measure.wires.straightness as straightness
 from cadra.geometry import apply_affine
 from cadra.measure.wires.fit import measure_wires
 from cadra.synthetic.render import RenderConfig, Scene, render
+from cadra.validation.wire_images import (
+    FAC,
+    affine_error_m,
+    circle,
+    make_image,
+    true_affine,
+    true_offset_px,
+)
 
 MACH, RADIUS_PX, V_CENTRE_PX = 1.1, 100.0, 600.0
 #: shock vertex to x+ wire (px): cases whose line the shock moves by 5-8 sigma

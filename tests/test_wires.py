@@ -1,14 +1,15 @@
 """Fiducial wires and the image->plane affine (cadra.measure.wires.fit), against exact truth.
 
-Images come from the synthetic renderer: the wires are drawn with a known, perturbed affine
-(``cadra.synthetic.simulate.film_affine``: ~4 px shift, 0.05 deg rotation, 5e-4 scale, 1-sigma), so
-the true image->plane map and the true image line of every wire are exact.
+Images come from the synthetic renderer through :mod:`cadra.validation.wire_images`: the wires
+are drawn with a known, perturbed affine (``cadra.synthetic.simulate.film_affine``: ~4 px
+shift, 0.05 deg rotation, 5e-4 scale, 1-sigma), so the true image->plane map and the true image
+line of every wire are exact.
 
-Measured when these tests were written (HFFAF station 1 top and 5 side, 80 default-realism
-renders): affine error (largest over the image corners and centre) median 1.1 um (0.009 px),
-95th percentile 2.0 um, max 2.3 um (0.018 px); wire lines (distance of the true segment's ends
-from the fitted line) median 0.010 px, 95th percentile 0.016 px, max 0.021 px; line offsets /
-reported sigma: rms 1.1-1.2, max 4.3 (320 lines). The tolerances below sit ~1.3x above those
+Measured (HFFAF station 1 top and 5 side, 80 default-realism renders): affine error (largest
+over the image corners and centre) median 1.1 um (0.009 px), 95th percentile 2.0 um, max 2.3 um
+(0.018 px); wire lines (distance of the true segment's ends from the fitted line) median
+0.010 px, 95th percentile 0.016 px, max 0.021 px; line offsets / reported sigma: rms 1.1-1.2,
+max 4.3 (320 lines). The tolerances below sit ~1.3x above those
 maxima. measure_wires takes ~9 ms per 1600 x 1200 image.
 
 Noise-free, a wire that runs parallel to the pixel grid to within ~1 px across the image keeps
@@ -27,13 +28,19 @@ import pytest
 
 from cadra.facility.reference import fit_affine_to_wires
 from cadra.geometry import apply_affine
-from cadra.io.facility_file import load_facility
 from cadra.measure.wires.fit import WireMeasurement, measure_wires, wire_mask
-from cadra.synthetic.render import RenderConfig, Scene, render
-from cadra.synthetic.simulate import FilmPlacement, film_affine
-
-FAC = load_facility("hffaf")
-VIEWS = [(1, "top"), (5, "side")]
+from cadra.validation.wire_images import (
+    FAC,
+    QUIET,
+    VIEWS,
+    affine_error_m,
+    circle,
+    drift_px,
+    line_errors_px,
+    make_image,
+    true_affine,
+    true_offset_px,
+)
 
 #: default realism: the solved affine maps every image point within this of the truth (m;
 #: 0.024 px; measured max 2.3 um over 80 renders, median 1.1 um)
@@ -41,68 +48,6 @@ AFFINE_TOL_M = 3.0e-6
 #: ... and each wire's fitted line passes within this of the true line's ends (px; measured
 #: max 0.021 px, median 0.010 px)
 LINE_TOL_PX = 0.025
-
-QUIET = RenderConfig(read_noise_sigma=0.0, shot_noise_sigma=0.0, film_grain_sigma=0.0,
-                     scratches=0, dust=0, bow_shock=False, wake=False, bit_depth=16)
-
-
-def circle(uc, vc, radius, n=720):
-    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    return np.column_stack([uc + radius * np.cos(t), vc + radius * np.sin(t)])
-
-
-def true_affine(view, seed):
-    rng = np.random.default_rng(seed)
-    return film_affine(view.image_to_plane, FilmPlacement(), rng, view.width_px,
-                        view.height_px)
-
-
-def make_image(view, affine, config=None, seed=0, drop=(), bodies=()):
-    """Render ``view``'s wires (minus ``drop``) and mark through ``affine``; float in [0, 1]."""
-    config = RenderConfig() if config is None else config
-    segs = view.wire_lines_px(affine=affine, margin_px=20.0)
-    wires = tuple((np.array(s[0]), np.array(s[1]), w.diameter_m / view.scale_m_per_px)
-                  for s, w in zip(segs, view.wires, strict=True) if w.name not in drop)
-    mark = view.reference_mark
-    scene = Scene(width_px=view.width_px, height_px=view.height_px, bodies=tuple(bodies),
-                  wires=wires, reference_mark=(mark.u_px, mark.v_px, mark.arm_px,
-                                               mark.width_px))
-    img = render(scene, config, np.random.default_rng(seed + 12345))
-    return img.astype(np.float64) / ((1 << config.bit_depth) - 1)
-
-
-def affine_error_m(view, result, affine):
-    """Largest distance (m) between the solved and true maps of the corners and centre."""
-    W, H = view.width_px - 1.0, view.height_px - 1.0
-    pts = np.array([[0, 0], [W, 0], [0, H], [W, H], [W / 2, H / 2]])
-    d = apply_affine(result.affine, pts) - apply_affine(affine, pts)
-    return float(np.max(np.hypot(d[:, 0], d[:, 1])))
-
-
-def line_errors_px(view, result, affine):
-    """Per wire: largest distance (px) of the true segment's in-image ends from the fitted
-    line (NaN if not found)."""
-    out = []
-    for f, seg in zip(result.wires, view.wire_lines_px(affine=affine), strict=True):
-        out.append(float(np.max(np.abs(f.distance_px(np.array(seg))))) if f.found
-                   else math.nan)
-    return np.array(out)
-
-
-def true_offset_px(view, result, affine):
-    """Per wire: signed distance (px) of the fitted line's reference point from the true line."""
-    out = []
-    for f, seg in zip(result.wires, view.wire_lines_px(affine=affine), strict=True):
-        p0, p1 = np.array(seg)
-        t = (p1 - p0) / np.linalg.norm(p1 - p0)
-        out.append(float((np.asarray(f.point_px) - p0) @ np.array([-t[1], t[0]])))
-    return np.array(out)
-
-
-def drift_px(view, affine):
-    """How far (px) each wire's image strays across the pixel grid over the image."""
-    return np.array([min(abs(s[1][0] - s[0][0]), abs(s[1][1] - s[0][1]))
-                     for s in view.wire_lines_px(affine=affine)])
 
 
 @pytest.fixture(scope="module")

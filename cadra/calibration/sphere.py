@@ -12,8 +12,8 @@ really fires ``dt_k`` after the recorded time, so the model is seen ``v dt_k`` f
 Shots at different speeds separate an x-survey bias from a timing bias.
 
 Not every bias is observable: a common offset of all stations, or one growing linearly along
-the range, is the same as a change of each shot's initial position or velocity (DESIGN.md
-section 8). Along the range (x) and in time it is worse: a bias pattern quadratic in the
+the range, is the same as a change of each shot's initial position or velocity
+(docs/calibration.md). Along the range (x) and in time it is worse: a bias pattern quadratic in the
 stations' x is the same as a change of the drag level (b = c x^2 looks like a deceleration
 2 c V^2, the same Delta C_D for every shot), and a quadratic timing pattern the same as a change
 of the drag's Mach slope. These patterns are roughly polynomials in the stations' x (degree 1

@@ -99,10 +99,30 @@ def stdout_closed() -> int:
     return EXIT_STDOUT_CLOSED
 
 
+def take_ctrl_c() -> None:
+    """Make Ctrl-C reach this process: Python's own handler for SIGINT, and SIGINT unblocked.
+
+    A process inherits its parent's disposition and mask of SIGINT: started from a parent
+    that ignores it (a pool's worker, a shell's background job, a test runner's worker) or
+    that had it blocked at the moment it spawned (multiprocessing blocks it in the spawning
+    thread while it starts its resource tracker), Python installs no handler, or the signal
+    stays pending, and the command runs to its end and exits 0 after a Ctrl-C. A command
+    line takes it back at its start, so a Ctrl-C is never lost."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        with suppress(ValueError, OSError):      # not the main thread: leave it
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+    if hasattr(signal, "pthread_sigmask"):
+        with suppress(ValueError, OSError):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def console_main(prog: str, body, argv) -> int:
     """Run a console script's ``body(argv)`` to the conventions of docs/cli.md: Ctrl-C ends
-    it with one line and status 130, a closed stdout (``| head``) quietly with
-    :data:`EXIT_STDOUT_CLOSED`; returns the exit status."""
+    it with one line and status 130 (and is never lost: :func:`take_ctrl_c`), a closed
+    stdout (``| head``) quietly with :data:`EXIT_STDOUT_CLOSED`; returns the exit status."""
+    take_ctrl_c()
     try:
         status = body(argv)
         sys.stdout.flush()   # a closed stdout shows here, inside the handler below
@@ -115,4 +135,4 @@ def console_main(prog: str, body, argv) -> int:
 
 
 __all__ = ["EXIT_STDOUT_CLOSED", "HelpFormatter", "add_verbosity", "add_version",
-           "console_main", "join_number_lists", "stdout_closed", "warn"]
+           "console_main", "join_number_lists", "stdout_closed", "take_ctrl_c", "warn"]

@@ -1,4 +1,4 @@
-"""The library of candidate unmodelled effects (DESIGN.md section 9; seed 002 Table 2).
+"""The library of candidate unmodelled effects (docs/gap.md; seed 002 Table 2).
 
 Each candidate is an augmentation of the fitted model with parameters of its own, in one of
 three kinds:

@@ -3,7 +3,7 @@
 At a fit, each candidate's sensitivity columns C (per measurement, weighted) are projected
 orthogonal to the fit's own Jacobian J (every shot's initial state, the free aero parameters,
 the effects already added): ``C_perp = (I - P_J) C``. The weighted residual ``r`` regressed on
-``C_perp`` gives, without refitting (DESIGN.md section 9):
+``C_perp`` gives, without refitting (docs/gap.md):
 
 - the chi^2 the candidate would remove, ``dchi2 = |P_Cperp r|^2`` (exact for an effect that
   enters linearly, the first Gauss-Newton step otherwise);

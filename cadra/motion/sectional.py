@@ -1,7 +1,11 @@
 """Overlapping sectional fits (seed 000 "Data reduction procedure"; seed 001 section II): the
 epicyclic or 1-DOF pitch model fitted to short overlapping windows, giving the motion
 parameters K, λ, ω (and their sigmas) against time or distance. Each window starts from the
-previous window's solution, re-referred to its own centre."""
+last solution whose arms are all determined (each amplitude above its sigma), re-referred to
+its own centre. An arm that has decayed into the noise is not determined: at a vanishing
+amplitude its rate and frequency are flat directions, and a fit started there can wander
+along them until it runs out of evaluations, so such a solution is reported but not
+carried on."""
 
 from __future__ import annotations
 
@@ -55,6 +59,11 @@ def _check_window(window, step, minimum):
     return int(window), int(step)
 
 
+def _determined(fit, arms) -> bool:
+    """Whether every arm of ``fit`` has an amplitude above its sigma (a start to carry on)."""
+    return all(a.K > a.K_sigma for a in arms)
+
+
 def sectional_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, window: int,
                         step: int, variable: str = "time", **fit_kwargs) -> Sections:
     """Epicyclic fits (:func:`fit_epicyclic`, two arms) of windows of ``window`` points every
@@ -71,8 +80,9 @@ def sectional_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, wi
         c = 0.5 * (s[i] + s[j - 1])
         f = fit_epicyclic(s[i:j], a[i:j], b[i:j], sa[i:j], sb[i:j], s_ref=c, start=prev,
                           variable=variable, **fit_kwargs)
-        prev = f
         arms = [f.arm(k) for k in (1, 2)]
+        if _determined(f, arms):
+            prev = f
         rows.append((c, [m.K for m in arms], [m.K_sigma for m in arms], [m.lam for m in arms],
                      [m.lam_sigma for m in arms], [m.omega for m in arms],
                      [m.omega_sigma for m in arms], f.rms, 0.0))
@@ -92,7 +102,8 @@ def sectional_pitch(s, alpha, sigma_alpha=None, *, window: int, step: int,
         c = 0.5 * (s[i] + s[j - 1])
         f = fit_pitch(s[i:j], a[i:j], sa[i:j], trim=trim, variable=variable, s_ref=c,
                       start=prev)
-        prev = f
+        if _determined(f, [f]):
+            prev = f
         rows.append((c, [f.K], [f.K_sigma], [f.value("lambda")], [f.sigma("lambda")],
                      [f.value("omega")], [f.sigma("omega")], f.rms, f.value("alpha_T")))
     return _pack("pitch", variable, rows, window, step, None)

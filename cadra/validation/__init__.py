@@ -13,4 +13,11 @@ tests). Modules:
 - the cases, fixtures and scoring the tools and tests share (simulated tunnel records, gap
   cases and scoring, trajectory files made from a truth, image fixtures, the baselines a
   benchmark compares with).
+- :mod:`~cadra.validation.truth_files`: stage one's trajectory file made from a truth;
+- :mod:`~cadra.validation.wire_images`: wire-only images with an exact truth, their scoring;
+- :mod:`~cadra.validation.fuzz`: the input parsers' fuzzer (seeds, mutators, runner);
+- :mod:`~cadra.validation.otsu`, :mod:`~cadra.validation.fit_baseline`: the baselines the
+  benchmarks compare with (Otsu + moments pixels; the SciPy reference fitter);
+- :mod:`~cadra.validation.stage1_bench`, :mod:`~cadra.validation.stage2_bench`: the stage-one
+  and stage-two benchmarks' sections (``tools/bench_cadra1.py``, ``tools/bench_cadra2.py``).
 """

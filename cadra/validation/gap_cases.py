@@ -1,8 +1,14 @@
-"""The cases of the gap validation (tools/validate_gap.py, tools/gap_detection.py): which shots,
-what effect is injected and at what size, and the stage-one-like measurement of a simulated
-shot. Each case's sizes are drawn by ``draw(rng, lo, hi)`` (default: uniform in [lo, hi] with a
-random sign); a caller that needs other sizes (a strong effect, a detection scan) passes its
-own ``draw``. The sizes, shots and sets are described in validate_gap.py's docstring.
+"""The cases of the gap validation: which shots, what effect is injected and at what size.
+
+Each case (:func:`make_case`) names its shots (a single M2 M0.70 sample shot, an M1 M1.10 one
+for :data:`M1_CASES`, or a set, :data:`SET_CASES`), the effect it injects (a body effect, an
+aero term, the air, a measurement edit, or none), the effect the diagnosis should name and
+the truth of its parameters. Each case's sizes are drawn by ``draw(rng, lo, hi)`` (default:
+uniform in [lo, hi] with a random sign, :func:`draw_uniform`); a caller that needs other
+sizes (a strong effect, a detection scan) passes its own ``draw``. The sizes are physically
+realistic; the validation that runs the cases (``tools/validate_gap.py``) lists them.
+
+The shots are the repository's sample shots (``sample_shots/specs``, :func:`shot_spec`).
 """
 
 from __future__ import annotations
@@ -13,11 +19,21 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from cadra.validation.gap_measure import SA_DEG, SP
+
+__all__ = ["AERO_CASES", "ALL_SHOTS_CASES", "BODY_CASES", "BODY_PAIRS", "LATERAL_OFFSET_M",
+           "M1_CASES", "M1_SHOTS", "MAX_REDRAWS", "OFFSET_CASES", "PAIR_CASES",
+           "SAMPLE_SPECS", "SET_CASES", "SHARED_DENSITY_PER_M", "SHOTS", "STRONG_SUBCASES",
+           "WHERE_ONLY_SIGMAS", "draw_uniform", "make_case", "shot_spec"]
+
+#: the sample shots' specs (``<name>.toml``), in the repository beside the package
+SAMPLE_SPECS = Path(__file__).resolve().parents[2] / "sample_shots" / "specs"
+#: the seven M2 M0.70 sample shots
 SHOTS = ["m2_2425", "m2_2426", "m2_2427", "m2_2428", "m2_2429", "m2_2431", "m2_2433"]
 #: cases run on the symmetric M1 M1.10 shots (total-angle model): with an alpha-beta model's
 #: separate pitch and yaw stiffness (C_m, C_n) an Iyy - Izz split is absorbed entirely (one
 #: frequency each), and m2_m070 already has a Mach term (Cm_A3); m1_m110 has neither
+#: the M1 M1.10 sample shots
 M1_SHOTS = ["m1_2366", "m1_2379", "m1_2380", "m1_2388", "m1_2393"]
 M1_CASES = ("inertia_asym", "cmM", "held", "held_null", "shared_density", "strong")
 #: facility effects validated on sets of shots through the same stations: a station's timing
@@ -33,7 +49,7 @@ M1_CASES = ("inertia_asym", "cmM", "held", "held_null", "shared_density", "stron
 #: a body effect does not repeat, so in one shot of a set it contradicts the shared aero),
 #: and a missing cubic C_m term (at one amplitude it is a change of the linear slope; a
 #: set sees it at several). Single shots: 13 of 40 such trials ended "no significant
-#: effect" at chi^2/dof 0.9-1.4 (session 7).
+#: effect" at chi^2/dof 0.9-1.4.
 SET_CASES = {"timing": ["sphere_1", "sphere_2", "sphere_3"], "scale": 3, "station_bias": 3,
              "products": 3, "cm3": 3, "where_only": 3, "shared_density": 3, "held": 3,
              "held_null": 3, "pair_station": 3, "strong": 3}
@@ -46,6 +62,7 @@ OFFSET_CASES = ("scale", "station_bias", "where_only", "pair_station")
 #: body effects (per shot) and aero terms (every shot of a set)
 BODY_CASES = ("cg", "inertia_asym", "products")
 AERO_CASES = ("cm3", "cmq2", "cmM")
+#: the largest lateral launch offset (m) of a set's shot, in y and z
 LATERAL_OFFSET_M = 0.02
 #: body asymmetries are fitted in the fit's body frame, whose roll about the axis of a body
 #: of revolution is not the simulator's (the model carries no roll mark, so the fit's roll is
@@ -55,7 +72,6 @@ LATERAL_OFFSET_M = 0.02
 BODY_PAIRS = {"inertia_asym": [("Iyy_minus_Izz_kg_m2", "Iyz_kg_m2")],
               "cg": [("cg_offset_y_m", "cg_offset_z_m")],
               "products": [("Ixy_kg_m2", "Ixz_kg_m2")]}
-SP, SP_SPHERE, SA_DEG = 2.8e-7, 2.2e-7, 0.0012
 #: a one-station misfit of this many sigmas (in every shot of a three-shot set)
 WHERE_ONLY_SIGMAS = (3.0, 4.5)
 #: the shared density gradient's size, 1/m (0.03-0.12 % over M1's stations): small enough
@@ -73,6 +89,14 @@ PAIR_CASES = {"pair_station": ("cg", "station_bias"), "pair_dynamics": ("cg", "d
 ALL_SHOTS_CASES = ("cm3", "cmq2", "cmM", "shared_density", "held")
 #: draws of an effect that does not matter redrawn at most this many times per trial
 MAX_REDRAWS = 5
+
+
+
+def shot_spec(name: str):
+    """The sample shot ``name``'s spec (``sample_shots/specs/<name>.toml``)."""
+    from cadra.synthetic.simulate import load_shot_spec
+
+    return load_shot_spec(SAMPLE_SPECS / f"{name}.toml")
 
 
 def draw_uniform(rng, lo, hi):
@@ -185,8 +209,9 @@ def make_case(name, rng, specs, model_file_dir, draw=None):
         return spec, edit, None, {}, where
     if name == "where_only":
         # one station's angle (theta or psi) or lateral position (y or z) off by b sigma in
-        # every shot of the set, b in WHERE_ONLY_SIGMAS (validate_gap sizes it instead by its
-        # noncentrality, WHERE_ONLY_LAMBDA, and the global chi^2 alone passes in about 60 %)
+        # every shot of the set, b in WHERE_ONLY_SIGMAS (the trial runner,
+        # :mod:`cadra.validation.gap_trials`, sizes it instead by its noncentrality,
+        # WHERE_ONLY_LAMBDA, and the global chi^2 alone passes in about 60 %)
         st = int(rng.integers(1, 15))
         c = int(rng.choice([1, 2, 3, 4]))
         sig = math.radians(SA_DEG) if c >= 3 else SP
@@ -200,8 +225,8 @@ def make_case(name, rng, specs, model_file_dir, draw=None):
         expected = f"station {st + 1} {ch} bias" if c < 3 else None
         return spec, edit, expected, {}, {(st + 1, ch)}
     if name == "shared_density":
-        # the range air's gradient, the same in every shot of the set (run_trial applies the
-        # first spec's effects to every shot: ``ALL_SHOTS_CASES``)
+        # the range air's gradient, the same in every shot of the set (the trial runner applies
+        # the first spec's effects to every shot: ``ALL_SHOTS_CASES``)
         g = _draw(rng, *SHARED_DENSITY_PER_M)
         return (replace(spec, effects=Effects(density_gradient_per_m=g)), None,
                 "shared density gradient", {"drho_dx_over_rho_per_m": g}, None)
@@ -224,32 +249,3 @@ def make_case(name, rng, specs, model_file_dir, draw=None):
             if v != getattr(Effects(), k)}))
         return spec_ab, b[1] or a[1], (a[2], b[2]), {**a[3], **b[3]}, None
     raise ValueError(f"unknown case {name!r}")
-
-
-def measure(sim, nominal, spec, seed, edit, offset=(0.0, 0.0)):
-    """Stage-one-like measurements of a simulated shot, with a measurement edit applied;
-    ``offset``: (y, z) m by which the whole path is translated (a lateral launch offset);
-    ``seed`` None: without noise."""
-    from cadra.flight import shot_data_from_truth
-
-    sphere = sim.body.kind == "sphere"
-    truth = sim.truth.copy()
-    truth["y_m"] += offset[0]
-    truth["z_m"] += offset[1]
-    sd = shot_data_from_truth(truth, nominal, spec.shot_id, sim.body.kind,
-                              sigma_position_m=SP_SPHERE if sphere else SP,
-                              sigma_angle_rad=math.radians(SA_DEG),
-                              rng=None if seed is None else np.random.default_rng(seed))
-    if edit is None:
-        return sd
-    meas = sd.meas.copy()
-    if isinstance(edit, tuple):
-        kind, st, v = edit
-        if kind == "timing":      # the spark fired v after its recorded time
-            meas[st, :3] += truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()[st] * v
-        else:                     # scale about the station's optical centre (x_station, 0, 0)
-            c = np.array([truth["x_m"].iloc[st], 0.0, 0.0])
-            meas[st, :3] += v * (truth[["x_m", "y_m", "z_m"]].to_numpy()[st] - c)
-    else:
-        meas = edit(meas)
-    return replace(sd, meas=meas)

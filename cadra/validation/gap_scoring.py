@@ -1,11 +1,11 @@
-"""Scoring a gap diagnosis against the injected truth, for tools/validate_gap.py.
+"""Scoring a gap diagnosis against the injected truth.
 
-The statistics of the harness, apart from the loop that makes and diagnoses the cases: the
-shrink ratio a perfect diagnosis would reach (from the two fits' linearizations), the rate and
-tail probability of exceeding the limit, the chi^2 change expected of a correct model, the
-fits from the truth, and whether an added effect's size (a body pair by its magnitude, or a
-vector with the refit's covariance) lies within 2 sigma of the truth. Pure functions over the
-trial rows and the diagnosis's tables; tested in tests/test_gap.py through validate_gap.
+The statistics of the gap validation, apart from the loop that makes and diagnoses the
+cases: the shrink ratio a perfect diagnosis would reach (from the two fits' linearizations),
+the rate and tail probability of exceeding the limit, the chi^2 change expected of a correct
+model, the fits from the truth, and whether an added effect's size (a body pair by its
+magnitude, or a vector with the refit's covariance) lies within 2 sigma of the truth. Pure
+functions over the trial rows and the diagnosis's tables.
 """
 
 from __future__ import annotations
@@ -16,7 +16,11 @@ from dataclasses import replace
 import numpy as np
 from scipy import stats
 
-#: the issue's shrink criterion (rms per channel after / clean within 10 %), and the noise
+__all__ = ["SHRINK_DRAWS", "SHRINK_LIMIT", "body_truth_in_fit_frame", "dchi2_expected",
+           "exceed_expected", "exceed_observed", "exceed_pvalue", "fit_from_truth",
+           "linear_shrink", "magnitude_within_2sigma", "pooled_shrink", "size_within_2sigma"]
+
+#: the shrink criterion (rms per channel after / clean within 10 %), and the noise
 #: vectors drawn to estimate how often a perfect diagnosis fails it (``linear_shrink``)
 SHRINK_LIMIT = 1.10
 SHRINK_DRAWS = 4000
@@ -30,7 +34,7 @@ def linear_shrink(clean, after, noise: dict, rng, draws: int = SHRINK_DRAWS,
     the trial's ratio (max over channels of rms after / rms clean); with ``draws`` other
     noise vectors it gives the probability that the ratio exceeds ``limit`` when the effect
     added is exactly the one injected: the rate at which a perfect diagnosis fails the
-    issue's 10 % criterion on this shot. The same for chi^2 after - chi^2 clean (whose mean
+    10 % criterion on this shot. The same for chi^2 after - chi^2 clean (whose mean
     is minus the effect's parameter count; its scatter grows with the difference of the two
     Jacobians). Returns a dict: ``ratio`` (predicted), ``prob``, ``dchi2`` (predicted),
     ``dchi2_mean`` and ``dchi2_var`` over the draws; or None if either fit has no
