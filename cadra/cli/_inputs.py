@@ -4,12 +4,27 @@ input a command reads (for the output guard) and how a refused input is reported
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from contextlib import suppress
+from dataclasses import dataclass
 from pathlib import Path
 
 #: what a refused input raises (FitDataError, SpecError, CalibrationError and a missing model
 #: are ValueErrors; unknown parameter names KeyErrors)
 REFUSED = (ValueError, KeyError, FileNotFoundError)
+
+
+@dataclass(frozen=True)
+class Command:
+    """One ``cadra2`` subcommand: its name, the function that runs it (``run(args) -> exit
+    status``), its one-line summary for ``cadra2 --help``, its description for ``cadra2 NAME
+    --help`` and the function that adds its options to its parser."""
+
+    name: str
+    run: Callable
+    summary: str
+    description: str
+    arguments: Callable
 
 
 def quiet(args) -> bool:
@@ -137,5 +152,5 @@ def input_paths(args) -> list[Path]:
     return paths
 
 
-__all__ = ["REFUSED", "add_data_options", "add_start_option", "input_paths", "model_of",
+__all__ = ["REFUSED", "Command", "add_data_options", "add_start_option", "input_paths", "model_of",
            "quiet", "refused", "say", "shots_of", "verbose"]

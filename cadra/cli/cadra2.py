@@ -53,14 +53,8 @@ DESCRIPTION = (
 NUMBER_LIST_OPTIONS = ("--values",)
 
 
-def _subcommand(sub, name: str, func, summary: str, description: str):
-    """A subcommand's parser: its one-line summary in ``cadra2 --help``, its plain-text
-    description in ``cadra2 NAME --help``, defaults shown, -q/-v."""
-    p = sub.add_parser(name, help=summary, description=description,
-                       formatter_class=HelpFormatter)
-    add_verbosity(p, top=False)
-    p.set_defaults(func=func)
-    return p
+#: the subcommands, in the order of ``cadra2 --help``
+MODULES = (fit, studies, diagnose, calibrate, motion, roll, simulate)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -69,13 +63,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_version(parser)
     add_verbosity(parser)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    fit.add_parser(sub, _subcommand)
-    studies.add_parsers(sub, _subcommand)
-    diagnose.add_parser(sub, _subcommand)
-    calibrate.add_parser(sub, _subcommand)
-    motion.add_parser(sub, _subcommand)
-    roll.add_parser(sub, _subcommand)
-    simulate.add_parsers(sub, _subcommand)
+    for module in MODULES:
+        for cmd in module.COMMANDS:
+            # each subcommand: its summary in ``cadra2 --help``, its plain-text description
+            # in ``cadra2 NAME --help``, defaults shown, -q/-v
+            p = sub.add_parser(cmd.name, help=cmd.summary, description=cmd.description,
+                               formatter_class=HelpFormatter)
+            add_verbosity(p, top=False)
+            p.set_defaults(func=cmd.run)
+            cmd.arguments(p)
     return parser
 
 

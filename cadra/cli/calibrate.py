@@ -12,28 +12,23 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from cadra.cli import _inputs as cli
 from cadra.cli._format import warn
-from cadra.cli._inputs import REFUSED, add_data_options, refused, say, shots_of
+from cadra.cli._inputs import Command
 
 
-def add_parser(sub, subcommand) -> None:
-    cal = subcommand(
-        sub, "calibrate", run, "station biases from sphere calibration shots",
-        "Sphere calibration: per-station position and timing biases with sigmas, compared "
-        "with the facility's station history, to which the estimate is appended "
-        "(docs/calibration.md). Exit status 3: the outputs are written but the estimate is "
-        "not in the station history (the message says why).")
-    add_data_options(cal)
-    cal.add_argument("--stations-root", default=None, metavar="DIR",
-                     help="directory holding stations/<facility>/ (default: "
-                          "$CADRA_STATIONS_ROOT, else the repository root beside facilities/; "
-                          "'.' for the working folder)")
-    cal.add_argument("--no-history", action="store_true",
-                     help="do not append the estimate to the station history")
-    cal.add_argument("--threshold-sigma", type=float, default=3.0,
-                     help="a station is flagged when its bias moved by more than this many "
-                          "sigma")
-    cal.add_argument("--note", default="", help="a note stored with the history entry")
+def _calibrate_arguments(p) -> None:
+    cli.add_data_options(p)
+    p.add_argument("--stations-root", default=None, metavar="DIR",
+                   help="directory holding stations/<facility>/ (default: "
+                        "$CADRA_STATIONS_ROOT, else the repository root beside facilities/; "
+                        "'.' for the working folder)")
+    p.add_argument("--no-history", action="store_true",
+                   help="do not append the estimate to the station history")
+    p.add_argument("--threshold-sigma", type=float, default=3.0,
+                   help="a station is flagged when its bias moved by more than this many "
+                        "sigma")
+    p.add_argument("--note", default="", help="a note stored with the history entry")
 
 
 def run(args) -> int:
@@ -53,12 +48,12 @@ def run(args) -> int:
     out = Path(args.output)
     try:
         root = stations_root(args.stations_root)
-        shots, _ = shots_of(args)
+        shots, _ = cli.shots_of(args)
         facility = shots_facility(shots, CalibrationError)
         history, hist_warnings = load_history(root, facility)  # refuse a bad history early
         est = estimate_station_biases(shots, facility=facility)
-    except REFUSED as exc:
-        return refused("cadra2 calibrate", exc)
+    except cli.REFUSED as exc:
+        return cli.refused("cadra2 calibrate", exc)
     table = est.to_table(note=args.note or "")
     hfile = None if args.no_history else history_path(root, facility)
     entry = failed = None
@@ -87,11 +82,11 @@ def run(args) -> int:
     if entry is None and failed is None:   # -q: the one status line (else the history's)
         print(head)
     else:
-        say(args, head)
-    say(args, *station_lines(table, args.threshold_sigma))
+        cli.say(args, head)
+    cli.say(args, *station_lines(table, args.threshold_sigma))
     for w in (*est.warnings, *hist_warnings):
         warn("cadra2 calibrate", w)
-    say(args, f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
+    cli.say(args, f"wrote {out}/ (bias_table.csv, comparison.csv, biases.png, report.md)")
     if failed is not None:
         print(f"cadra2 calibrate: NOT recorded in the station history: {failed}",
               file=sys.stderr)
@@ -101,4 +96,15 @@ def run(args) -> int:
     return 0
 
 
-__all__ = ["add_parser", "run"]
+#: the subcommands this module runs
+COMMANDS = (
+    Command("calibrate", run, "station biases from sphere calibration shots",
+            "Sphere calibration: per-station position and timing biases with sigmas, compared "
+            "with the facility's station history, to which the estimate is appended "
+            "(docs/calibration.md). Exit status 3: the outputs are written but the estimate is "
+            "not in the station history (the message says why).",
+            _calibrate_arguments),
+)
+
+
+__all__ = ["COMMANDS"]

@@ -8,31 +8,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cadra.cli._inputs import (
-    REFUSED,
-    add_data_options,
-    add_start_option,
-    model_of,
-    quiet,
-    refused,
-    say,
-    shots_of,
-    verbose,
-)
+from cadra.cli import _inputs as cli
+from cadra.cli._inputs import Command
 
 
-def add_parser(sub, subcommand) -> None:
-    diag = subcommand(
-        sub, "diagnose", run,
-        "where the fit misses, which unmodelled effect, how far it shrinks",
-        "Fit, then rank a library of unmodelled effects (dynamics, aero, station) by score "
-        "tests and nonlinear refits, add the significant ones, and say where any remaining "
-        "gap lies (docs/gap.md).")
-    add_data_options(diag)
-    diag.add_argument("--model", required=True, help="aero model (bundled name or file)")
-    diag.add_argument("--alpha", type=float, default=0.01,
-                      help="family-wise significance of adding an effect")
-    add_start_option(diag)
+def _diagnose_arguments(p) -> None:
+    cli.add_data_options(p)
+    p.add_argument("--model", required=True, help="aero model (bundled name or file)")
+    p.add_argument("--alpha", type=float, default=0.01,
+                   help="family-wise significance of adding an effect")
+    cli.add_start_option(p)
 
 
 def run(args) -> int:
@@ -46,13 +31,13 @@ def run(args) -> int:
 
     out = Path(args.output)
     try:
-        model = model_of(args)
-        shots, trajs = shots_of(args)
+        model = cli.model_of(args)
+        shots, trajs = cli.shots_of(args)
         # a fit short of convergence is still diagnosed: diagnose_gap continues it with more
         # budget and, if it still falls short, runs from its best point and says so
         result, _ = fit_shots(shots, model, estimates=start_estimates(shots, args.start),
                               options=FitOptions(max_iterations=args.max_iterations))
-        dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=not quiet(args))
+        dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=not cli.quiet(args))
         stage_one = {}
         for sd, traj in zip(shots, trajs, strict=True):
             table = load_trajectory(traj).table
@@ -60,18 +45,28 @@ def run(args) -> int:
                 stage_one[sd.shot_id] = table
         base = dg.fit_given if dg.fit_given is not None else result
         tables = where_analysis(base, shots, base.residuals, stage_one or None)
-    except REFUSED as exc:
-        return refused("cadra2 diagnose", exc)
+    except cli.REFUSED as exc:
+        return cli.refused("cadra2 diagnose", exc)
     write_diagnosis(dg, base, out, overwrite=args.overwrite, where_tables=tables)
     print(dg.verdict)
-    if not quiet(args):
-        ranking = dg.ranking if verbose(args) else dg.ranking.head(8)[
+    if not cli.quiet(args):
+        ranking = dg.ranking if cli.verbose(args) else dg.ranking.head(8)[
             ["candidate", "dchi2", "p_adjusted", "size"]]
         print(ranking.to_string(index=False))
         for line in tables["findings"]:
             print(f"where: {line}")
-    say(args, f"wrote {out}/ (report.md, ranking.csv, where*.csv, where.png)")
+    cli.say(args, f"wrote {out}/ (report.md, ranking.csv, where*.csv, where.png)")
     return 0
 
 
-__all__ = ["add_parser", "run"]
+#: the subcommands this module runs
+COMMANDS = (
+    Command("diagnose", run, "where the fit misses, which unmodelled effect, how far it shrinks",
+            "Fit, then rank a library of unmodelled effects (dynamics, aero, station) by score "
+            "tests and nonlinear refits, add the significant ones, and say where any remaining "
+            "gap lies (docs/gap.md).",
+            _diagnose_arguments),
+)
+
+
+__all__ = ["COMMANDS"]

@@ -9,58 +9,41 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from cadra.cli import _inputs as cli
 from cadra.cli._format import warn
-from cadra.cli._inputs import (
-    REFUSED,
-    add_data_options,
-    add_start_option,
-    model_of,
-    quiet,
-    refused,
-    say,
-    shots_of,
-    verbose,
-)
+from cadra.cli._inputs import Command
 
 #: chi^2/nu above which a converged fit is said not to describe the data
 CHI2_WARN = 2.0
 
 
-def add_parser(sub, subcommand) -> None:
-    fit = subcommand(
-        sub, "fit", run, "fit aerodynamic coefficients to measured trajectories",
-        "Least-squares differential correction of the model's free parameters and each "
-        "shot's initial state to stage one's measurements: one trajectory file is a single "
-        "fit, several a multi-fit. Data finer than film level are fitted in two phases (first "
-        "with the sigmas floored at 0.1 mm and 0.1 deg, then with stage one's own), each with "
-        "its own progress bar. Writes the coefficient table, covariances, residuals, report "
-        "and plots (docs/fitting.md). Exit status 1 if the fit did not converge.")
-    add_data_options(fit)
-    fit.add_argument("--model", required=True,
-                     help="aero model: a bundled name (cadra2 models lists them) or a model "
-                          "file (docs/aero_models.md)")
-    fit.add_argument("--no-auto-start", action="store_true",
-                     help="start from the model file's values, not linear-theory estimates")
-    add_start_option(fit)
-    fit.add_argument("--no-plots", action="store_true", help="tables and report only")
-    fit.add_argument("--bias-table", default=None, metavar="current|FILE",
-                     help="correct the measurements by a station bias table: 'current' (the "
-                          "facility history's latest entry) or a bias-table CSV (default: "
-                          "none)")
-    fit.add_argument("--stations-root", default=None, metavar="DIR",
-                     help="directory holding stations/<facility>/ (default: $CADRA_STATIONS_ROOT"
-                          ", else the repository holding facilities/; as for calibrate)")
-    fit.add_argument("--variance-components", action="store_true",
-                     help="after convergence, rescale each channel's sigmas (x, y, z, theta, "
-                          "psi) by the factor its residuals ask for and refit: coefficient "
-                          "sigmas that carry the noise the data show when stage one's sigmas "
-                          "are off; the factors are reported (default: off, stage one's "
-                          "sigmas as they are)")
-    fit.add_argument("--reference", default=None, metavar="MODEL|FIT_DIR",
-                     help="compare with a reference: a model (bundled name or file: values "
-                          "only) or an earlier cadra2 fit's output folder (values, sigmas and "
-                          "covariance); adds a pulls table and a joint chi^2 to the report and "
-                          "draws it on the coefficient plots (default: none)")
+def _fit_arguments(p) -> None:
+    cli.add_data_options(p)
+    p.add_argument("--model", required=True,
+                   help="aero model: a bundled name (cadra2 models lists them) or a model "
+                        "file (docs/aero_models.md)")
+    p.add_argument("--no-auto-start", action="store_true",
+                   help="start from the model file's values, not linear-theory estimates")
+    cli.add_start_option(p)
+    p.add_argument("--no-plots", action="store_true", help="tables and report only")
+    p.add_argument("--bias-table", default=None, metavar="current|FILE",
+                   help="correct the measurements by a station bias table: 'current' (the "
+                        "facility history's latest entry) or a bias-table CSV (default: "
+                        "none)")
+    p.add_argument("--stations-root", default=None, metavar="DIR",
+                   help="directory holding stations/<facility>/ (default: $CADRA_STATIONS_ROOT"
+                        ", else the repository holding facilities/; as for calibrate)")
+    p.add_argument("--variance-components", action="store_true",
+                   help="after convergence, rescale each channel's sigmas (x, y, z, theta, "
+                        "psi) by the factor its residuals ask for and refit: coefficient "
+                        "sigmas that carry the noise the data show when stage one's sigmas "
+                        "are off; the factors are reported (default: off, stage one's "
+                        "sigmas as they are)")
+    p.add_argument("--reference", default=None, metavar="MODEL|FIT_DIR",
+                   help="compare with a reference: a model (bundled name or file: values "
+                        "only) or an earlier cadra2 fit's output folder (values, sigmas and "
+                        "covariance); adds a pulls table and a joint chi^2 to the report and "
+                        "draws it on the coefficient plots (default: none)")
 
 
 def run(args) -> int:
@@ -73,13 +56,13 @@ def run(args) -> int:
 
     out = Path(args.output)
     try:
-        model = model_of(args)
-        shots, _ = shots_of(args)
+        model = cli.model_of(args)
+        shots, _ = cli.shots_of(args)
         notes = []
         if args.bias_table:
             shots, note = correct_by_bias_table(shots, args.bias_table, args.stations_root)
             notes.append(note)
-        options = FitOptions(max_iterations=args.max_iterations, progress=not quiet(args))
+        options = FitOptions(max_iterations=args.max_iterations, progress=not cli.quiet(args))
         reference = None
         if args.reference:
             from cadra.fitting.reference import load_reference
@@ -92,8 +75,8 @@ def run(args) -> int:
                                   estimates=estimates)
         if result.options.get("variance_components") and result.problem is not None:
             shots = list(result.problem.shots)   # the rescaled sigmas the fit used
-    except REFUSED as exc:
-        return refused("cadra2 fit", exc)
+    except cli.REFUSED as exc:
+        return cli.refused("cadra2 fit", exc)
     config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
     extra = {"model_fitted.toml": toml_text(result.model.to_dict(), "CADRA aerodynamic model "
                                             "(docs/aero_models.md): the fitted values, written "
@@ -102,7 +85,7 @@ def run(args) -> int:
     write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
                       start_model=start, extra_files=extra, notes=notes, reference=reference)
     print_result(result, args)
-    say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
+    cli.say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
     return 0 if result.converged else 1
 
 
@@ -121,8 +104,21 @@ def print_result(result, args) -> None:
              "(report.md)")
     for w in result.warnings:
         warn("cadra2 fit", w)
-    if not quiet(args):
-        print(result.report(verbose=verbose(args), status=False, warnings=False))
+    if not cli.quiet(args):
+        print(result.report(verbose=cli.verbose(args), status=False, warnings=False))
 
 
-__all__ = ["add_parser", "print_result", "run"]
+#: the subcommands this module runs
+COMMANDS = (
+    Command("fit", run, "fit aerodynamic coefficients to measured trajectories",
+            "Least-squares differential correction of the model's free parameters and each "
+            "shot's initial state to stage one's measurements: one trajectory file is a single "
+            "fit, several a multi-fit. Data finer than film level are fitted in two phases (first "
+            "with the sigmas floored at 0.1 mm and 0.1 deg, then with stage one's own), each with "
+            "its own progress bar. Writes the coefficient table, covariances, residuals, report "
+            "and plots (docs/fitting.md). Exit status 1 if the fit did not converge.",
+            _fit_arguments),
+)
+
+
+__all__ = ["COMMANDS"]

@@ -9,25 +9,15 @@ import math
 import sys
 from pathlib import Path
 
+from cadra.cli import _inputs as cli
 from cadra.cli._format import warn
-from cadra.cli._inputs import REFUSED, add_data_options, quiet, refused, say, shots_of, verbose
+from cadra.cli._inputs import Command
 
 PROG = "cadra2 motion"
 
 
-def add_parser(sub, subcommand) -> None:
-    """Register ``cadra2 motion`` on ``cadra2``'s subparsers."""
-    p = subcommand(
-        sub, "motion", run, "epicyclic fit, linear-theory and K-B coefficients, yaw card",
-        "The classic angular-motion reduction of each shot: the angle of attack "
-        "and sideslip relative to the mean flight path (axis inclinations minus the path's, "
-        "from a polynomial fit of the cg positions), the epicyclic fit (tricyclic with "
-        "--spin) with sigmas, the Nonplanar Ratio, C_L_alpha from the swerve, linear-theory "
-        "C_m_alpha, C_mq + C_m_alpha_dot and C_mp_alpha with sigmas, and sectional fits with "
-        "the Kryloff-Bogoliuboff reduction when the record holds enough cycles. Writes "
-        "report.md, angles.csv, arms.csv, coefficients.csv and plots (yaw card, arms against "
-        "distance, sectional coefficients against amplitude); docs/motion.md.")
-    add_data_options(p, model=False)
+def _motion_arguments(p) -> None:
+    cli.add_data_options(p, model=False)
     p.add_argument("--variable", choices=("distance", "time"), default="distance",
                    help="the fit's independent variable")
     p.add_argument("--spin", action="append", type=float, metavar="RAD_S",
@@ -71,11 +61,11 @@ def run(args) -> int:
     try:
         if args.path_degree < 1:
             raise ValueError(f"--path-degree: at least 1, got {args.path_degree}")
-        shots, _ = shots_of(args)
+        shots, _ = cli.shots_of(args)
         spins = _spins(args, len(shots))
         results = []
         for shot, spin in tqdm(list(zip(shots, spins, strict=True)), desc="motion",
-                               disable=quiet(args) or len(shots) < 2, file=sys.stderr,
+                               disable=cli.quiet(args) or len(shots) < 2, file=sys.stderr,
                                leave=False):
             if not shot.has_angles:
                 raise ValueError(f"{shot.source.get('trajectory_file', shot.shot_id)}: no "
@@ -87,20 +77,35 @@ def run(args) -> int:
                     step=args.step))
             except MotionFitError as exc:
                 raise ValueError(f"{shot.shot_id}: {exc}") from None
-    except REFUSED as exc:
-        return refused(PROG, exc)
+    except cli.REFUSED as exc:
+        return cli.refused(PROG, exc)
     files = write_outputs(results, out, overwrite=args.overwrite, command=vars(args))
     for r in results:
         for w in r.warnings:
             warn(PROG, w)
-    if not quiet(args):
-        print("\n".join(console_lines(results, verbose=verbose(args))))
+    if not cli.quiet(args):
+        print("\n".join(console_lines(results, verbose=cli.verbose(args))))
     n_kb = sum(r.kb is not None for r in results)
     print(f"motion: {len(results)} shot(s) reduced ({results[0].fit.variable}); "
           f"linear-theory coefficients for {sum(r.coefficients is not None for r in results)}, "
           f"K-B reduction for {n_kb}")
-    say(args, f"wrote {out}/ ({', '.join(files)})")
+    cli.say(args, f"wrote {out}/ ({', '.join(files)})")
     return 0
 
 
-__all__ = ["add_parser", "run"]
+#: the subcommands this module runs
+COMMANDS = (
+    Command("motion", run, "epicyclic fit, linear-theory and K-B coefficients, yaw card",
+            "The classic angular-motion reduction of each shot: the angle of attack "
+            "and sideslip relative to the mean flight path (axis inclinations minus the path's, "
+            "from a polynomial fit of the cg positions), the epicyclic fit (tricyclic with "
+            "--spin) with sigmas, the Nonplanar Ratio, C_L_alpha from the swerve, linear-theory "
+            "C_m_alpha, C_mq + C_m_alpha_dot and C_mp_alpha with sigmas, and sectional fits with "
+            "the Kryloff-Bogoliuboff reduction when the record holds enough cycles. Writes "
+            "report.md, angles.csv, arms.csv, coefficients.csv and plots (yaw card, arms against "
+            "distance, sectional coefficients against amplitude); docs/motion.md.",
+            _motion_arguments),
+)
+
+
+__all__ = ["COMMANDS"]

@@ -13,23 +13,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cadra.cli._inputs import REFUSED, add_data_options, quiet, refused, shots_of
+from cadra.cli import _inputs as cli
+from cadra.cli._inputs import Command
 
 PROG = "cadra2 roll"
 
 
-def add_parser(sub, subcommand) -> None:
-    """Register ``cadra2 roll`` on ``cadra2``'s subparsers."""
-    p = subcommand(
-        sub, "roll", run, "seed 003's global segmented fit of pure-roll records",
-        "Seed 003's (ROMOF) global nonlinear least-squares fit of the rolling "
-        "motion of a finned model on a roll bearing: the records cut into segments, each with "
-        "its own initial roll angle and rate, one coefficient set for all, fitted in the "
-        "paper's steps (its start set, then the others 3-4 at a time) from equation-error "
-        "starting values. Writes report.md, Tables 2 and 3 (coefficients, sigmas, "
-        "signal/noise, correlations), the segments' bias, rms and runs of sign, the steady "
-        "spins of the fitted coefficients, and roll_fit.png; docs/segmented_roll.md.")
-    add_data_options(p, model=False)
+def _roll_arguments(p) -> None:
+    cli.add_data_options(p, model=False)
     p.add_argument("--model", default="seed003_romof",
                    help="aero model (bundled name or file) whose Cl is linear in the "
                         "stepped coefficients")
@@ -56,12 +47,12 @@ def run(args) -> int:
         if args.window < 5 or args.window % 2 == 0:
             raise ValueError(f"--window: an odd number of frames >= 5, got {args.window}")
         model = resolve_model(args.model)
-        shots, _ = shots_of(args)
+        shots, _ = cli.shots_of(args)
         alpha = bearing_alpha(shots, args.alpha_deg)
         records = records_of(shots)
         fit = segmented_fit(records, model, shots[0].rigid, alpha, window=args.window)
-    except REFUSED as exc:
-        return refused(PROG, exc)
+    except cli.REFUSED as exc:
+        return cli.refused(PROG, exc)
     tables = seed003_tables(fit)
     res = fit.result
     out = Path(args.output)
@@ -73,10 +64,24 @@ def run(args) -> int:
                      for v, st in zip(spins["p_hat"], spins["stable"], strict=True))
     print(f"roll: {len(records)} record(s), {len(fit.segments)} segments, {res.status}, "
           f"chi^2/dof {res.reduced_chi2:.3f}; steady spins p_hat: {spun or 'none'}")
-    if not quiet(args):
+    if not cli.quiet(args):
         print(f"wrote {out}/ (report.md, table2, table3, paper_table3, segments, steady_spins "
               "(.csv, .md), roll_fit.png)")
     return 0 if res.converged else 1        # the best point is written, marked so
 
 
-__all__ = ["add_parser", "run"]
+#: the subcommands this module runs
+COMMANDS = (
+    Command("roll", run, "seed 003's global segmented fit of pure-roll records",
+            "Seed 003's (ROMOF) global nonlinear least-squares fit of the rolling "
+            "motion of a finned model on a roll bearing: the records cut into segments, each with "
+            "its own initial roll angle and rate, one coefficient set for all, fitted in the "
+            "paper's steps (its start set, then the others 3-4 at a time) from equation-error "
+            "starting values. Writes report.md, Tables 2 and 3 (coefficients, sigmas, "
+            "signal/noise, correlations), the segments' bias, rms and runs of sign, the steady "
+            "spins of the fitted coefficients, and roll_fit.png; docs/segmented_roll.md.",
+            _roll_arguments),
+)
+
+
+__all__ = ["COMMANDS"]

@@ -8,22 +8,15 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cadra.cli._inputs import quiet, say, verbose
+from cadra.cli import _inputs as cli
+from cadra.cli._inputs import Command
 
 
-def add_parsers(sub, subcommand) -> None:
-    sim = subcommand(
-        sub, "simulate", run_simulate, "simulate and render a synthetic shot",
-        "Fly a synthetic shot from a shot specification (6-DOF, the same code the fit uses), "
-        "render its shadowgraphs and write the shot file, images and exact truth "
-        "(docs/simulation.md).")
-    sim.add_argument("spec", help="shot specification TOML (docs/simulation.md)")
-    sim.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
-    sim.add_argument("--no-images", action="store_true", help="trajectory and truth only")
-    sim.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    subcommand(sub, "models", run_models, "list the bundled aero models",
-               "List the bundled aero models (cadra/aero/models): name, case, angle plane, "
-               "free parameters, description; give one to --model by name.")
+def _simulate_arguments(p) -> None:
+    p.add_argument("spec", help="shot specification TOML (docs/simulation.md)")
+    p.add_argument("-o", "--output", required=True, help="output directory (must not exist)")
+    p.add_argument("--no-images", action="store_true", help="trajectory and truth only")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 
 
 def run_simulate(args) -> int:
@@ -36,17 +29,17 @@ def run_simulate(args) -> int:
         spec = load_shot_spec(args.spec)
         shot = simulate_shot(spec)
         write_shot(shot, out, images=not args.no_images, overwrite=args.overwrite,
-                   progress=not quiet(args))
+                   progress=not cli.quiet(args))
     except (SpecError, ValueError, FileNotFoundError) as exc:
         msg = str(exc)  # errors of the spec file name it already
         where = "" if msg.startswith(str(args.spec)) else f"{args.spec}: "
         print(f"cadra2 simulate: {where}{msg}", file=sys.stderr)
         return 1
-    if verbose(args):
+    if cli.verbose(args):
         print(truth_text(shot))
     print(summary_line(shot))
     extra = ", station_biases.csv" if (out / "station_biases.csv").is_file() else ""
-    say(args, f"wrote {out}/shot.toml, truth.csv{extra}" + (
+    cli.say(args, f"wrote {out}/shot.toml, truth.csv{extra}" + (
         "" if args.no_images else ", truth_images.csv, images/"))
     return 0
 
@@ -57,16 +50,30 @@ def run_models(args) -> int:
     from cadra.aero import bundled_model_table
 
     rows = bundled_model_table()
-    if not quiet(args):
+    if not cli.quiet(args):
         print(f"{'name':28s} {'case':9s} {'plane':10s} {'free':>4s}  description")
         for r in rows:
             print(f"{r['name']:28s} {r['case']:9s} {r['plane']:10s} {len(r['free']):4d}  "
                   f"{r['description']}")
-            if verbose(args):
+            if cli.verbose(args):
                 print(f"{'':28s} free: {', '.join(r['free'])}")
     print(f"{len(rows)} bundled models (use one with --model NAME; a model file by its path; "
           "docs/aero_models.md)")
     return 0
 
 
-__all__ = ["add_parsers", "run_models", "run_simulate"]
+#: the subcommands this module runs
+COMMANDS = (
+    Command("simulate", run_simulate, "simulate and render a synthetic shot",
+            "Fly a synthetic shot from a shot specification (6-DOF, the same code the fit "
+            "uses), render its shadowgraphs and write the shot file, images and exact truth "
+            "(docs/simulation.md).",
+            _simulate_arguments),
+    Command("models", run_models, "list the bundled aero models",
+            "List the bundled aero models (cadra/aero/models): name, case, angle plane, "
+            "free parameters, description; give one to --model by name.",
+            lambda p: None),
+)
+
+
+__all__ = ["COMMANDS"]

@@ -6,42 +6,25 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from cadra.cli import _inputs as cli
 from cadra.cli._format import warn
-from cadra.cli._inputs import (
-    REFUSED,
-    add_data_options,
-    model_of,
-    quiet,
-    refused,
-    say,
-    shots_of,
-    verbose,
-)
+from cadra.cli._inputs import Command
 
 
-def add_parsers(sub, subcommand) -> None:
-    single = subcommand(
-        sub, "single", run_single,
-        "single fits with linear forms and quasi-linear trends (seed 004 steps 1-2)",
-        "Seed 004 steps 1 and 2: each shot fitted on its own with a linear model, then the "
-        "quasi-linear coefficients against amplitude (alpha_rms, sigma_rms) with "
-        "straight-line tests and plots. The trends need at least two converged shots; a fit "
-        "with chi^2/nu far above 1 is flagged (its sigmas are not meaningful).")
-    add_data_options(single)
-    single.add_argument("--model", default=None,
-                        help="linear model (default: linear_template_sigma for symmetric "
-                             "bodies, linear_template_alpha_beta for lifting ones)")
-    hold = subcommand(
-        sub, "holdone", run_holdone, "hold-one-parameter study (seed 004 Fig. 15)",
-        "Seed 004 Fig. 15: fit freely, then hold one parameter at each given value (model "
-        "file's unit) and refit the rest on all shots; writes a table of chi^2, residual rms "
-        "and the other parameters, and a plot.")
-    add_data_options(hold)
-    hold.add_argument("--model", required=True, help="aero model (bundled name or file)")
-    hold.add_argument("--param", required=True, help="the parameter to hold")
-    hold.add_argument("--values", required=True, metavar="V1,V2,...",
-                      help="comma-separated values to hold it at, model file's unit "
-                           "(negative values are fine: --values -1.0,-1.5)")
+def _single_arguments(p) -> None:
+    cli.add_data_options(p)
+    p.add_argument("--model", default=None,
+                   help="linear model (default: linear_template_sigma for symmetric "
+                        "bodies, linear_template_alpha_beta for lifting ones)")
+
+
+def _holdone_arguments(p) -> None:
+    cli.add_data_options(p)
+    p.add_argument("--model", required=True, help="aero model (bundled name or file)")
+    p.add_argument("--param", required=True, help="the parameter to hold")
+    p.add_argument("--values", required=True, metavar="V1,V2,...",
+                   help="comma-separated values to hold it at, model file's unit "
+                        "(negative values are fine: --values -1.0,-1.5)")
 
 
 def run_single(args) -> int:
@@ -53,19 +36,19 @@ def run_single(args) -> int:
 
     out = Path(args.output)
     try:
-        shots, _ = shots_of(args)
-        model = model_of(args) if args.model else linear_template_for(shots[0])
+        shots, _ = cli.shots_of(args)
+        model = cli.model_of(args) if args.model else linear_template_for(shots[0])
         if args.model is None and any(linear_template_for(s).name != model.name
                                       for s in shots[1:]):
             model = load_bundled_model("linear_template_alpha_beta")
         table = single_fits(shots, model, None,
                             options=FitOptions(max_iterations=args.max_iterations))
-    except REFUSED as exc:
-        return refused("cadra2 single", exc)
+    except cli.REFUSED as exc:
+        return cli.refused("cadra2 single", exc)
     write_single_fits(table, model, out, overwrite=args.overwrite)
     checks = check_single_fits(table)
-    if not quiet(args):
-        print("\n".join(single_fits_lines(table, model, verbose(args))))
+    if not cli.quiet(args):
+        print("\n".join(single_fits_lines(table, model, cli.verbose(args))))
     for w in checks.messages:
         warn("cadra2 single", w)
     n_ok = int(table["converged"].sum())
@@ -73,7 +56,7 @@ def run_single(args) -> int:
     n_warn = len(checks.messages)
     print(f"single: {n_ok}/{len(table)} single fits converged with {model.name}; quasi-linear "
           f"trends {trend}" + (f"; {n_warn} warning(s)" if n_warn else ""))
-    say(args, f"wrote {out}/ (single_fits.csv, quasi_linear.json, report.md, plots/)")
+    cli.say(args, f"wrote {out}/ (single_fits.csv, quasi_linear.json, report.md, plots/)")
     return 0 if table["converged"].all() else 1
 
 
@@ -86,34 +69,51 @@ def run_holdone(args) -> int:
 
     out = Path(args.output)
     try:
-        shots, _ = shots_of(args)
-        model = model_of(args)
+        shots, _ = cli.shots_of(args)
+        model = cli.model_of(args)
         values = [float(v) for v in args.values.split(",") if v.strip()]
         si = values_to_si(model, args.param, values)
         options = FitOptions(max_iterations=args.max_iterations)
         # the study starts from the free fit's solution (its parameters and states)
         free, _ = fit_shots(shots, model, options=FitOptions(
-            max_iterations=args.max_iterations, progress=not quiet(args)))
+            max_iterations=args.max_iterations, progress=not cli.quiet(args)))
         if not free:
             raise ValueError(f"the free fit did not converge ({free.message}); the study "
                              "needs a converged starting point")
         start = free.model.with_vary({args.param: model.parameter(args.param).vary})
         table = hold_one_study(shots, start, [sf.state for sf in free.shots], args.param, si,
                                options=options)
-    except REFUSED as exc:
-        return refused("cadra2 holdone", exc)
+    except cli.REFUSED as exc:
+        return cli.refused("cadra2 holdone", exc)
     write_hold_one(table, args.param, out, overwrite=args.overwrite)
     cols = ["value", "status", "reduced_chi2", "theta_rms_deg", "psi_rms_deg"]
-    if verbose(args):
+    if cli.verbose(args):
         print(table.to_string(index=False))
-    elif not quiet(args):
+    elif not cli.quiet(args):
         print(table[[c for c in cols if c in table]].to_string(index=False))
     best = table.loc[table["chi2"].idxmin(), "value"] if table["chi2"].notna().any() else None
     print(f"holdone: {args.param} held at {len(table)} values, "
           f"{int(table['converged'].sum())} converged"
           + (f"; chi^2 lowest at {best:g}" if best is not None else ""))
-    say(args, f"wrote {out}/ (hold_one.csv, hold_one.png)")
+    cli.say(args, f"wrote {out}/ (hold_one.csv, hold_one.png)")
     return 0 if table["converged"].all() else 1
 
 
-__all__ = ["add_parsers", "run_holdone", "run_single"]
+#: the subcommands this module runs
+COMMANDS = (
+    Command("single", run_single,
+            "single fits with linear forms and quasi-linear trends (seed 004 steps 1-2)",
+            "Seed 004 steps 1 and 2: each shot fitted on its own with a linear model, then the "
+            "quasi-linear coefficients against amplitude (alpha_rms, sigma_rms) with "
+            "straight-line tests and plots. The trends need at least two converged shots; a fit "
+            "with chi^2/nu far above 1 is flagged (its sigmas are not meaningful).",
+            _single_arguments),
+    Command("holdone", run_holdone, "hold-one-parameter study (seed 004 Fig. 15)",
+            "Seed 004 Fig. 15: fit freely, then hold one parameter at each given value (model "
+            "file's unit) and refit the rest on all shots; writes a table of chi^2, residual rms "
+            "and the other parameters, and a plot.",
+            _holdone_arguments),
+)
+
+
+__all__ = ["COMMANDS"]

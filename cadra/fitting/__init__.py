@@ -1,8 +1,8 @@
 """Stage two: 6-DOF least-squares differential correction (docs/fitting.md).
 
-Public API:
+Public API (the measurements it fits, :class:`~cadra.flight.data.ShotData`, are
+:mod:`cadra.flight`'s):
 
-- :class:`ShotData`, :func:`load_shot_data`, :func:`shot_data_from_truth` -- the measurements;
 - :func:`fit` (the solver), :class:`FitOptions`, :class:`Integration`, :class:`FitResult`;
 - :class:`FitProblem` (the forward model behind every prediction), :func:`result_problem`;
 - :func:`starting_model`, :func:`initial_states` -- linear-theory starting values;
@@ -23,16 +23,7 @@ from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
 from cadra.fitting.solver import FitOptions, fit
 from cadra.fitting.start import initial_states, starting_model
-from cadra.flight.data import (
-    CHANNELS,
-    FILM_SIGMAS,
-    FitDataError,
-    ShotData,
-    floor_sigmas,
-    load_shot_data,
-    shot_data_from_truth,
-)
-from cadra.flight.estimates import estimate_motion
+from cadra.flight.data import FILM_SIGMAS, ShotData, floor_sigmas
 
 #: the progress-bar labels of :func:`fit_shots`' two phases (continuation)
 PHASE_LABELS = ("fit (film-level sigmas)", "fit (stage-one sigmas)")
@@ -122,7 +113,6 @@ def _fit_shots(shots, model, *, options, auto_start, initial, continuation, loca
                extras=extras), start
 
 
-__all__ = ["CHANNELS", "FILM_SIGMAS", "LOCAL_NAMES", "PHASE_LABELS", "FitDataError",
-           "FitOptions", "FitProblem", "FitResult", "Integration", "ShotData", "estimate_motion",
-           "fit", "fit_shots", "initial_states", "load_shot_data", "result_problem",
-           "shot_data_from_truth", "starting_model"]
+__all__ = ["LOCAL_NAMES", "PHASE_LABELS", "FitOptions", "FitProblem", "FitResult",
+           "Integration", "fit", "fit_shots", "initial_states", "result_problem",
+           "starting_model"]

@@ -358,6 +358,31 @@ def solve_cg(apply, b: np.ndarray, diag: np.ndarray, tol: float = 1e-9, max_iter
 # =============================================================================== bound
 
 
+def nuisance_columns(model, expected: np.ndarray, config: RenderConfig,
+                     step_blur_px: float) -> tuple[list[str], list[np.ndarray]]:
+    """The image's nuisance parameters and their Jacobian columns: its gain (the expected
+    image itself) and, for a blurred image, the blur's width (central difference of
+    ``model(blur=...)`` with a step of at most half the blur)."""
+    names, cols = ["gain"], [expected.copy()]
+    sigma = config.optics_blur_sigma_px
+    if sigma > 0.0:
+        hb = min(step_blur_px, 0.5 * sigma)
+        names.append("blur_sigma")
+        cols.append((model(blur=sigma + hb) - model(blur=sigma - hb)) / (2.0 * hb))
+    return names, cols
+
+
+def correlated_fisher(jac: np.ndarray, expected: np.ndarray, config: RenderConfig,
+                      cg_tol: float):
+    """The Fisher information ``J^T C^-1 J`` of the image's correlated noise (``C`` from
+    :func:`noise_covariance_operator`, solved by :func:`solve_cg`), symmetrized; with the
+    noise's diagonal, ``C^-1 J`` and the solve's iterations and residual."""
+    apply, diag, _ = noise_covariance_operator(expected, config)
+    x, iters, resid = solve_cg(apply, jac, diag, tol=cg_tol)
+    fisher = np.einsum("ijk,ijl->kl", jac, x)
+    return 0.5 * (fisher + fisher.T), diag, x, iters, resid
+
+
 def _roi_box(polygon, margin, width_px, height_px) -> tuple[int, int, int, int]:
     u0 = int(math.floor(polygon[:, 0].min() - margin))
     u1 = int(math.ceil(polygon[:, 0].max() + margin))
@@ -455,19 +480,12 @@ def pose_crb(
         dp[i] = step
         cols.append((model(dp) - model(-dp)) / (2.0 * step))
     if include_nuisance:
-        names.append("gain")
-        cols.append(expected.copy())
-        sigma = config.optics_blur_sigma_px
-        if sigma > 0.0:
-            hb = min(step_blur_px, 0.5 * sigma)
-            names.append("blur_sigma")
-            cols.append((model(blur=sigma + hb) - model(blur=sigma - hb)) / (2.0 * hb))
+        extra_names, extra_cols = nuisance_columns(model, expected, config, step_blur_px)
+        names += extra_names
+        cols += extra_cols
     jac = np.stack(cols, axis=-1)
 
-    apply, diag, _ = noise_covariance_operator(expected, config)
-    x, iters, resid = solve_cg(apply, jac, diag, tol=cg_tol)
-    fisher = np.einsum("ijk,ijl->kl", jac, x)
-    fisher = 0.5 * (fisher + fisher.T)
+    fisher, diag, x, iters, resid = correlated_fisher(jac, expected, config, cg_tol)
     fisher_w = np.einsum("ijk,ijl->kl", jac, jac / diag[..., None])
     cov = np.linalg.inv(fisher)
     cov_w = np.linalg.inv(fisher_w)

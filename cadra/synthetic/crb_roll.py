@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cadra.synthetic.crb import _roi_box, model_image, noise_covariance_operator, solve_cg
+from cadra.synthetic.crb import _roi_box, correlated_fisher, model_image, nuisance_columns
 from cadra.synthetic.render import RenderConfig, illumination_field
 
 __all__ = ["RollCRB", "roll_crb"]
@@ -95,18 +95,10 @@ def roll_crb(outline_fn, roll_rad: float, ref_px, config: RenderConfig | None = 
         cols.append((model(pose=dp) - model(pose=-dp)) / (2.0 * step))
     cols.append((model(outline_fn(roll_rad + step_roll_rad))
                  - model(outline_fn(roll_rad - step_roll_rad))) / (2.0 * step_roll_rad))
-    names.append("gain")
-    cols.append(expected.copy())
-    sigma = config.optics_blur_sigma_px
-    if sigma > 0.0:
-        hb = min(step_blur_px, 0.5 * sigma)
-        names.append("blur_sigma")
-        cols.append((model(blur=sigma + hb) - model(blur=sigma - hb)) / (2.0 * hb))
-    jac = np.stack(cols, axis=-1)
-    apply, diag, _ = noise_covariance_operator(expected, config)
-    x, _, _ = solve_cg(apply, jac, diag, tol=cg_tol)
-    fisher = np.einsum("ijk,ijl->kl", jac, x)
-    fisher = 0.5 * (fisher + fisher.T)
+    extra_names, extra_cols = nuisance_columns(model, expected, config, step_blur_px)
+    names += extra_names
+    cols += extra_cols
+    fisher = correlated_fisher(np.stack(cols, axis=-1), expected, config, cg_tol)[0]
     cov = np.linalg.inv(fisher)
     k = names.index("roll")
     return RollCRB(params=tuple(names), fisher=fisher, cov=cov,

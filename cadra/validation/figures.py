@@ -1,9 +1,10 @@
 """The validated figures as pages: ``docs/validation.md`` and the README's headline table, made
 from the tools' results files (:mod:`cadra.validation.results`), never by hand.
 
-:data:`FIGURES` names each figure a page shows: the tool whose results hold it, its key (a
-dotted path into the tool's JSON), what it is in words, its target where it has one, and
-whether it is a headline (the README's table). :func:`update` writes both pages from
+:data:`FIGURES` (the table ``cadra/data/validation_figures.csv``) names each figure a page shows:
+the tool whose results hold it, its key (a dotted path into the tool's JSON), what it is in
+words, its target where it has one, its number format, and whether it is a headline (the
+README's table). :func:`update` writes both pages from
 ``results/*.json`` (``python tools/make_validation_doc.py``); :func:`stale` says which page
 is not what the results make (a test runs it), so a page can never drift from its numbers.
 """
@@ -61,125 +62,23 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "bench_aero": ("The aerodynamic model's evaluation speed", "aero_models.md"),
 }
 
-F = Figure
+#: the figures' table: ``cadra/data/validation_figures.csv`` (columns tool, key, label, target,
+#: format, headline), read by :func:`load_figures`
+FIGURES_PATH = Path(__file__).resolve().parent.parent / "data" / "validation_figures.csv"
+
+
+def load_figures(path: str | os.PathLike = FIGURES_PATH) -> tuple[Figure, ...]:
+    """Every figure the pages show, in their order (the table at ``path``)."""
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    return tuple(Figure(r["tool"], r["key"], r["label"], r["target"], r["format"] or ".3g",
+                        r["headline"] == "yes") for r in rows)
+
+
 #: every figure the pages show, in their order
-FIGURES: tuple[Figure, ...] = (
-    # stage one
-    F("bench_cadra1", "capsule_ref_rms_px", "capsule reference point error rms (px)",
-      "< 0.02", ".4g", True),
-    F("bench_cadra1", "capsule_axis_rms_deg", "capsule axis angle error rms (deg)", "< 0.01",
-      ".4g", True),
-    F("bench_cadra1", "sphere_center_rms_px", "sphere centre error rms (px)", "< 0.02", ".4g"),
-    F("bench_cadra1", "crb_ratio_max", "error rms / Cramér–Rao bound, worst", "< 2"),
-    F("bench_cadra1", "sigma_ratio_min", "reported sigma / actual error, lowest", "0.8–1.25",
-      headline=True),
-    F("bench_cadra1", "sigma_ratio_max", "reported sigma / actual error, highest", "0.8–1.25",
-      headline=True),
-    F("bench_cadra1", "formation_sigma_ratio_min",
-      "sigma / error away from the default image formation, lowest", "0.8–1.25"),
-    F("bench_cadra1", "formation_sigma_ratio_max",
-      "sigma / error away from the default image formation, highest", "0.8–1.25"),
-    F("bench_cadra1", "baseline_ratio_min", "Otsu baseline error / CADRA's, lowest", "> 10"),
-    F("bench_cadra1", "shot_seconds_one_core", "a 16-station shot (32 images) on one core (s)",
-      "< 3", ".3g", True),
-    F("bench_cadra1", "read_blur_floor_s", "reading and blurring those images alone (s)", "",
-      ".3g"),
-    F("validate_wire_sigma", "z_rms_ab", "wire affine error / sigma, along and across the range",
-      "0.9–1.1"),
-    F("validate_wire_sigma", "error_rms_um_ab", "wire affine error rms (µm), along / across"),
-    # stage two
-    F("bench_cadra2", "baseline_speedup", "single fit, speed-up over scipy least_squares + "
-      "solve_ivp on the same equations", "≥ 50", ".3g", True),
-    F("bench_cadra2", "baseline_multifit_speedup", "seven-shot multi-fit, the same speed-up",
-      "≥ 50", ".3g", True),
-    F("bench_cadra2", "single_fit_s", "single fit, M2-2429, all Table 4 parameters (s)"),
-    F("bench_cadra2", "multifit_s", "seven-shot multi-fit (s)"),
-    F("bench_cadra2", "baseline_vs_cadra_single_max_sigma",
-      "reference fitter minus CADRA, worst parameter (sigma)", "< 0.05"),
-    F("bench_cadra2", "noise_free_max_rel_err", "noise-free fit from the truth, worst relative "
-      "error", "< 1e-4"),
-    F("bench_cadra2", "pull_std_min", "pulls' standard deviation, lowest parameter", "0.7–1.3"),
-    F("bench_cadra2", "pull_std_max", "pulls' standard deviation, highest parameter", "0.7–1.3"),
-    F("bench_cadra2", "within_2sigma_min", "share within 2 sigma, lowest parameter", "≥ 0.9"),
-    F("bench_e2e", "e2e_chi2nu_median", "chi²/ν median over both seven-shot sets",
-      "1 ± its scatter", ".4g", True),
-    F("bench_e2e", "e2e_chi2nu_median_within_scatter", "chi²/ν within its expected scatter",
-      "yes"),
-    F("bench_e2e", "e2e_within_2sigma_frac", "parameters within 2 sigma of the truth", "≥ 0.9",
-      ".3g", True),
-    F("bench_e2e", "e2e_pull_std_min", "pulls' standard deviation, lowest", "0.7–1.3"),
-    F("bench_e2e", "e2e_pull_std_max", "pulls' standard deviation, highest", "0.7–1.3"),
-    F("bench_e2e", "control_within_2sigma_frac",
-      "control (truth + Gaussian noise of the same sigmas): within 2 sigma", "≥ 0.9"),
-    F("bench_e2e", "realisations", "realisations per set", "", "d"),
-    F("bench_calibration", "bias_within_2sigma_frac",
-      "injected station biases recovered within 2 sigma", "≥ 0.9", ".3g", True),
-    F("bench_calibration", "false_flag_rate", "unbiased station channels flagged", "≤ 0.01"),
-    F("bench_calibration", "residual_ratio_after_correction",
-      "capsule residual after the table is applied / without biases", "≤ 1.10"),
-    F("bench_calibration", "trials", "trials", "", "d"),
-    # the gap
-    F("validate_gap", "top1_rate_min", "effect named first, worst case", "≥ 0.9", ".3g", True),
-    F("validate_gap", "size_within_2sigma_rate_min", "its size within 2 sigma, worst case",
-      "≥ 0.9"),
-    F("validate_gap", "null_clean_rate", "null shots left clean", "≥ 0.9", ".3g", True),
-    F("validate_gap", "out_of_library_unexplained_rate",
-      "an effect outside the library left unexplained, located", "≥ 0.9"),
-    F("validate_gap", "held_param_flag_rate", "a wrong held parameter flagged", "≥ 0.9"),
-    F("validate_gap", "shrink_ratio_pooled_max", "residual after / clean fit, pooled, worst case",
-      "≤ 1.10"),
-    F("validate_gap", "seconds_per_diagnosis", "time per diagnosis, median (s)", "", ".3g"),
-    F("validate_gap", "trials_per_case", "trials per case", "", "d"),
-    F("gap_detection", "detection_efficiency_max",
-      "size detected in 90 % / size the true effect's own test needs, worst effect", "≤ 1.5"),
-    # the seeds' methods
-    F("validate_motion", "cadra_over_classic_error_max",
-      "CADRA's error / the classic method's, noise-free, worst coefficient", "≤ 0.1", ".3g",
-      True),
-    F("validate_motion", "classic_over_paper_error_max",
-      "the classic method rebuilt / the paper's own error, worst", ""),
-    F("validate_motion", "cadra_pull_std_min", "CADRA's pulls with noise, std, lowest",
-      "0.7–1.3"),
-    F("validate_motion", "cadra_pull_std_max", "CADRA's pulls with noise, std, highest",
-      "0.7–1.3"),
-    F("validate_tricyclic", "seed002_within_case_inequalities_hold",
-      "the paper's within-case orderings reproduced", "all"),
-    F("validate_tricyclic", "seed002_nr_lowers_rms_frac",
-      "the nonrolling-axis correction lowers the rms", "1"),
-    F("validate_tricyclic", "seed002_cubic_12nr_over_10_ratio",
-      "cubic C_m: 10-constant rms / 12-constant + NR (paper 15.6)", ""),
-    F("validate_m80", "m80_within_2sigma_frac", "6-DOF coefficients within 2 sigma", "≥ 0.9",
-      ".3g", True),
-    F("validate_m80", "m80_linear_within_2sigma_frac", "linear theory within 2 sigma", ""),
-    F("validate_m80", "draws", "noise draws", "", "d"),
-    F("validate_roll_seed001", "lockin_cadra_over_mdc_error_max",
-      "roll lock-in: CADRA's error / the MDC reduction's, noise-free", "≤ 0.1"),
-    F("validate_roll_seed001", "limit_cycle_rel_err", "Eq. 31's limit cycle, relative error",
-      ""),
-    F("validate_roll_seed003", "seed003_pull_std_min", "pulls' std, lowest coefficient",
-      "0.7–1.3"),
-    F("validate_roll_seed003", "seed003_pull_std_max", "pulls' std, highest coefficient",
-      "0.7–1.3"),
-    F("validate_roll_seed003", "seed003_within_2sigma", "within 2 sigma", "≥ 0.9"),
-    F("validate_roll_seed003", "steady_spin_rel_err_max",
-      "steady spins of the fitted coefficients, relative error", ""),
-    F("validate_roll_seed003", "draws", "draws", "", "d"),
-    F("validate_roll_images", "roll_rms_deg", "roll error rms (deg)", "", ".3g"),
-    F("validate_roll_images", "roll_crb_ratio", "roll error rms / its Cramér–Rao bound", ""),
-    F("validate_roll_images", "roll_sigma_ratio_min", "roll sigma / error, lowest fold bin",
-      "0.8–1.25"),
-    F("validate_roll_images", "roll_sigma_ratio_max", "roll sigma / error, highest fold bin",
-      "0.8–1.25"),
-    F("bench_starts", "cone_gyro_epicyclic_to_truth_frac",
-      "gyroscopically stable cone: fits from the epicyclic start reaching the truth", "1"),
-    F("bench_starts", "cone_gyro_linear_to_truth_frac",
-      "the same from the damped sines' start", ""),
-    F("bench_motion", "epicyclic_fit_ms", "epicyclic fit of a 200-point history (ms)", "< 50"),
-    F("bench_motion", "kb_reduction_s", "sectional K-B reduction of 2,000 points (s)", "< 2"),
-    F("bench_simulator", "trajectories_per_s", "16-station trajectories per second, one core",
-      "≥ 500", ".4g"),
-    F("bench_aero", "ns_float64", "a full 9-coefficient evaluation (ns)", "", ".3g"),
-)
+FIGURES: tuple[Figure, ...] = load_figures()
 
 
 def value_of(figures: dict, key: str):
@@ -294,5 +193,6 @@ def update(root: str | os.PathLike) -> list[Path]:
     return written
 
 
-__all__ = ["FIGURES", "Figure", "README_BEGIN", "README_END", "SECTIONS", "fmt", "pages",
-           "render_headline", "render_validation", "stale", "update", "value_of"]
+__all__ = ["FIGURES", "FIGURES_PATH", "README_BEGIN", "README_END", "SECTIONS", "Figure", "fmt",
+           "load_figures", "pages", "render_headline", "render_validation", "stale", "update",
+           "value_of"]

@@ -4,7 +4,9 @@
   pixel outline at a pose;
 - :mod:`~cadra.measure.silhouette.locate`: the coarse location, the fit's first guess;
 - :mod:`~cadra.measure.silhouette.edges`: stage A, per-segment edge offsets about a trial
-  outline, with the blurred-edge model of a whole polygon;
+  outline;
+- :mod:`~cadra.measure.silhouette.polygon`: the blurred-edge model of a whole polygon,
+  corners included (a finned body's roll);
 - :mod:`~cadra.measure.silhouette.noise`: the image noise's correlation and the offsets'
   covariance it makes;
 - :mod:`~cadra.measure.silhouette.fit`: the silhouette least squares (method a),
