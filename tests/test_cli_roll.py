@@ -7,7 +7,6 @@ record on CADRA's roll bearing; the steady spin the paper derives from them (+0.
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +22,7 @@ from cadra.dynamics.trajectory import Launch
 from cadra.flight.data import rigid_body_from_shot
 from cadra.io.shotfile import MassProperties, ShotFile, StationRecord, save_shot
 from cadra.io.trajectory import COLUMNS, write_trajectory
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-import validate_roll_seed003 as case  # noqa: E402
+from cadra.validation import seed003_runs as case
 
 R_AIR, T_K = 287.05, 288.15
 

@@ -1,6 +1,6 @@
-"""The 7.62 mm M-80 (issue 19, docs/m80.md) against independent truth.
+"""The 7.62 mm M-80 (docs/m80.md) against independent truth.
 
-- The bundled model ``m80`` holds BRL MR 1833 Table II's values (as quoted in issue 19) in
+- The bundled model ``m80`` holds BRL MR 1833 Table II's values (docs/m80.md) in
   the report's normalisation (CMQ per q d/V, CMPA per p d/V), mapped onto CADRA's
   q d/2V and p d/2V by the factors of 2 written in its forms.
 - The gyroscopic stability factor of the sample rounds: S_g = I_x^2 p^2 / (2 rho I_y S d V^2
@@ -11,20 +11,18 @@
   here (not cadra.motion's).
 - The small-arms range covers a slow-arm cycle and samples the fast arm above Nyquist.
 - Stage one on one rendered M-80 station recovers position and axis within its sigmas.
-- (slow) tools/validate_m80.py's one draw: images -> cadra1 -> linear theory and the 6-DOF
-  fit recover the coefficients within 2 sigma.
+- (slow) tools/validate_m80.py's one draw (cadra.validation.m80): images -> cadra1 -> linear
+  theory and the 6-DOF fit recover the coefficients within 2 sigma.
 """
 
 import dataclasses
 import math
-import sys
 import tomllib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-from test_magnus import fit_two_arms  # Prony roots and amplitudes of the two arms
 
 from cadra.aero import resolve_model
 from cadra.dynamics.observe import observe
@@ -33,11 +31,12 @@ from cadra.dynamics.trajectory import Launch
 from cadra.facility.reference import small_arms_range_text
 from cadra.io.facility_file import load_facility
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
+from cadra.validation.arms import fit_two_arms  # Prony roots and amplitudes of the two arms
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = ROOT / "sample_shots" / "specs" / "m80_1.toml"
 TWIST_M = 12 * 0.0254          # 1 turn in 12 in
-# MR 1833 Table II as quoted in issue 19
+# MR 1833 Table II (docs/m80.md)
 TABLE_II = {"CD0": (0.29, 0.39), "CNA": (2.0, 3.0), "CMA": (1.77, 1.86),
             "CMQ": (-4.5, -2.8), "CMPA": (-0.21, 0.04)}
 
@@ -221,10 +220,9 @@ def test_stage_one_recovers_one_rendered_station(tmp_path):
 
 @pytest.mark.slow
 def test_validate_m80_one_draw_recovers_the_coefficients(tmp_path):
-    sys.path.insert(0, str(ROOT / "tools"))
-    import validate_m80
+    from cadra.validation.m80 import run
 
-    s = validate_m80.run(draws=1, out=tmp_path, film=False, verbose=False)
+    s = run(draws=1, out=tmp_path, film=False, verbose=False)
     assert not s["failures"]
     for r in s["six_dof"].values():
         assert r["max_abs_pull"] <= 2.0

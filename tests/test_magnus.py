@@ -27,6 +27,7 @@ from cadra.dynamics.layout import PLANE_SIGMA
 from cadra.dynamics.observe import observe
 from cadra.dynamics.setup import RigidBody, propagate_states
 from cadra.dynamics.trajectory import Launch
+from cadra.validation.arms import fit_two_arms
 
 # a 7.62 mm bullet of the M-80's size (BRL MR 1833; illustrative mass properties): 9.5 g,
 # d = 7.82 mm, I_x = 6.5e-8 kg m^2, I_y = 5.3e-7 kg m^2; sea-level air, gravity off
@@ -93,17 +94,6 @@ def flight():
     b = (v[:, 1] + 1j * v[:, 2]) / V
     xi = np.sin(obs["psi_rad"]) + 1j * np.sin(obs["theta_rad"]) - b
     return dict(s=s, ds=ds, V0=V0, V=V, states=states, xi=xi, b=b)
-
-
-def fit_two_arms(xi, ds):
-    """Roots (fast, slow) per caliber of xi[n+2] = c1 xi[n+1] + c0 xi[n] (Prony, least
-    squares over the whole history) and the arms' complex amplitudes."""
-    c = np.linalg.lstsq(np.stack([xi[1:-1], xi[:-2]], 1), xi[2:], rcond=None)[0]
-    lam = np.log(np.roots([1.0, -c[0], -c[1]]).astype(complex)) / ds
-    lam = lam[np.argsort(-lam.imag)]
-    s = np.arange(xi.size) * ds
-    K = np.linalg.lstsq(np.exp(np.outer(s, lam)), xi, rcond=None)[0]
-    return lam, K
 
 
 def test_speed_and_spin_per_caliber_as_assumed(flight):

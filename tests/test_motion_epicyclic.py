@@ -1,4 +1,4 @@
-"""cadra.motion epicyclic/tricyclic fits and linear-theory coefficients (issue 19).
+"""cadra.motion epicyclic/tricyclic fits and linear-theory coefficients.
 
 Truths: the analytic epicycle (noise-free recovery to 1e-6), Gaussian noise draws (pulls),
 and scipy's solve_ivp of the linear angular equation (seed 000 eq. 2, seed 001 eq. 32) and of

@@ -3,8 +3,8 @@
 Truths: scipy's solve_ivp of eq. 27 as a scalar ODE (the undamped sin 4γ pendulum's period,
 orbit and Fourier content; the damped motion's peak amplitudes; records fitted with known
 coefficients); the complete elliptic integral (scipy.special.ellipk) for the period; the
-6-DOF roll bearing of CADRA's simulator with the input coefficients as aero-model forms (as
-tests/test_roll_lockin.py builds it) for seed 001 Table IV's case (C_lp0 −2, C_lp2 15,
+6-DOF roll bearing of CADRA's simulator with the input coefficients as aero-model forms
+(cadra.validation.roll_bearing) for seed 001 Table IV's case (C_lp0 −2, C_lp2 15,
 C_l(α) 0.5, released at 70°); an independent quadrature (scipy.integrate.quad) of the
 damping's work for the limit cycle.
 """
@@ -14,11 +14,6 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.special import ellipk
 
-from cadra.aero import model_from_dict
-from cadra.dynamics.modes import TestMode
-from cadra.dynamics.observe import air_angles
-from cadra.dynamics.setup import RigidBody, propagate_states
-from cadra.dynamics.trajectory import Launch
 from cadra.motion.pureroll import (
     damping_integrals,
     energy_balance_amplitude,
@@ -32,13 +27,17 @@ from cadra.motion.pureroll import (
     pure_roll_coefficients,
     section_estimates,
 )
+from cadra.validation.roll_bearing import (
+    TABLE_IV_FINNER,
+    TABLE_IV_SPEED_M_S,
+    bearing,
+    lockin_model,
+    roll_history,
+)
 
 # Table IV's case in a subsonic tunnel (our choice: the seed gives no conditions): a light
 # 30 mm finner (I_x 2.5e-5 kg m²) at 10 deg in sea-level air at 30 m/s on a roll bearing
-FINNER = dict(mass_kg=0.1, inertia_body_kg_m2=np.diag([2.5e-5, 5e-4, 5e-4]), d_m=0.03,
-              cg_from_ref_body_m=[-0.1, 0.0, 0.0], density_kg_m3=1.225,
-              speed_of_sound_m_s=340.0, viscosity_pa_s=1.8e-5, gravity_m_s2=0.0)
-U, ALPHA = 30.0, np.radians(10.0)
+U = TABLE_IV_SPEED_M_S
 IX, D = 2.5e-5, 0.03
 S = np.pi * D**2 / 4
 Q = 0.5 * 1.225 * U**2
@@ -56,32 +55,17 @@ def eq27(t, a0, a2, A, gamma0_deg, gamma_dot0=0.0):
                      method="DOP853", rtol=1e-12, atol=1e-14).y[0]
 
 
-def lockin_model(Cla, Clp0, Clp2):
-    return model_from_dict({
-        "format": "cadra.aero/1", "name": "lockin", "angle_plane": "sigma",
-        "coefficients": {"CD": "0.5", "CL": "2*sin(sigma)", "Cm": "-0.5*sin(sigma)",
-                         "Cl": "Cla*sin(4*phi)", "Clp": "Clp0 + Clp2*(phi - pi/4)**2"},
-        "parameters": {"Cla": {"value": Cla}, "Clp0": {"value": Clp0},
-                       "Clp2": {"value": Clp2}},
-    })
+def test_table_iv_finner_is_the_one_the_constants_describe():
+    body = bearing()
+    assert body.inertia_body_kg_m2[0, 0] == IX and body.d_m == D
+    assert body.density_kg_m3 == 1.225 == TABLE_IV_FINNER["density_kg_m3"]
+    assert body.area_m2 == pytest.approx(S, rel=1e-12)
 
 
 def roll_bearing_record(t, phi0_deg=70.0):
     """The aerodynamic roll angle φ = γ (rad) of the 6-DOF roll bearing, Table IV's inputs."""
-    body = RigidBody(**FINNER, mode=TestMode(kind="roll_bearing", stream_m_s=U))
-
-    def launch(roll):
-        return Launch(speed_m_s=0.0, theta_rad=ALPHA, roll_rad=roll).state(body)
-
-    def phi_at(roll):
-        return air_angles(launch(roll)[None, :], body)["phi_rad"][0]
-
-    sense = np.sign(phi_at(0.1) - phi_at(0.0))
-    y0 = launch((np.radians(phi0_deg) - phi_at(0.0)) * sense)
     model = lockin_model(TABLE_IV["Cl_alpha"], TABLE_IV["Clp0"], TABLE_IV["Clp2"])
-    states = propagate_states(y0, 0.0, t, body.phys(), model.compile(), model.values(),
-                              dt_max=2e-4)
-    return np.unwrap(air_angles(states, body)["phi_rad"])
+    return roll_history(model, phi0_deg, t, bearing())[0]
 
 
 # ----------------------------------------------------------------------------------------
@@ -259,16 +243,14 @@ def test_bad_input_raises_value_error():
 
 @pytest.mark.slow
 def test_validation_tool_table_iv_and_limit_cycle():
-    """tools/validate_roll_seed001.py (one noise draw, 10 s): the 6-DOF fit's noise-free
-    errors at least 10x below the pendulum MDC's (seed 001's claim for its 6-D program), the
-    MDC's within the figures of docs/pureroll.md, and the simulated limit cycle for eq. 31 at
-    25 deg on the energy balance's amplitude, 2 % above eq. 31's."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-    import validate_roll_seed001 as tool
+    """tools/validate_roll_seed001.py's re-run (cadra.validation.lockin; one noise draw,
+    10 s): the 6-DOF fit's noise-free errors at least 10x below the pendulum MDC's (seed 001's
+    claim for its 6-D program), the MDC's within the figures of docs/pureroll.md, and the
+    simulated limit cycle for eq. 31 at 25 deg on the energy balance's amplitude, 2 % above
+    eq. 31's."""
+    from cadra.validation.lockin import run
 
-    out = tool.main(["--draws", "1"])
+    out = run(draws=1)
     mdc, cadra = out["lockin_mdc_err_pct"], out["lockin_cadra_err_pct"]
     assert mdc["Clp0"] < 0.1 and mdc["Clp2"] < 0.3 and mdc["Cl_alpha"] < 0.01
     assert out["lockin_cadra_over_mdc_error_max"] < 0.1

@@ -3,8 +3,8 @@ its file columns, and stage two fitting the roll channel of a roll-bearing recor
 
 Truths: ``conventions.quat_from_axis_roll`` (the attitude built from a nose axis and a roll)
 and ``quat_to_euler``; a central difference of the observation for its complex step; the
-known coefficients of a simulated roll-bearing record (seed 001 Eq. 27 forms, tests of
-test_roll_lockin.py) recovered within their sigmas.
+known coefficients of a simulated roll-bearing record (seed 001 Eq. 27 forms,
+:mod:`cadra.validation.roll_bearing`) recovered within their sigmas.
 """
 
 from __future__ import annotations
@@ -92,17 +92,23 @@ def test_trajectory_file_reads_phi_when_there_and_not_measured_when_absent(tmp_p
 # --- stage two fits a roll-bearing record's roll channel ---------------------------------
 
 def _roll_record(rng, *, phi0_deg=70.0, n=400, rate_hz=200.0, sigma_deg=0.05):
-    """A roll-bearing record of seed 001 Eq. 27's lock-in (tests/test_roll_lockin.py's body
-    and forms) measured in theta, psi and phi with white noise."""
-    from test_roll_lockin import bearing, lockin_model, roll_history
-
+    """A roll-bearing record of seed 001 Eq. 27's lock-in (the slow-damping finner of
+    :mod:`cadra.validation.roll_bearing` and its forms) measured in theta, psi and phi with
+    white noise."""
     from cadra.dynamics.trajectory import truth_table
     from cadra.flight.data import shot_data_from_truth
+    from cadra.validation.roll_bearing import (
+        SLOW_FINNER,
+        SLOW_SPEED_M_S,
+        bearing,
+        lockin_model,
+        roll_history,
+    )
 
     model = lockin_model()
     t = np.arange(n) / rate_hz
-    _, states = roll_history(model, phi0_deg, t)
-    body = bearing()
+    body = bearing(SLOW_FINNER, SLOW_SPEED_M_S)
+    _, states = roll_history(model, phi0_deg, t, body)
     truth = truth_table(t, states, body)
     sd = shot_data_from_truth(truth, body, "roll-1", "finner",
                               sigma_position_m=1e-4, sigma_angle_rad=math.radians(sigma_deg),
@@ -196,3 +202,34 @@ def test_finned_range_shot_fits_its_roll_coefficients_and_plots_the_roll():
     pts = [c for c in ax.containers]
     x_m, y_m = pts[0].lines[0].get_data()
     assert np.all(np.abs(np.interp(x_m, x_fit, y_fit) - y_m) < 3 * 0.3)
+
+
+# --- stage one's sigma beside a faint outline ----------------------------------------------
+
+def test_noise_autocovariance_that_is_no_covariance_is_not_used():
+    """Stage one's correlated-noise sigma fits the noise's autocovariance as alpha + beta m^2
+    through the levels on the two sides of an outline. Where the two are close (a faint
+    shadow, as a thin fin's can be) and their noise differs, that line's slope is mostly
+    noise, and extrapolated to darker intensities it exceeded the noise's own variance: a
+    correlation beyond 1, which gave a Basic Finner view a negative segment variance, a pose
+    sigma of 1e140 m and a singular covariance in the two views' combination. Here: a disc at
+    0.7 in a beam of 0.8, grain-like correlated noise inside it only; the line would imply a
+    correlation of 1.9 at black. Such an estimate is not used (None: white noise)."""
+    import cv2
+
+    from cadra.measure.silhouette.edges import outline_geometry
+    from cadra.measure.silhouette.noise import noise_autocovariance
+
+    n, white = 400, 0.01
+    yy, xx = np.mgrid[0:n, 0:n].astype(float)
+    r = np.hypot(xx - 200.3, yy - 199.6)
+    clean = 0.7 + 0.1 * 0.5 * (1 + np.tanh((r - 100.0) / 0.8))
+    rng = np.random.default_rng(3)
+    k = cv2.getGaussianKernel(9, 1.5)[:, 0]
+    g = cv2.sepFilter2D(rng.standard_normal((n, n)), -1, k, k,
+                        borderType=cv2.BORDER_REFLECT_101) / np.sqrt(np.sum(np.outer(k, k)**2))
+    img = clean + white * rng.standard_normal((n, n)) + np.where(r < 100, 0.01, 0.0) * g
+    t = np.linspace(0, 2 * np.pi, 1024, endpoint=False)
+    poly = np.column_stack([200.3 + 100 * np.cos(t), 199.6 + 100 * np.sin(t)])
+    coef = np.array([white**2 + 0.5e-4, 0.0, 0.0])
+    assert noise_autocovariance(img, outline_geometry(poly, 3.0), None, coef, 5) is None

@@ -16,9 +16,17 @@ import math
 import numpy as np
 import pytest
 from scipy.optimize import curve_fit
-from test_roll_lockin import ALPHA, U, bearing, roll_history
 
 from cadra.aero import model_from_dict
+from cadra.validation.roll_bearing import (
+    ALPHA,
+    SLOW_FINNER,
+    SLOW_SPEED_M_S,
+    bearing,
+    roll_history,
+)
+
+U = SLOW_SPEED_M_S
 
 ONE_DEG = math.radians(1.0)
 
@@ -39,8 +47,8 @@ def test_eq22_on_the_roll_bearing_gives_eqs_23_to_25():
     Cl_dA, dA, Cl_ga, Clp = 0.02, math.radians(1.0), -0.5, -3.0
     model = eq22_model(Cl_dA, dA, Cl_ga, Clp)
     t = np.linspace(0.0, 1.5, 1501)
-    phi, _ = roll_history(model, 20.0, t)
-    body = bearing()
+    body = bearing(SLOW_FINNER, U)
+    phi, _ = roll_history(model, 20.0, t, body)
     qSd = 0.5 * body.density_kg_m3 * U**2 * body.area_m2 * body.d_m
     Ix = body.inertia_body_kg_m2[0, 0]
 

@@ -12,21 +12,22 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
-from cadra.aero import model_from_dict
 from cadra.conventions import aero_roll_angle
 from cadra.dynamics.eom import air_data
-from cadra.dynamics.modes import TestMode
 from cadra.dynamics.observe import air_angles
-from cadra.dynamics.setup import RigidBody, propagate_states
-from cadra.dynamics.trajectory import Launch
+from cadra.dynamics.setup import RigidBody
+from cadra.validation.roll_bearing import (
+    SLOW_FINNER,
+    SLOW_SPEED_M_S,
+    bearing,
+    lockin_model,
+    release_state,
+    roll_history,
+)
 
 # a finned model in a low-density tunnel: roll inertia large against rho S d^3, so the roll
 # damping per cycle is small (lambda / omega ~ 0.005) and the averaging of Eq. 31 applies
-FINNER = dict(mass_kg=0.5, inertia_body_kg_m2=np.diag([2.0e-4, 2.5e-3, 2.5e-3]), d_m=0.03,
-              cg_from_ref_body_m=[-0.1, 0.0, 0.0], density_kg_m3=0.3,
-              speed_of_sound_m_s=340.0, viscosity_pa_s=1.8e-5, gravity_m_s2=0.0)
-U = 60.0
-ALPHA = np.radians(10.0)
+FINNER, U = SLOW_FINNER, SLOW_SPEED_M_S
 
 
 def test_phi_is_atan2_of_the_cross_flow_in_every_quadrant():
@@ -57,43 +58,19 @@ def test_phi_is_atan2_of_the_cross_flow_in_every_quadrant():
         assert variables[8].imag / h == pytest.approx(w / (v * v + w * w), rel=1e-12)
 
 
-def lockin_model(Cla=0.5, Clp0=-2.0, Clp2=15.0):
-    """Seed 001 Eq. 27 as forms: the induced roll moment Cla sin(4 phi) (rolling by +gamma
-    raises phi by gamma, so p = phi' and Eq. 27's L(alpha) sin 4 gamma is q S d Cla
-    sin 4 phi; lock-in at phi = pi/4) and the roll damping quadratic about pi/4."""
-    return model_from_dict({
-        "format": "cadra.aero/1", "name": "lockin", "angle_plane": "sigma",
-        "coefficients": {"CD": "0.5", "CL": "2*sin(sigma)", "Cm": "-0.5*sin(sigma)",
-                         "Cl": "Cla*sin(4*phi)", "Clp": "Clp0 + Clp2*(phi - pi/4)**2"},
-        "parameters": {"Cla": {"value": Cla}, "Clp0": {"value": Clp0},
-                       "Clp2": {"value": Clp2}},
-    })
+def slow_bearing():
+    return bearing(FINNER, U)
 
 
-def bearing():
-    return RigidBody(**FINNER, mode=TestMode(kind="roll_bearing", stream_m_s=U))
-
-
-def roll_history(model, phi0_deg, t):
-    """phi(t) of the body held at 10 deg in the stream, released at phi0 at rest in roll."""
-    body = bearing()
-
-    def phi_at(roll):
-        y = Launch(speed_m_s=0.0, theta_rad=ALPHA, roll_rad=roll).state(body)
-        return air_angles(y[None, :], body)["phi_rad"][0]
-
-    # the launch's roll angle moves phi one for one (its sense is the launch's convention)
-    sense = np.sign(phi_at(0.1) - phi_at(0.0))
-    roll = (np.radians(phi0_deg) - phi_at(0.0)) * sense
-    y0 = Launch(speed_m_s=0.0, theta_rad=ALPHA, roll_rad=roll).state(body)
-    assert air_angles(y0[None, :], body)["phi_rad"][0] == pytest.approx(np.radians(phi0_deg))
-    states = propagate_states(y0, 0.0, t, body.phys(), model.compile(), model.values(),
-                              dt_max=2e-4)
-    return np.unwrap(air_angles(states, body)["phi_rad"]), states
+def test_release_puts_phi_where_asked():
+    body = slow_bearing()
+    for phi0 in (20.0, 70.0, -130.0):
+        y0 = release_state(body, np.radians(phi0))
+        assert air_angles(y0[None, :], body)["phi_rad"][0] == pytest.approx(np.radians(phi0))
 
 
 def eq27_constants():
-    body = bearing()
+    body = slow_bearing()
     q = 0.5 * body.density_kg_m3 * U**2
     qSd = q * body.area_m2 * body.d_m
     Ix = body.inertia_body_kg_m2[0, 0]
@@ -105,7 +82,7 @@ def test_roll_bearing_matches_seed001_eq27():
     scalar ODE agree to 1e-7 rad over 20 roll cycles."""
     Cla, Clp0, Clp2 = 0.5, -2.0, 15.0
     t = np.linspace(0.0, 2.0, 2001)
-    phi, states = roll_history(lockin_model(Cla, Clp0, Clp2), 70.0, t)
+    phi, states = roll_history(lockin_model(Cla, Clp0, Clp2), 70.0, t, slow_bearing())
     a, b = eq27_constants()
 
     def rhs(_t, s):
@@ -147,7 +124,7 @@ def simulated_limit_cycle(model, lo_deg, hi_deg, cycles=6):
     t = np.linspace(0.0, cycles * period, 40 * cycles + 1)
 
     def growth(K_deg):
-        phi, _ = roll_history(model, 45.0 + K_deg, t)
+        phi, _ = roll_history(model, 45.0 + K_deg, t, slow_bearing())
         return np.max(np.abs(phi[t > (cycles - 1.2) * period] - np.pi / 4)) - np.radians(K_deg)
 
     return brentq(growth, lo_deg, hi_deg, xtol=1e-3)
@@ -176,6 +153,6 @@ def test_seed001_limit_cycle_of_41_8_deg_is_not_one_of_eq27():
     a, _ = eq27_constants()
     period = 2 * np.pi / np.sqrt(4 * a * 0.5)
     t = np.linspace(0.0, 10 * period, 801)
-    phi, _ = roll_history(lockin_model(0.5, -2.0, 15.0), 45.0 + 43.0, t)
+    phi, _ = roll_history(lockin_model(0.5, -2.0, 15.0), 45.0 + 43.0, t, slow_bearing())
     amp = np.abs(phi - np.pi / 4)
     assert np.max(amp[t > 8 * period]) < np.radians(43.0 - 1.0)

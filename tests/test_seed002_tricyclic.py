@@ -1,6 +1,7 @@
-"""tools/validate_tricyclic.py: seed 002 Table 2 (Jaffe's tricyclic fits to 6-DOF simulations
-of Run 21, a 60 deg blunt cone flown free in a wind tunnel) and the gap diagnosis of what the
-tricyclic fit can only leave as a residual.
+"""tools/validate_tricyclic.py's cases (cadra.validation.tricyclic, tricyclic_gap): seed 002
+Table 2 (Jaffe's tricyclic fits to 6-DOF simulations of Run 21, a 60 deg blunt cone flown
+free in a wind tunnel) and the gap diagnosis of what the tricyclic fit can only leave as a
+residual.
 
 Truths: the paper's text (V falls ~6 % over the flight, p changes < 1 %, the trim 0.67 deg,
 one nonrolling iteration reproduces the 6-DOF's phi_hat: its Fig. 9), the nonrolling angle
@@ -8,16 +9,13 @@ integrated from the simulated body's own angular velocity (not from eq. 8), the 
 twin of each perturbed simulation, and the injected effect and its size.
 """
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.integrate import cumulative_trapezoid
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-
-import validate_tricyclic as vt  # noqa: E402
+from cadra.motion import fit_epicyclic
+from cadra.validation import tricyclic as vt
+from cadra.validation.tricyclic_gap import diagnose
 
 CASES = {c.key: c for c in vt.CASES + vt.SINGLES}
 
@@ -72,7 +70,7 @@ def test_one_nonrolling_iteration_gives_the_6dof_phi_hat(records):
     the 6-DOF's own. Here: the fitted phi_hat of the 12-constant fit against the rotation of
     the fixed-plane frame about the body axis, integrated from the body rates."""
     rec = records["linear_pv"]
-    fit = vt.fit_epicyclic(rec.x, rec.alpha_f, rec.beta_f, trim_rate=0.0, curvature=True,
+    fit = fit_epicyclic(rec.x, rec.alpha_f, rec.beta_f, trim_rate=0.0, curvature=True,
                            nonrolling=True, variable="distance")
     exact = _nonrolling_angle_from_rates(rec)
     assert abs(exact[-1]) > 0.3                      # a real rotation (rad) ...
@@ -119,7 +117,7 @@ def test_trim_arm_is_the_tables_067_deg(records):
     for key, lo, hi in (("cubic_cg", 0.6, 0.74), ("cubic", 0.0, 0.05)):
         rec = records[key]
         p = float(np.mean(rec.spin) / np.mean(rec.speed))
-        f = vt.fit_epicyclic(rec.x, rec.alpha_f, rec.beta_f, trim_rate=p, curvature=True,
+        f = fit_epicyclic(rec.x, rec.alpha_f, rec.beta_f, trim_rate=p, curvature=True,
                              nonrolling=True, variable="distance")
         assert lo < np.degrees(f.arm(0).K) < hi, key
 
@@ -128,7 +126,7 @@ def test_diagnosis_names_the_cg_offset(tmp_path):
     """The gap diagnosis of the cubic + cg case (0.1 deg, 0.1 mm noise) names the lateral
     cg offset alone, at the injected size across the axis (0.0853 mm) within 5 %, and the
     fit with it sits at the noise floor."""
-    r = vt.diagnose(CASES["cubic_cg"], 0.1, 1, tmp_path)
+    r = diagnose(CASES["cubic_cg"], 0.1, 1, tmp_path)
     assert r["named"] == ["lateral cg offset"], r["verdict"]
     assert r["reduced_chi2"][0] > 3.0 and r["reduced_chi2"][1] < 1.2
     cg = r["sizes"]["lateral cg offset"]
@@ -138,7 +136,7 @@ def test_diagnosis_names_the_cg_offset(tmp_path):
 @pytest.mark.slow
 def test_diagnosis_names_every_mass_asymmetry(tmp_path):
     """cg offset + Iy != Iz + products (Table 2's last mass case): all three named (80 s)."""
-    r = vt.diagnose(CASES["cubic_cg_iyz_prod"], 0.1, 3, tmp_path)
+    r = diagnose(CASES["cubic_cg_iyz_prod"], 0.1, 3, tmp_path)
     assert set(r["named"]) == {"lateral cg offset", "inertia asymmetry",
                                "products of inertia"}, r["verdict"]
     assert not r["unexplained"] and r["reduced_chi2"][1] < 1.15
@@ -149,7 +147,7 @@ def test_diagnosis_of_the_varied_density_is_unexplained(tmp_path):
     """A density varying in time at the pitch period is not in the gap library (its density
     candidate is a gradient along the range): the diagnosis names the cg offset and leaves
     the rest unexplained above the noise floor; it does not name a density effect."""
-    r = vt.diagnose(CASES["cubic_cg_density"], 0.1, 4, tmp_path)
+    r = diagnose(CASES["cubic_cg_density"], 0.1, 4, tmp_path)
     assert "lateral cg offset" in r["named"], r["verdict"]
     assert "density gradient" not in r["named"]
     assert r["unexplained"] and r["reduced_chi2"][1] > 1.15

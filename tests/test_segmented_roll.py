@@ -10,8 +10,6 @@ made them (pulls), and of noise-free segments from a wrong start (exact).
 """
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -20,6 +18,8 @@ from scipy.integrate import solve_ivp
 
 from cadra.aero import resolve_model
 from cadra.dynamics.observe import air_angles, observe
+from cadra.dynamics.setup import propagate_states
+from cadra.dynamics.trajectory import Launch
 from cadra.report.roll import write_roll
 from cadra.stats import runs_of_sign
 from cadra.studies.segmented_roll import (
@@ -37,9 +37,7 @@ from cadra.studies.segmented_roll import (
     steady_spins,
     zero_rate_points,
 )
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-import validate_roll_seed003 as case  # noqa: E402
+from cadra.validation import seed003_runs as case
 
 MODEL = resolve_model("seed003_romof")
 TRUTH = {n: float(MODEL.parameter(n).value) for n in TABLE_ORDER}
@@ -107,9 +105,9 @@ def test_roll_bearing_flies_eq5(body, run1):
     # the run breaks out positive and ends in the steady spin p = +0.0280
     assert run1.p_rad_s[-1] * kd == pytest.approx(0.0280, abs=0.0005)
     # on this mount the aerodynamic roll angle (gamma) is the observed aircraft roll (phi)
-    y0 = case.Launch(speed_m_s=0.0, theta_rad=case.ALPHA, roll_rad=1.0).state(body)
-    states = case.propagate_states(y0, 0.0, t[::10], body.phys(), MODEL.compile(),
-                                   MODEL.values(), dt_max=5e-4)
+    y0 = Launch(speed_m_s=0.0, theta_rad=case.ALPHA, roll_rad=1.0).state(body)
+    states = propagate_states(y0, 0.0, t[::10], body.phys(), MODEL.compile(), MODEL.values(),
+                              dt_max=5e-4)
     d = air_angles(states, body)["phi_rad"] - observe(states, body.ref_from_cg_body_m())["phi_rad"]
     assert np.max(np.abs((d + np.pi) % (2 * np.pi) - np.pi)) < 1e-12
 

@@ -220,9 +220,18 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
         warnings.append(message)
 
     def evaluate_jac(p, xv):
-        preds, jacs = problem.jacobian_from(p, xv, [st.y_nom for st in states])
+        """chi^2 at (p, xv) and the states' predictions and Jacobians there; inf when either
+        is not finite (no linearisation to step from)."""
+        try:
+            preds, jacs = problem.jacobian_from(p, xv, [st.y_nom for st in states])
+        except (FloatingPointError, ZeroDivisionError):
+            for st in states:
+                st.pred = st.jac = None
+            return math.inf
         for st, pred, jac in zip(states, preds, jacs, strict=True):
             st.pred, st.jac = pred, jac
+        if not all(np.all(np.isfinite(st.jac[st.mask])) for st in states):
+            return math.inf
         return _chi2(states, [st.pred for st in states])
 
     def evaluate(p, xv, ys):
@@ -245,8 +254,8 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             return build_result(problem, params, states, "failed", message, history,
                                 warnings, iterations, t_start, options, lam, xvals)
         if not math.isfinite(chi2):
-            message = ("the starting point gives a non-finite prediction (the trajectory "
-                       "diverges or tumbles, or a run needs more than "
+            message = ("the starting point gives a non-finite prediction or Jacobian (the "
+                       "trajectory diverges or tumbles, or a run needs more than "
                        f"{MAX_ADAPTIVE_EVALS:,} derivative evaluations: a long record at a "
                        f"small Integration.h_max_s, here {options.integration.h_max_s:g} s); "
                        "better starting values, or a larger h_max_s, are needed"
@@ -303,10 +312,20 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                 except (FloatingPointError, ZeroDivisionError):
                     chi2_try = math.inf
                 if chi2_try < chi2:
-                    params, xvals = p_try, x_try
+                    kept = [(st.y_nom, st.pred, st.jac) for st in states]
                     for st, y in zip(states, ys, strict=True):
                         st.y_nom = y
-                    chi2_before, chi2 = chi2, evaluate_jac(params, xvals)
+                    chi2_jac = evaluate_jac(p_try, x_try)
+                    if not math.isfinite(chi2_jac):
+                        # the Jacobian's integration runs on its own step sequence and can
+                        # overflow, or run out of evaluations, where the trial prediction
+                        # did not: no linearisation there, so the trial counts as rejected
+                        for st, (y, pred, jac) in zip(states, kept, strict=True):
+                            st.y_nom, st.pred, st.jac = y, pred, jac
+                        lam *= 10.0
+                        continue
+                    params, xvals = p_try, x_try
+                    chi2_before, chi2 = chi2, chi2_jac
                     history.append(chi2)
                     lam = max(lam / 10.0, 1e-12)
                     accepted = True

@@ -20,4 +20,24 @@ tests). Modules:
   benchmarks compare with (Otsu + moments pixels; the SciPy reference fitter);
 - :mod:`~cadra.validation.stage1_bench`, :mod:`~cadra.validation.stage2_bench`: the stage-one
   and stage-two benchmarks' sections (``tools/bench_cadra1.py``, ``tools/bench_cadra2.py``).
+- :mod:`~cadra.validation.gap_cases`: the gap validation's cases (shots, effect, sizes);
+- :mod:`~cadra.validation.gap_measure`: stage-one-like measurements of a simulated shot;
+- :mod:`~cadra.validation.gap_trials`: a blind gap-diagnosis trial, a case's trials;
+- :mod:`~cadra.validation.gap_scoring`: a gap diagnosis scored against the injected truth;
+- :mod:`~cadra.validation.gap_summary`: the gap validation's lines per case and figures;
+- :mod:`~cadra.validation.gap_detection`: the gap diagnosis's detection-efficiency scan;
+- :mod:`~cadra.validation.gap_power`: a score test's power and the detection curve's fit.
+- :mod:`~cadra.validation.roll_bearing`: simulated roll-bearing records of the roll lock-in
+  (two finners, Eq. 27 as forms); :mod:`~cadra.validation.lockin`: seed 001 Table IV re-run;
+  :mod:`~cadra.validation.seed003_runs`: seed 003's runs and segmented-fit draws;
+  :mod:`~cadra.validation.roll_images`, :mod:`~cadra.validation.finner_range`: the finner's
+  roll from renders and its range shot end to end (``tools/validate_roll*.py``);
+- :mod:`~cadra.validation.motion_cases`, :mod:`~cadra.validation.motion_validation`: the
+  seeds' classic-motion cases on a gimbal and a pitch pivot and their tables;
+  :mod:`~cadra.validation.motion_records`: solve_ivp records and the motion benchmark;
+  :mod:`~cadra.validation.arms`: a yaw history's two arms by Prony's method;
+- :mod:`~cadra.validation.tricyclic`, :mod:`~cadra.validation.tricyclic_table`,
+  :mod:`~cadra.validation.tricyclic_gap`: seed 002's Run 21 in a wind tunnel, its tricyclic
+  table and its gap diagnosis; :mod:`~cadra.validation.m80`: the M-80 end to end;
+  :mod:`~cadra.validation.starts_bench`: linear-theory against epicyclic starting values.
 """

@@ -86,7 +86,8 @@ def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
     the lags matters), times the fitted noise model's variance at the side's median level.
     Additive correlated noise (a scanner's MTF) gives ``beta = 0``; film grain, which
     modulates the beam, ``alpha = 0``. Returns ``(lags, alpha, beta)``, or None where a side
-    has too few pixels.
+    has too few pixels or where the fit implies a correlation beyond 1 at an intensity between
+    black and the brighter side's level (the noise is then taken as white).
     """
     H, W = img.shape
     # the ring needs no precision: every 8th vertex of the outline is 8x faster
@@ -138,6 +139,15 @@ def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
         return None
     beta = (ab - ad) / (mb * mb - md * md)
     alpha = ad - beta * md * md
+    # the line through two levels holds between them; where they are close (a faint shadow,
+    # a blurred edge) its slope is mostly their noise, and extrapolated to the other
+    # intensities of the outline's pixels it can exceed the noise's own variance: a
+    # correlation beyond 1, no covariance at all (a segment's offset variance comes out
+    # negative). Such an estimate is not used.
+    m = np.linspace(0.0, max(mb, md), 33)[:, None]
+    var = np.maximum(v0 + v1 * m + v2 * m * m, 1e-300)
+    if np.any(np.abs(alpha + beta * m * m) > var):
+        return None
     return lags, alpha, beta
 
 
