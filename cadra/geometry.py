@@ -1,7 +1,7 @@
 """Pure plane geometry shared by the synthetic side and the measurement: polygons and 2x3 affines.
 
 The lowest layer of the package: numpy only, no other :mod:`cadra` import, so the renderer
-(:mod:`cadra.synthetic`), stage one (:mod:`cadra.measure`), the optics (:mod:`cadra.optics`) and
+(:mod:`cadra.synthetic`), stage one (:mod:`cadra.imaging`), the optics (:mod:`cadra.optics`) and
 the facility model (:mod:`cadra.facility`) can all use it without importing each other.
 
 Polygons are ``(N, 2)`` vertex arrays, closed implicitly (last vertex not repeated), either

@@ -29,8 +29,8 @@ from cadra.flight.data import ShotData
 from cadra.flight.starts import start_estimates
 from cadra.gap.score import GapDiagnosis, diagnose_gap
 from cadra.gap.where import where_analysis
-from cadra.measure.shot import Stage1Result, measure_shot
-from cadra.measure.station import ViewResult, measure_view
+from cadra.imaging.shot import Stage1Result, measure_shot
+from cadra.imaging.station import ViewResult, measure_view
 from cadra.synthetic.simulate import (
     ShotSpec,
     SimulatedShot,

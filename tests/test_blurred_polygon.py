@@ -1,5 +1,5 @@
 """The blurred-edge model of a whole polygon, corners included
-(cadra.measure.silhouette.polygon.blurred_polygon), against independent truths: the Gaussian's
+(cadra.imaging.silhouette.polygon.blurred_polygon), against independent truths: the Gaussian's
 mass over the polygon integrated numerically (shapely's point-in-polygon on a fine grid), the
 straight edge's Phi(-d/s), and the Laplacian of the blurred indicator by finite differences."""
 
@@ -10,8 +10,8 @@ import pytest
 import shapely
 from scipy.special import ndtr
 
-from cadra.measure.silhouette.edges import PHI1
-from cadra.measure.silhouette.polygon import blurred_polygon
+from cadra.imaging.silhouette.edges import PHI1
+from cadra.imaging.silhouette.polygon import blurred_polygon
 
 #: a non-convex quadrilateral with a sharp tip (11 deg), a reflex vertex on a pixel centre
 #: (24, 20) and edges at odd angles to the grid

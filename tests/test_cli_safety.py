@@ -21,6 +21,7 @@ import pytest
 
 from cadra.cli.cadra1 import main as cadra1
 from cadra.cli.cadra2 import main as cadra2
+from cadra.imaging.shot import measure_shot
 from cadra.io.atomic import (
     UnsafeOutputError,
     atomic_output_dir,
@@ -28,7 +29,6 @@ from cadra.io.atomic import (
     clean_stale_temps,
     stale_temps,
 )
-from cadra.measure.shot import measure_shot
 from cadra.report.stage1 import write_stage1
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
@@ -328,7 +328,7 @@ def test_ctrl_c_cadra2_exits_130_one_line_nothing_written(tmp_path):
 #: cadra1's own main, with each station slowed down so the signal lands while the pool works
 SLOW_CADRA1 = """
 import sys, time
-import cadra.measure.shot as shot
+import cadra.imaging.shot as shot
 measure = shot.measure_station
 def slow(*args, **kwargs):
     time.sleep(3.0)

@@ -1,10 +1,10 @@
-"""Two-view combination against exact geometry (cadra.measure.combine)."""
+"""Two-view combination against exact geometry (cadra.imaging.combine)."""
 
 import numpy as np
 import pytest
 
 from cadra.conventions import axis_from_inclinations, projected_angles_from_axis
-from cadra.measure.combine import ViewPose, combine_views
+from cadra.imaging.combine import ViewPose, combine_views
 
 RNG = np.random.default_rng(7)
 
@@ -93,7 +93,7 @@ def test_tilt_error_propagation_matches_monte_carlo():
     reference point by tilt_sensitivity x (tilt error). Simulated here as the measurement
     does it: the true tilts from the true angles, each view's position shifted by its
     sensitivity times the error of the tilt the measured angles give (view_tilts)."""
-    from cadra.measure.combine import view_tilts
+    from cadra.imaging.combine import view_tilts
 
     theta, psi = 0.5, -0.1
     theta_p, psi_p = projected_angles_from_axis(axis_from_inclinations(theta, psi))

@@ -196,7 +196,7 @@ def test_range_covers_a_slow_cycle_and_samples_the_fast_arm(flight):
 # --- stage one on a rendered station ---------------------------------------------------------
 
 def test_stage_one_recovers_one_rendered_station(tmp_path):
-    from cadra.measure.shot import measure_shot
+    from cadra.imaging.shot import measure_shot
     from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import write_shot
 

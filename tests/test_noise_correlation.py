@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from cadra.body import capsule, sphere
-from cadra.measure.silhouette.edges import outline_geometry, stage_a
-from cadra.measure.silhouette.fit import FitSettings
-from cadra.measure.silhouette.noise import noise_autocovariance, segment_covariance
-from cadra.measure.silhouette.template import make_template, outline_px
+from cadra.imaging.silhouette.edges import outline_geometry, stage_a
+from cadra.imaging.silhouette.fit import FitSettings
+from cadra.imaging.silhouette.noise import noise_autocovariance, segment_covariance
+from cadra.imaging.silhouette.template import make_template, outline_px
 from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.crb import grain_correlation_kernel
 from cadra.synthetic.render import RenderConfig, render

@@ -217,8 +217,8 @@ def test_noise_autocovariance_that_is_no_covariance_is_not_used():
     correlation of 1.9 at black. Such an estimate is not used (None: white noise)."""
     import cv2
 
-    from cadra.measure.silhouette.edges import outline_geometry
-    from cadra.measure.silhouette.noise import noise_autocovariance
+    from cadra.imaging.silhouette.edges import outline_geometry
+    from cadra.imaging.silhouette.noise import noise_autocovariance
 
     n, white = 400, 0.01
     yy, xx = np.mgrid[0:n, 0:n].astype(float)

@@ -1,4 +1,4 @@
-"""Stage one's roll of a finned body (cadra.measure.roll; docs/stage1.md, "Roll of a finned
+"""Stage one's roll of a finned body (cadra.imaging.roll; docs/stage1.md, "Roll of a finned
 body") against the renderer's exact truth: the sample shot FINNER-1 rendered at default
 realism, its truth roll from the simulated attitude."""
 
@@ -13,8 +13,8 @@ import shapely
 from cadra.body import outline_polygon
 from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import VIEW_AXES
-from cadra.measure.combine import StationPose
-from cadra.measure.roll import (
+from cadra.imaging.combine import StationPose
+from cadra.imaging.roll import (
     PERIOD_RAD,
     RollCandidate,
     StationRoll,
@@ -23,9 +23,9 @@ from cadra.measure.roll import (
     resolve_roll_track,
     view_outline_px,
 )
-from cadra.measure.shot import with_roll_track
-from cadra.measure.station import StationResult, measure_station
-from cadra.measure.wires.fit import wire_mask
+from cadra.imaging.shot import with_roll_track
+from cadra.imaging.station import StationResult, measure_station
+from cadra.imaging.wires.fit import wire_mask
 from cadra.synthetic.crb_roll import roll_crb
 from cadra.synthetic.render_config import RenderConfig
 from cadra.synthetic.simulate import (
@@ -244,7 +244,7 @@ def test_local_level_carries_a_tilted_beam_into_the_shadow():
     """The beam's level under a shadow (a first-order normalized convolution): a tilted
     plane is reproduced exactly where it is masked (a weighted mean would lean toward its
     unshadowed side by the gradient times ~0.8 sigma)."""
-    from cadra.measure.roll import _local_linear_level
+    from cadra.imaging.roll import _local_linear_level
 
     v, u = np.indices((120, 160), dtype=float)
     beam = 0.8 + 1e-3 * u - 6e-4 * v

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from cadra.body import capsule, cone, sphere
-from cadra.measure.silhouette.fit import FitSettings, fit_silhouette
-from cadra.measure.silhouette.template import make_template, outline_px
+from cadra.imaging.silhouette.fit import FitSettings, fit_silhouette
+from cadra.imaging.silhouette.template import make_template, outline_px
 from cadra.optics.projection import ParallelProjection
 from cadra.synthetic.cases import random_view_case
 from cadra.synthetic.render import RenderConfig
@@ -194,7 +194,7 @@ def test_partly_out_of_frame_and_blank():
     fit = fit_silhouette(case.image, tpl, case.projection, far)
     assert not fit.ok and "out of frame" in fit.reason
     blank = np.full_like(case.image, 0.85)
-    from cadra.measure.silhouette.locate import locate_model
+    from cadra.imaging.silhouette.locate import locate_model
 
     coarse = locate_model(blank, tpl, case.projection)
     assert not coarse.ok and "no model" in coarse.reason
@@ -203,7 +203,7 @@ def test_partly_out_of_frame_and_blank():
 def test_band_pixels_match_brute_force_nearest_edge():
     """The band search (each edge's box of +-band px) finds, for every pixel within the band,
     the same signed distance and nearest edge as a brute-force search over all edges."""
-    from cadra.measure.silhouette.edges import band_pixels, outline_geometry
+    from cadra.imaging.silhouette.edges import band_pixels, outline_geometry
 
     tpl = make_template(capsule("M2"), "top", tilt_rad=0.2)
     M = np.array([[1.27e-4, 2e-7, -0.03], [-3e-7, 1.27e-4, -0.03]])
@@ -274,7 +274,7 @@ def test_scaled_covariance_same_pose_and_honest_sigma():
     iterations stop), a different covariance; and the errors in units of the scaled sigma
     have a standard deviation near 1 (40 random M2 views; the 1000-render figures are
     tools/bench_cadra1.py's, the whole-shot ones tools/bench_e2e.py's)."""
-    from cadra.measure.silhouette.locate import locate_model, pose_from_coarse
+    from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 
     with pytest.raises(ValueError, match="covariance"):
         FitSettings(covariance="hc3")

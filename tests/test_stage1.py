@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 
 from cadra.cli.cadra1 import main as cadra1_main
+from cadra.imaging.shot import measure_shot
 from cadra.io.trajectory import load_trajectory
-from cadra.measure.shot import measure_shot
 from cadra.report.stage1 import write_stage1
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from cadra.measure.truth_compare import compare_with_truth
+from cadra.imaging.truth_compare import compare_with_truth
 from cadra.report.stage1 import comparison_markdown
 
 

@@ -1,4 +1,4 @@
-"""The wire centroid's sub-pixel phase bias (cadra.measure.wires.phase), against closed forms
+"""The wire centroid's sub-pixel phase bias (cadra.imaging.wires.phase), against closed forms
 and noise-free renders.
 
 A noise-free render leaves only the deterministic error of each wire's line: on a wire that
@@ -13,8 +13,8 @@ single-gain model slightly under-sizes the bias near its jump); swept lines' sig
 import numpy as np
 import pytest
 
-from cadra.measure.wires.fit import measure_wires
-from cadra.measure.wires.phase import phase_gain, sampling_bias_px, systematic_cov
+from cadra.imaging.wires.fit import measure_wires
+from cadra.imaging.wires.phase import phase_gain, sampling_bias_px, systematic_cov
 from cadra.validation.wire_images import (
     FAC,
     QUIET,

@@ -1,4 +1,4 @@
-"""The wires' profile model (cadra.measure.wires.profile) against the renderer's exact lines.
+"""The wires' profile model (cadra.imaging.wires.profile) against the renderer's exact lines.
 
 Two wires 40 px apart across a 600 px strip, one parallel to the pixel rows (one sub-pixel
 phase all along: the case a centroid cannot average), one drifting 3 px across them. Formed
@@ -12,8 +12,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cadra.measure.wires.fit import _centroids, measure_wires
-from cadra.measure.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
+from cadra.imaging.wires.fit import _centroids, measure_wires
+from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.synthetic.scene import wire_polygon
 from cadra.validation.wire_images import FAC, make_image, true_affine

@@ -1,4 +1,4 @@
-"""A bow shock along a fiducial wire (cadra.measure.wires.straightness).
+"""A bow shock along a fiducial wire (cadra.imaging.wires.straightness).
 
 In a supersonic shot the bow shock's shadowgraph line (a dark/bright pair, ~10 % contrast)
 stands ahead of the model and, near its vertex, runs almost parallel to a wire across the
@@ -15,9 +15,9 @@ import math
 import numpy as np
 import pytest
 
-import cadra.measure.wires.straightness as straightness
+import cadra.imaging.wires.straightness as straightness
 from cadra.geometry import apply_affine
-from cadra.measure.wires.fit import measure_wires
+from cadra.imaging.wires.fit import measure_wires
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.validation.wire_images import (
     FAC,

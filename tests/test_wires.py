@@ -1,4 +1,4 @@
-"""Fiducial wires and the image->plane affine (cadra.measure.wires.fit), against exact truth.
+"""Fiducial wires and the image->plane affine (cadra.imaging.wires.fit), against exact truth.
 
 Images come from the synthetic renderer through :mod:`cadra.validation.wire_images`: the wires
 are drawn with a known, perturbed affine (``cadra.synthetic.simulate.film_affine``: ~4 px
@@ -28,7 +28,7 @@ import pytest
 
 from cadra.facility.reference import fit_affine_to_wires
 from cadra.geometry import apply_affine
-from cadra.measure.wires.fit import WireMeasurement, measure_wires, wire_mask
+from cadra.imaging.wires.fit import WireMeasurement, measure_wires, wire_mask
 from cadra.validation.wire_images import (
     FAC,
     QUIET,

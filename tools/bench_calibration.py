@@ -120,7 +120,7 @@ def end_to_end() -> dict:
 
     from cadra.calibration.sphere import estimate_station_biases
     from cadra.flight import load_shot_data
-    from cadra.measure.shot import measure_shot
+    from cadra.imaging.shot import measure_shot
     from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

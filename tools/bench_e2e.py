@@ -71,7 +71,7 @@ def measure_one(job):
     (n, 5) with NaN where not measured, seconds). Nothing is left on disk.
     """
     from cadra.flight.data import load_shot_data, shot_data_from_truth
-    from cadra.measure.shot import measure_shot
+    from cadra.imaging.shot import measure_shot
     from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

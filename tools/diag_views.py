@@ -42,9 +42,9 @@ def _rms_z(df, e, s):
 
 
 def station_rows(name: str, seed: int, render: dict) -> list[dict]:
-    from cadra.measure.combine import _tilt_propagated
-    from cadra.measure.shot import measure_shot
-    from cadra.measure.station import _view_pose
+    from cadra.imaging.combine import _tilt_propagated
+    from cadra.imaging.shot import measure_shot
+    from cadra.imaging.station import _view_pose
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     spec = load_shot_spec(ROOT / "sample_shots" / "specs" / f"{name}.toml")

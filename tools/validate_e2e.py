@@ -43,7 +43,7 @@ def main(argv=None) -> int:
 
     from cadra.fitting import fit_shots
     from cadra.flight import load_shot_data
-    from cadra.measure.shot import measure_shot
+    from cadra.imaging.shot import measure_shot
     from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

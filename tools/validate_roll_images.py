@@ -10,7 +10,7 @@ Each case is one HFFAF station (both views, 1600 x 1200 px, default realism: def
 (``sample_shots/specs/finner_1.toml``: the Basic Finner at d = 0.7 cm, 551 px long) at a
 random roll (uniform over a turn), a random axis within 3 deg of the range axis and a random
 reference point within 5 mm of the station's centre, flying at 690 m/s (motion blur, a Mach 2
-bow shock). The images are measured by ``cadra.measure.station.measure_station`` (wires, pose
+bow shock). The images are measured by ``cadra.imaging.station.measure_station`` (wires, pose
 fit, the roll of docs/stage1.md "Roll of a finned body"). The station's best roll candidate is
 compared with the truth modulo 90 deg (one station: no continuity); the Cramér–Rao bound of
 each view's roll (``cadra.synthetic.crb_roll``, pose and nuisances marginalized) on every case,

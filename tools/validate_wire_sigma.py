@@ -2,7 +2,7 @@
 
 Renders wire-only views (:mod:`cadra.validation.wire_images`: HFFAF station 1 top and 5 side,
 a perturbed film affine per placement, default realism), measures them with
-:func:`cadra.measure.wires.fit.measure_wires` and compares the solved map of the image centre
+:func:`cadra.imaging.wires.fit.measure_wires` and compares the solved map of the image centre
 (where the model flies) with the true map, in units of the reported
 ``WireMeasurement.position_sigma_m`` (a along the range, b across it). Each placement is
 rendered twice: with the default noise, and noise-free (same wires, same placement), whose

@@ -68,11 +68,11 @@ def _main(argv: list[str] | None) -> int:
         return _check(args)
     from pathlib import Path
 
+    from cadra.imaging.shot import measure_shot
     from cadra.io.atomic import check_output_dir
     from cadra.io.shot_check import check_model_size
     from cadra.io.shotfile import load_shot
     from cadra.io.trajectory import load_truth
-    from cadra.measure.shot import measure_shot
     from cadra.report.stage1 import write_stage1
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"

@@ -281,7 +281,7 @@ def _numeric(table: pd.DataFrame, path: Path) -> pd.DataFrame:
 
 
 def station_rows(results, times_s: dict) -> pd.DataFrame:
-    """Table rows (:data:`ALL_COLUMNS`) from :class:`cadra.measure.station.StationResult` s
+    """Table rows (:data:`ALL_COLUMNS`) from :class:`cadra.imaging.station.StationResult` s
     (the roll from a pose's ``phi_rad`` / ``sigma_phi_rad`` where it has them)."""
     rows = []
     for r in results:

@@ -1,7 +1,7 @@
 """Stage one's outputs: the trajectory file, the quality table, overlays, one page of plots
 and the report (docs/stage1.md).
 
-:func:`write_stage1` writes a :class:`cadra.measure.shot.Stage1Result` to a folder, atomically
+:func:`write_stage1` writes a :class:`cadra.imaging.shot.Stage1Result` to a folder, atomically
 (:func:`cadra.io.atomic.atomic_output_dir`: built in a temporary sibling and moved into place;
 an output that is or holds one of the measurement's inputs is refused, an existing one unless
 ``overwrite``)::
@@ -24,9 +24,9 @@ import numpy as np
 import pandas as pd
 
 from cadra.channels import OBSERVED
+from cadra.imaging.truth_compare import TruthComparison, compare_with_truth
 from cadra.io.atomic import atomic_output_dir, check_output_dir
 from cadra.io.trajectory import trajectory_to_csv
-from cadra.measure.truth_compare import TruthComparison, compare_with_truth
 from cadra.report import figures, markdown
 
 

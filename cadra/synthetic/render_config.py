@@ -229,6 +229,6 @@ def save_render_config(
         If ``path`` exists and ``overwrite`` is false.
     """
     path = Path(path)
-    text = "# cadra.measure RenderConfig (docs/renderer.md)\n" + tomli_w.dumps(config.to_dict())
+    text = "# cadra.imaging RenderConfig (docs/renderer.md)\n" + tomli_w.dumps(config.to_dict())
     atomic_write_text(path, text, overwrite=overwrite)
     return path

@@ -27,7 +27,7 @@ def finner_realisation(r: int, seed: int, work: Path) -> dict:
     """FINNER-1 with a new seed: images -> cadra1 -> cadra2; pulls of the free coefficients."""
     from cadra.fitting import fit_shots
     from cadra.flight.data import load_shot_data
-    from cadra.measure.shot import measure_shot
+    from cadra.imaging.shot import measure_shot
     from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

@@ -93,7 +93,7 @@ def measure_draw(k: int, out: Path, keep_images: bool = False, reuse: bool = Fal
     """Fly, render and measure every round of draw ``k``; returns (ShotData list, seconds).
     ``reuse``: keep a round's earlier shot file and stage-one output when both are there."""
     from cadra.flight import load_shot_data
-    from cadra.measure.shot import measure_shot
+    from cadra.imaging.shot import measure_shot
     from cadra.report.stage1 import write_stage1
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 

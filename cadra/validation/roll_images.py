@@ -6,7 +6,7 @@ Each case is one HFFAF station (both views, 1600 x 1200 px, default realism: def
 (``sample_shots/specs/finner_1.toml``: the Basic Finner at d = 0.7 cm, 551 px long) at a
 random roll (uniform over a turn), a random axis within 3 deg of the range axis and a random
 reference point within 5 mm of the station's centre, flying at 690 m/s (motion blur, a Mach 2
-bow shock). The images are measured by ``cadra.measure.station.measure_station`` (wires, pose
+bow shock). The images are measured by ``cadra.imaging.station.measure_station`` (wires, pose
 fit, the roll). The station's best roll candidate is compared with the truth modulo 90 deg
 (one station: no continuity); the Cramér–Rao bound of each view's roll
 (``cadra.synthetic.crb_roll``, pose and nuisances marginalized) on every case, combined over
@@ -56,7 +56,7 @@ def _case(i, shot, rng, tmp, config, crb=True):
     bounds)."""
     from cadra.body import outline_polygon
     from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
-    from cadra.measure.station import measure_station
+    from cadra.imaging.station import measure_station
     from cadra.synthetic.crb_roll import roll_crb
     from cadra.synthetic.render import render, write_image
     from cadra.synthetic.simulate import film_affine, view_scene

@@ -161,7 +161,7 @@ def speed(tmpdir: Path, shot_spec: Path, write_outputs: Callable):
     import cv2
     import pandas as pd
 
-    from cadra.measure.shot import measure_shot
+    from cadra.imaging.shot import measure_shot
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
     shot_dir = tmpdir / "shot"

@@ -1,7 +1,7 @@
 """The harness layer: synthetic cases with exact truth measured by stage one.
 
 The one place that may import both sides: the synthetic data (:mod:`cadra.synthetic`) and
-the measurement it tests (:mod:`cadra.measure`), which never import each other. Tests and
+the measurement it tests (:mod:`cadra.imaging`), which never import each other. Tests and
 benchmarks (``tools/bench_cadra1.py``) put a case and a measurement together through here.
 
 :func:`measure_case` runs stage one's per-view measurement on a
@@ -15,9 +15,9 @@ from __future__ import annotations
 import math
 
 from cadra.body import Body
-from cadra.measure.silhouette.fit import FitSettings, ViewFit, fit_silhouette
-from cadra.measure.silhouette.locate import locate_model, pose_from_coarse
-from cadra.measure.silhouette.template import make_template
+from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
+from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
+from cadra.imaging.silhouette.template import make_template
 from cadra.synthetic.cases import ViewCase
 from cadra.synthetic.render_config import RenderConfig
 

@@ -9,7 +9,7 @@ exact. The wire tests and ``tools/validate_wire_sigma.py`` render and score thro
   station 5 side); :data:`QUIET`: a noise-free render configuration;
 - :func:`true_affine`, :func:`make_image`, :func:`circle`: the truth and the image;
 - :func:`affine_error_m`, :func:`line_errors_px`, :func:`true_offset_px`, :func:`drift_px`:
-  a :class:`~cadra.measure.wires.fit.WireMeasurement` scored against the truth;
+  a :class:`~cadra.imaging.wires.fit.WireMeasurement` scored against the truth;
 - :func:`wire_sigma`: is the wire affine's reported uncertainty honest at the image centre
   (where the model flies)?
 """
@@ -22,8 +22,8 @@ from dataclasses import replace
 import numpy as np
 
 from cadra.geometry import apply_affine
+from cadra.imaging.wires.fit import measure_wires
 from cadra.io.facility_file import load_facility
-from cadra.measure.wires.fit import measure_wires
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.synthetic.simulate import FilmPlacement, film_affine
 
@@ -104,7 +104,7 @@ def wire_sigma(n: int = 120, seed0: int = 1000, profile_model: bool = True,
 
     ``n`` placements alternate over :data:`VIEWS` (placement and noise seeded from
     ``seed0``); each is rendered twice, with the default noise and noise-free (:data:`QUIET`,
-    same wires and placement), and measured by :func:`~cadra.measure.wires.fit.measure_wires`
+    same wires and placement), and measured by :func:`~cadra.imaging.wires.fit.measure_wires`
     (``profile_model``: the profile model; False: the centroids with their phase term).
     ``blur_px``: another optics blur sigma for both renders. The solved map of the image
     centre is compared with the true map in units of the noisy render's

@@ -1,6 +1,6 @@
 """A wire's cross-section modelled as the image forms it: the centres without a phase bias.
 
-A wire's centroid (:func:`cadra.measure.wires.fit._centroids`) needs no model of the profile, but
+A wire's centroid (:func:`cadra.imaging.wires.fit._centroids`) needs no model of the profile, but
 it errs by a periodic function of the wire's sub-pixel phase (up to ~0.007 px for a 2 px wire)
 and its darkness weights carry the noise of every sample in its window. This module fits each
 profile, sampled through pixel centres along an image axis, with a model of how the image was
@@ -30,14 +30,14 @@ profiles whose centres differ by up to ~0.035 px at some phases. The image forma
 starts in each order, refined by Levenberg-Marquardt on the blurs' variances), then every
 profile's centre is fitted with them (:func:`fit_centres`). The formation's covariance and
 each wire's centre shift per unit of each parameter come with it, so the caller can carry the
-formation's uncertainty into the lines (:func:`cadra.measure.wires.affine.formation_cov`).
+formation's uncertainty into the lines (:func:`cadra.imaging.wires.affine.formation_cov`).
 
 Measured (``tests/test_wire_profile.py``): on the renderer's own wires (coverage, then a
 discrete PSF) and on wires formed in the physical order (PSF, then the pixel), noise-free,
 lines within 5e-4 px at every phase; a model of the wrong order errs by up to 0.035 px; with
 the default noise the centres scatter ~2.7x less than the centroid's. At 0.4 px optics blur a
 few per cent error of the fitted blur moved lines by several sigma, so sharp wires are left to
-the centroid (:data:`cadra.measure.wires.fit.MIN_MODEL_BLUR_PX`). All lengths in pixels.
+the centroid (:data:`cadra.imaging.wires.fit.MIN_MODEL_BLUR_PX`). All lengths in pixels.
 """
 
 from __future__ import annotations

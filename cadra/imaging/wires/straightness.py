@@ -1,4 +1,4 @@
-"""Is a fiducial wire straight along its whole length? (step 5 of :mod:`cadra.measure.wires.fit`)
+"""Is a fiducial wire straight along its whole length? (step 5 of :mod:`cadra.imaging.wires.fit`)
 
 A wire is straight, so its profile centres scatter about one line with their noise alone. A
 shock wave or flow line that runs within a few pixels of a wire over hundreds of pixels moves
@@ -19,10 +19,10 @@ BLOCK_PROFILES = 12
 #: A block's mean residual beyond this many of its sigmas: the wire is not straight there.
 BLOCK_T_MAX = 4.0
 #: A block's sigma also allows the centroid's sub-pixel phase bias, which a slowly drifting
-#: wire keeps over a block (<= ~0.0075 px, :mod:`cadra.measure.wires.fit` step 4), so that
+#: wire keeps over a block (<= ~0.0075 px, :mod:`cadra.imaging.wires.fit` step 4), so that
 #: noise-free images pass.
 BLOCK_SYS_PX = 0.0075
-#: ... and for the profile model's centres (:mod:`cadra.measure.wires.profile`), which carry
+#: ... and for the profile model's centres (:mod:`cadra.imaging.wires.profile`), which carry
 #: no phase bias: their formation's error, <= ~0.0015 px on a line (docs/stage1.md).
 MODEL_BLOCK_SYS_PX = 0.0015
 #: Stretches left out of one wire at most (:func:`drop_bent_stretches`).

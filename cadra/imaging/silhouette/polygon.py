@@ -1,7 +1,7 @@
 """The blurred-edge model of a whole polygon, corners included: the image a shadow's outline
 makes through the edge model of stage A (a Gaussian edge of width ``s`` with the diffraction
 fringe ``a h``), exact near the corners (Owen's T for the Gaussian's mass in a wedge, the
-fringe's line integral), for the finned body's roll (:mod:`cadra.measure.roll`) and its tests.
+fringe's line integral), for the finned body's roll (:mod:`cadra.imaging.roll`) and its tests.
 Lengths in pixels (docs/stage1.md, "Roll of a finned body").
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 import shapely
 from scipy.special import ndtr, owens_t
 
-from cadra.measure.silhouette.edges import PHI1, SQRT2PI, outline_geometry
+from cadra.imaging.silhouette.edges import PHI1, SQRT2PI, outline_geometry
 
 #: :func:`blurred_polygon`: beyond this many edge widths from both ends of an edge, its
 #: Gaussian mass is the straight edge's

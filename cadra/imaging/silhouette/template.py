@@ -11,7 +11,7 @@ docs/conventions.md). :func:`outline_px` and :func:`pose_px` place it in the ima
 view's :class:`~cadra.optics.projection.Projection`. A finned body's outline depends on its
 roll too (docs/bodies.md): its template is made at a given roll (``roll_rad``, about the nose
 axis as ``conventions.quat_from_axis_roll`` defines it; docs/stage1.md, "Roll of a finned
-body"), which :mod:`cadra.measure.roll` measures.
+body"), which :mod:`cadra.imaging.roll` measures.
 """
 
 from __future__ import annotations

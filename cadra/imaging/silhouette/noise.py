@@ -6,7 +6,7 @@ Neighbouring segments share the grain at their common end; a pose fit, which sum
 offset, sees that correlation, and the offsets' residuals cannot show it (the pose absorbs
 it). :func:`noise_autocovariance` measures the noise, :func:`offset_covariance` propagates it
 through each pixel's influence on its segment's offset (``EdgeSegments.pixels``, kept by
-:func:`cadra.measure.silhouette.edges.stage_a`); :func:`segment_covariance` applies it to a
+:func:`cadra.imaging.silhouette.edges.stage_a`); :func:`segment_covariance` applies it to a
 stage-A result and :func:`segment_correlation` normalizes that.
 Pure functions of arrays (picklable inputs).
 """
@@ -17,7 +17,7 @@ import cv2
 import numba
 import numpy as np
 
-from cadra.measure.silhouette.edges import (
+from cadra.imaging.silhouette.edges import (
     EdgeSegments,
     Outline,
     _edge_profile,

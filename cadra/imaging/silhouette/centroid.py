@@ -2,7 +2,7 @@
 
 :func:`centroid_pose`: area moments with subpixel thresholding: pixels in the edge band weigh
 by their opacity ``(L - I) / (L - D)`` from the local levels of the silhouette fit's stage A
-(:mod:`cadra.measure.silhouette.edges`), pixels inside weigh 1. The reference point is the
+(:mod:`cadra.imaging.silhouette.edges`), pixels inside weigh 1. The reference point is the
 centroid minus the exact silhouette's centroid offset; the angle is the principal axis of the
 same moments. A consistency figure beside the silhouette least squares (docs/stage1.md).
 """
@@ -15,8 +15,8 @@ import cv2
 import numpy as np
 from scipy.special import ndtr
 
-from cadra.measure.silhouette.edges import EdgeSegments
-from cadra.measure.silhouette.template import Template, outline_px, pose_px, rot
+from cadra.imaging.silhouette.edges import EdgeSegments
+from cadra.imaging.silhouette.template import Template, outline_px, pose_px, rot
 from cadra.optics.projection import Projection
 
 __all__ = ["centroid_pose"]
@@ -27,7 +27,7 @@ def centroid_pose(img, template: Template, projection: Projection, pose, seg: Ed
     """Area-moment pose (method b) with subpixel thresholding; see the module docstring.
 
     ``pose`` is the silhouette fit's (it places the outline and picks the nose direction),
-    ``seg`` its last stage A (:func:`cadra.measure.silhouette.edges.stage_a`).
+    ``seg`` its last stage A (:func:`cadra.imaging.silhouette.edges.stage_a`).
 
     Returns ``((u, v) ref px, axis angle px rad, (a, b, phi) plane)``. Band pixels weigh by
     their opacity from their segment's local levels; interior pixels weigh 1; pixels of

@@ -5,27 +5,27 @@ its images as arrays or paths, the body's spec dict, settings) returning a
 :class:`StationResult`, so a process pool or a Dask scheduler can ship it. Per view
 (docs/stage1.md):
 
-1. take the image (an array, :func:`cadra.measure.loading.station_image`, or a file,
-   :func:`cadra.measure.loading.load_station_image`; a bad one fails that view with its
+1. take the image (an array, :func:`cadra.imaging.loading.station_image`, or a file,
+   :func:`cadra.imaging.loading.load_station_image`; a bad one fails that view with its
    reason);
-2. locate the model roughly (:func:`cadra.measure.silhouette.locate.locate_model`) with the view's
+2. locate the model roughly (:func:`cadra.imaging.silhouette.locate.locate_model`) with the view's
    nominal projection;
 3. find and fit the fiducial wires, solve the image->plane affine and so the view's
-   :class:`~cadra.optics.projection.Projection` (:func:`cadra.measure.wires.fit.measure_wires`),
+   :class:`~cadra.optics.projection.Projection` (:func:`cadra.imaging.wires.fit.measure_wires`),
    the model's box excluded;
-4. fit the silhouette (method a, :mod:`cadra.measure.silhouette.fit`) and the area centroid
-   (method b, :mod:`cadra.measure.silhouette.centroid`) with the wires masked.
+4. fit the silhouette (method a, :mod:`cadra.imaging.silhouette.fit`) and the area centroid
+   (method b, :mod:`cadra.imaging.silhouette.centroid`) with the wires masked.
 
 The two views are then alternated: each view's outline depends on the axis' tilt out of its
 plane, which the other view measures; two or three rounds converge (the outline depends on the
-tilt only through its cosine). Finally :func:`cadra.measure.combine.combine_views`.
+tilt only through its cosine). Finally :func:`cadra.imaging.combine.combine_views`.
 
 For a finned body (:class:`cadra.body.FinnedBody`) the outline depends on the roll as well:
 its templates are made at the station's current roll estimate, and after each round the roll
 is measured from the fin silhouettes of both views with the poses held
-(:mod:`cadra.measure.roll`); the rounds go on until tilts and roll settle.
+(:mod:`cadra.imaging.roll`); the rounds go on until tilts and roll settle.
 ``StationResult.roll`` keeps the station's roll candidates; the shot's driver chooses among them
-by continuity (:func:`cadra.measure.roll.resolve_roll_track`).
+by continuity (:func:`cadra.imaging.roll.resolve_roll_track`).
 
 Every problem is a reason string on the view or station; nothing raises for bad data.
 """
@@ -43,11 +43,11 @@ import numpy as np
 from cadra.body import FinnedBody
 from cadra.conventions import axis_from_projected_angles
 from cadra.facility.reference import Station
-from cadra.measure.combine import StationPose, ViewPose, combine_views
-from cadra.measure.loading import load_station_image, station_image
-from cadra.measure.silhouette.fit import FitSettings, ViewFit, fit_silhouette
-from cadra.measure.silhouette.locate import locate_model, pose_from_coarse
-from cadra.measure.silhouette.template import make_template, outline_px
+from cadra.imaging.combine import StationPose, ViewPose, combine_views
+from cadra.imaging.loading import load_station_image, station_image
+from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
+from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
+from cadra.imaging.silhouette.template import make_template, outline_px
 from cadra.optics.projection import Projection
 
 VIEWS = ("top", "side")
@@ -78,7 +78,7 @@ class ViewResult:
     ok: bool
     reason: str
     fit: ViewFit | None = None
-    wires: object | None = None            # cadra.measure.wires.fit.WireMeasurement
+    wires: object | None = None            # cadra.imaging.wires.fit.WireMeasurement
     affine: np.ndarray | None = None       # image -> plane actually used
     tilt_rad: float = 0.0
     warnings: tuple[str, ...] = ()
@@ -99,7 +99,7 @@ class StationResult:
     pose: StationPose | None
     views: dict = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
-    roll: object | None = None      # a finned body's cadra.measure.roll.StationRoll
+    roll: object | None = None      # a finned body's cadra.imaging.roll.StationRoll
 
 
 @functools.lru_cache(maxsize=8)
@@ -184,7 +184,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
     ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
     so template, changed much since ``prev``: its edge profile was fitted to mismatched fins)."""
-    from cadra.measure.wires.fit import measure_wires, wire_mask
+    from cadra.imaging.wires.fit import measure_wires, wire_mask
 
     masks = {} if masks is None else masks
 
@@ -399,7 +399,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
             break
     results.update(fits)
     if overlays:
-        from cadra.measure.overlay import encode_png, view_overlay
+        from cadra.imaging.overlay import encode_png, view_overlay
 
         for name, img in images.items():
             r = results[name]
@@ -426,7 +426,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
 
 def _wrap_period(x: float) -> float:
     """``x`` (rad) brought into the cruciform's half period about 0, [-45, 45) deg."""
-    from cadra.measure.roll import PERIOD_RAD
+    from cadra.imaging.roll import PERIOD_RAD
 
     return (x + 0.5 * PERIOD_RAD) % PERIOD_RAD - 0.5 * PERIOD_RAD
 
@@ -434,8 +434,8 @@ def _wrap_period(x: float) -> float:
 def _station_roll(body, images: dict, fits: dict, tilts: dict, masks: dict,
                   settings: FitSettings, previous=None):
     """The roll of a finned body from both views' fin silhouettes, each view's fitted pose
-    held (:mod:`cadra.measure.roll`); ``previous`` this station's roll of the last round."""
-    from cadra.measure.roll import ViewRollModel, measure_station_roll, view_outline_px
+    held (:mod:`cadra.imaging.roll`); ``previous`` this station's roll of the last round."""
+    from cadra.imaging.roll import ViewRollModel, measure_station_roll, view_outline_px
 
     models = {}
     for name in VIEWS:

@@ -9,7 +9,7 @@ image-wide as ``D = r L + c`` by default; s the edge width; ``a L h`` the diffra
 :func:`_edge_profile`) gives the segment's edge offset ``delta`` along the outward normal with
 its variance (:func:`stage_a`). The edge width and the fringe amplitude are fitted per image,
 each as ``x0 + x4 cos(4 theta)`` (theta the normal's angle to the pixel grid). The method is
-described in :mod:`cadra.measure.silhouette.fit` and docs/stage1.md; all lengths in pixels.
+described in :mod:`cadra.imaging.silhouette.fit` and docs/stage1.md; all lengths in pixels.
 """
 
 from __future__ import annotations
@@ -445,7 +445,7 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D
 @dataclass(frozen=True, eq=False)
 class StageAState:
     """Stage A's final state, what the offsets' covariance is computed from
-    (:func:`cadra.measure.silhouette.noise.segment_covariance`): the band's pixels (their
+    (:func:`cadra.imaging.silhouette.noise.segment_covariance`): the band's pixels (their
     linear index ``lin`` into the image, intensity ``I``, signed distance ``d`` to the outline,
     segment ``k``, weight ``w``), each segment's levels ``L``, ``D`` and offset ``delta``,
     the edge profile ``prof`` and its cos 4θ factors ``c4``, the fringe width ratio, whether
@@ -519,7 +519,7 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     """Stage A at one trial outline: every usable segment's edge offset with its variance.
 
     ``img`` float (H, W); ``geo`` the outline (:func:`outline_geometry`); ``settings`` the
-    :class:`cadra.measure.silhouette.fit.FitSettings`; ``exclude`` True on pixels not to use;
+    :class:`cadra.imaging.silhouette.fit.FitSettings`; ``exclude`` True on pixels not to use;
     ``profile0`` the starting edge profile ``(s0, a0, s4, a4)``; ``noise_coef`` a previous
     noise model (a warm start: fewer rounds); ``band_px`` overrides ``settings.band_px``
     (``FitSettings.band_for``; None: the settings' own). None when fewer than 8 segments

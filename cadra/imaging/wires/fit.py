@@ -36,7 +36,7 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    least-squares line through the centres. Last, a stretch whose centres stray from the line
    together (a shock wave running close along the wire biases hundreds of centres by a
    fraction of their noise each, which no single profile shows) is found by the mean residual
-   of blocks of 12 centres and left out (:mod:`cadra.measure.wires.straightness`). The
+   of blocks of 12 centres and left out (:mod:`cadra.imaging.wires.straightness`). The
    surviving centres give the wire's line.
 6. **Affine.** Each found wire contributes two points on its fitted line, at the centroid of
    its centres +- their rms spread along the line. For a least-squares line these two
@@ -54,14 +54,14 @@ Method (all lengths in pixels unless a name ends in ``_m``):
 7. **Phase bias (centroids).** The centroid errs by a periodic function of the wire's
    sub-pixel phase (step 4). A line that keeps one phase along its length keeps that error
    whole, ~0.004 px rms, as large as its noise sigma; the affine's sigma without it was
-   ~0.87 of its error at the model. :mod:`cadra.measure.wires.phase` sizes the bias from the
+   ~0.87 of its error at the model. :mod:`cadra.imaging.wires.phase` sizes the bias from the
    wires that sweep phases in this image and adds, per wire, the covariance it leaves in the
    two Gauss points (``WireFit.sigma_sys_px`` the offset's share;
    ``WireMeasurement.phase_gain`` the size).
 8. **Profile model** (``profile_model=True``, the default). A least-squares fit of a
    blurred-bar model is ~2.7x less noisy than the centroid, but biased by up to +-0.035 px
    with the sub-pixel phase unless the model forms the profile as the image did: blur before
-   the pixel integration, the pixel, blur after it (:mod:`cadra.measure.wires.profile`). The
+   the pixel integration, the pixel, blur after it (:mod:`cadra.imaging.wires.profile`). The
    image's formation and each wire's width are fitted from the clean profiles the centroid
    lines kept; every clean profile's centre is then fitted with it and steps 5-6 run again on
    those centres (the straightness test allowing the model's ~0.0015 px instead of the
@@ -87,10 +87,10 @@ import numpy as np
 from scipy.stats import chi2
 
 from cadra.facility.reference import View
-from cadra.measure.wires.affine import corner_sigma_px, formation_cov, solve_affine_gls
-from cadra.measure.wires.phase import line_phases, phase_gain, systematic_cov
-from cadra.measure.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
-from cadra.measure.wires.straightness import (
+from cadra.imaging.wires.affine import corner_sigma_px, formation_cov, solve_affine_gls
+from cadra.imaging.wires.phase import line_phases, phase_gain, systematic_cov
+from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
+from cadra.imaging.wires.straightness import (
     BLOCK_SYS_PX,
     MODEL_BLOCK_SYS_PX,
     drop_bent_stretches,
@@ -465,7 +465,7 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
         columns).
     half_window : half-width (samples) of the window each profile's centre is fitted in.
     profile_model : fit each profile's centre with a model of the image formation
-        (:mod:`cadra.measure.wires.profile`, fitted per image) instead of the centroid (step 8;
+        (:mod:`cadra.imaging.wires.profile`, fitted per image) instead of the centroid (step 8;
         False: the centroids and their phase term, ~3x faster, ~3x less accurate).
 
     Returns

@@ -1,6 +1,6 @@
 """The wire centroid's sub-pixel phase bias: its size in one image, and what it leaves in a line.
 
-:mod:`cadra.measure.wires.fit` centres each profile across a wire by the centroid of its
+:mod:`cadra.imaging.wires.fit` centres each profile across a wire by the centroid of its
 darkness. Sampled on the pixel grid, that centroid errs by a periodic function ``beta(phi)``
 of the sub-pixel phase ``phi`` of the wire's centre (pixel centres at integers), zero on
 average over a phase. Along a wire whose image sweeps several pixels across the grid the

@@ -1,6 +1,6 @@
 """Per-image overlays of stage one: what was found in each shadowgraph, drawn on it.
 
-Made in the station's own task (:func:`cadra.measure.station.measure_station`), beside the
+Made in the station's own task (:func:`cadra.imaging.station.measure_station`), beside the
 image it reads, and returned as PNG bytes, so a worker never ships the image back. Drawn with
 OpenCV on the image's own pixels (no figure): fitted wires green, silhouette red, reference
 point and axis yellow, centroid cyan, the figures or the failure reason as text.
@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from cadra.measure.silhouette.template import outline_px
+from cadra.imaging.silhouette.template import outline_px
 
 
 def overlay_image(image, *, wire_lines=(), outline_px=None, ref_px=None, axis_px=None,

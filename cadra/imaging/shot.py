@@ -7,7 +7,7 @@ file) and the images, as arrays in memory or the shot file's image files, and re
 station's result. Nothing is written here; :func:`cadra.report.stage1.write_stage1` writes a
 result's folder.
 
-Stations are measured by :func:`cadra.measure.station.measure_station` (pure, picklable), in
+Stations are measured by :func:`cadra.imaging.station.measure_station` (pure, picklable), in
 parallel on the available cores (a process pool; ``workers=1`` runs in-process), with a
 progress bar. The pool's workers ignore Ctrl-C (the parent handles it) and die with the
 parent, even a SIGKILLed one (:func:`_worker_init`).
@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cadra.imaging.station import VIEWS, StationResult, measure_station
 from cadra.io.shotfile import ShotFile
 from cadra.io.trajectory import station_rows
-from cadra.measure.station import VIEWS, StationResult, measure_station
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,7 +38,7 @@ class Stage1Result:
     trajectory : the trajectory table (the trajectory file's columns and units,
         :mod:`cadra.io.trajectory`), one row per station.
     quality : per station and view, the figures a range engineer checks (docs/stage1.md).
-    stations : every station's :class:`~cadra.measure.station.StationResult`.
+    stations : every station's :class:`~cadra.imaging.station.StationResult`.
     shot : the shot's record (body, mass properties, air, spark times).
     meta : the trajectory file's metadata (shot id, shot and facility files, producer).
     inputs : the files the measurement read (shot, facility, images): an output folder must
@@ -149,14 +149,14 @@ def quality_rows(results) -> pd.DataFrame:
 def with_roll_track(results, times_s: dict) -> list:
     """``results`` with each measured station's roll set on its pose (``phi_rad``,
     ``sigma_phi_rad``): a finned body's roll candidates resolved along the shot by continuity
-    (:func:`cadra.measure.roll.resolve_roll_track`; docs/stage1.md, "Roll of a finned body").
+    (:func:`cadra.imaging.roll.resolve_roll_track`; docs/stage1.md, "Roll of a finned body").
     Unchanged when no station measured a roll (a body of revolution)."""
     from dataclasses import replace
 
     rolls = [r.roll if r.pose is not None else None for r in results]
     if all(x is None for x in rolls):
         return list(results)
-    from cadra.measure.roll import resolve_roll_track
+    from cadra.imaging.roll import resolve_roll_track
 
     order = np.argsort([times_s[r.station] for r in results], kind="stable")
     t = [times_s[results[k].station] for k in order]

@@ -65,7 +65,7 @@ class StationPose:
     x_top_minus_side_m: float
     x_consistency_sigma: float   # |x_top - x_side| / sqrt(s_top^2 + s_side^2)
     #: roll about the nose axis (a finned body's; ``quat_from_axis_roll``'s roll), rad, and
-    #: its sigma: set along the shot by cadra.measure.shot (continuity, docs/stage1.md "Roll
+    #: its sigma: set along the shot by cadra.imaging.shot (continuity, docs/stage1.md "Roll
     #: of a finned body"); NaN where not measured (a body of revolution)
     phi_rad: float = math.nan
     sigma_phi_rad: float = math.nan
@@ -99,7 +99,7 @@ def axis_from_views(projections, plane_points, angles) -> np.ndarray:
 def view_tilts(theta_p: float, psi_p: float) -> tuple[float, float]:
     """The axis' tilts out of the top and side view planes, (asin a_z, asin a_y), from the
     side-view and top-view projected angles: the tilts stage one builds each view's outline
-    template at (cadra.measure.station)."""
+    template at (cadra.imaging.station)."""
     a = axis_from_projected_angles(theta_p, psi_p)
     return math.asin(a[2]), math.asin(a[1])
 

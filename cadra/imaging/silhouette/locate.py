@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cadra.measure.silhouette.template import Template, rot
+from cadra.imaging.silhouette.template import Template, rot
 from cadra.optics.projection import Projection
 
 __all__ = ["CoarsePose", "locate_model", "pose_from_coarse"]

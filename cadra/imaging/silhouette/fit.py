@@ -9,7 +9,7 @@ Stage one's main method (seed 004, "Data Reduction and Analysis"; docs/stage1.md
     + outside; L the local bright level, D the dark level, tied to it image-wide as
     ``D = r L + c`` by default (``FitSettings.dark_level``: a free D per segment costs each
     offset ~12 % of its sigma); s the edge width) gives the segment's edge offset ``delta``
-    along the outward normal, with its variance (stage A, :mod:`cadra.measure.silhouette.edges`).
+    along the outward normal, with its variance (stage A, :mod:`cadra.imaging.silhouette.edges`).
     ``a L h`` is the diffraction fringe: a bright band outside the edge and a dark one inside,
     the second derivative of a blurred step. The edge width and the fringe amplitude are
     fitted per image, each as ``x0 + x4 cos(4 theta)`` (theta the normal's
@@ -28,10 +28,10 @@ Stage one's main method (seed 004, "Data Reduction and Analysis"; docs/stage1.md
     at each pose). Uncertainty: Newey-West sandwich over the contour-ordered segment residuals,
     so correlated noise (film grain) and misfit show up in the sigma.
 
-Method (b), the area centroid, is :mod:`cadra.measure.silhouette.centroid`; the outline
-template :mod:`cadra.measure.silhouette.template`; stage A (the per-segment edge offsets and
-their numba kernels) :mod:`cadra.measure.silhouette.edges`; the first guess
-:mod:`cadra.measure.silhouette.locate`.
+Method (b), the area centroid, is :mod:`cadra.imaging.silhouette.centroid`; the outline
+template :mod:`cadra.imaging.silhouette.template`; stage A (the per-segment edge offsets and
+their numba kernels) :mod:`cadra.imaging.silhouette.edges`; the first guess
+:mod:`cadra.imaging.silhouette.locate`.
 
 Geometry is in the *view plane* (metres in F, docs/conventions.md) through the view's
 :class:`~cadra.optics.projection.Projection` (for a parallel view: the image's wire affine);
@@ -52,14 +52,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cadra.measure.silhouette.centroid import centroid_pose
-from cadra.measure.silhouette.edges import outline_geometry, stage_a
-from cadra.measure.silhouette.noise import (
+from cadra.imaging.silhouette.centroid import centroid_pose
+from cadra.imaging.silhouette.edges import outline_geometry, stage_a
+from cadra.imaging.silhouette.noise import (
     noise_autocovariance,
     segment_correlation,
     segment_covariance,
 )
-from cadra.measure.silhouette.template import Template, outline_px, pose_px
+from cadra.imaging.silhouette.template import Template, outline_px, pose_px
 from cadra.optics.projection import Projection
 
 __all__ = ["FitSettings", "ViewFit", "fit_silhouette"]
@@ -158,7 +158,7 @@ class ViewFit:
     #: d(a_m, b_m, phi_rad) / d(tilt): how the pose moves when the template's out-of-plane
     #: tilt changes (m/rad, m/rad, rad/rad); zeros unless fit_silhouette was given a
     #: ``tilt_step``. The tilt comes from the other view's angle, so its error moves this
-    #: view's pose; cadra.measure.combine propagates it (docs/stage1.md, step 5)
+    #: view's pose; cadra.imaging.combine propagates it (docs/stage1.md, step 5)
     tilt_sensitivity: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 

@@ -9,11 +9,11 @@ vertical and down) is fitted in one dimension:
 
 1. **Model** (:class:`ViewRollModel`). The exact outline at trial roll
    (:func:`view_outline_px`: :func:`cadra.body.outline_polygon` at the view's pose) is turned
-   into the blurred-edge image of the silhouette fit (:mod:`cadra.measure.silhouette.edges`):
+   into the blurred-edge image of the silhouette fit (:mod:`cadra.imaging.silhouette.edges`):
    ``I = L (1 - g + a h) + D g`` with ``g`` the outline's indicator blurred by a Gaussian of
    the view's fitted edge width ``s = s0 + s4 cos 4 theta`` and ``h`` the fringe (amplitude
    ``a = a0 + a4 cos 4 theta``), both of the whole polygon, corners included
-   (:func:`~cadra.measure.silhouette.polygon.blurred_polygon`: beside a straight edge they are the
+   (:func:`~cadra.imaging.silhouette.polygon.blurred_polygon`: beside a straight edge they are the
    edge model's ``Phi(-d / s)`` and fringe; at the fin tips' and roots' corners, which carry
    the roll near a mirror fold, the nearest side's profile was the estimator's main error).
    The bright level is a
@@ -58,7 +58,7 @@ import numpy as np
 from cadra.body import outline_polygon
 from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
 from cadra.facility.reference import VIEW_AXES
-from cadra.measure.silhouette.polygon import blurred_polygon, pixel_centres_inside
+from cadra.imaging.silhouette.polygon import blurred_polygon, pixel_centres_inside
 
 __all__ = ["HAC_LAG_PX", "PERIOD_RAD", "TRACK_SIGMA_RAD", "RollCandidate", "StationRoll",
            "ViewRoll", "ViewRollModel", "measure_station_roll", "resolve_roll_track",
@@ -92,7 +92,7 @@ def view_outline_px(body, projection, view_name: str, pose, tilt_rad: float, rol
     """The exact outline (px, (N, 2)) of ``body`` in a view at stage one's view pose.
 
     ``pose = (a_m, b_m, phi_rad)`` (the reference point's view-plane coordinates and the
-    in-plane axis angle, :mod:`cadra.measure.silhouette.template`), ``tilt_rad`` the axis'
+    in-plane axis angle, :mod:`cadra.imaging.silhouette.template`), ``tilt_rad`` the axis'
     angle out of the view plane (top view: asin a_z; side view: asin a_y), ``roll_rad`` the
     roll about the nose axis of ``quat_from_axis_roll`` for that 3-D axis.
     """
@@ -204,7 +204,7 @@ class ViewRollModel:
 
     def basis(self, roll_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """``(1 - g + a h, g)`` on the ROI at ``roll_rad``: the blurred-edge model of the whole
-        outline, its corners included (:func:`~cadra.measure.silhouette.polygon.blurred_polygon`),
+        outline, its corners included (:func:`~cadra.imaging.silhouette.polygon.blurred_polygon`),
         with the view's edge profile ``x0 + x4 cos 4 theta`` per edge."""
         poly = self.outline_fn(roll_rad) - np.array([self.u0, self.v0], dtype=float)
 

@@ -4,8 +4,8 @@
 equations of :func:`~cadra.facility.reference.fit_affine_to_wires`, each wire's points
 weighted by the inverse of their 2 x 2 covariance), with an optional similarity prior;
 :func:`formation_cov` adds what the wires' fitted image formation leaves in it
-(:mod:`cadra.measure.wires.profile`); :func:`corner_sigma_px` says whether the map is
-determined. The method is :mod:`cadra.measure.wires.fit`' (steps 6 and 8); units in each name.
+(:mod:`cadra.imaging.wires.profile`); :func:`corner_sigma_px` says whether the map is
+determined. The method is :mod:`cadra.imaging.wires.fit`' (steps 6 and 8); units in each name.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from cadra.facility.reference import View
-from cadra.measure.wires.profile import Formation
+from cadra.imaging.wires.profile import Formation
 
 __all__ = ["corner_sigma_px", "formation_cov", "solve_affine_gls"]
 
