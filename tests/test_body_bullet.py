@@ -1,7 +1,7 @@
 """cadra.body.bullet: the ogive-cylinder-boattail projectile (BRL MR 1833's 7.62 mm M-80).
 
 Truth used here, independent of the code under test:
-* BRL MR 1833 Fig. 1 / Table I as quoted in issue 19 (inches): d = 0.308, length 1.108, ogive
+* BRL MR 1833 Fig. 1 / Table I (inches): d = 0.308, length 1.108, ogive
   0.554, a 9 deg boattail 0.173 long;
 * the radius r(x) of the body written out here from those dimensions (a tangent or secant
   ogive through its two end points, a cylinder, a cone frustum), integrated with scipy's

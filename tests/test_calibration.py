@@ -18,8 +18,8 @@ from cadra.calibration.sphere import (
     estimate_station_biases,
 )
 from cadra.fitting import fit_shots
-from cadra.flight import shot_data_from_truth
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot
+from cadra.validation.calibration_trials import biased_shot_data
 
 SPECS = "sample_shots/specs"
 SIGMA = 1e-6      # m, position noise (stage one measures spheres to ~0.2 um)
@@ -35,13 +35,7 @@ def injected() -> np.ndarray:
 
 
 def _biased(sim, bias, rng, kind=None):
-    sd = shot_data_from_truth(sim.truth, sim.rigid, sim.spec.shot_id, kind or sim.body.kind,
-                              sigma_position_m=SIGMA, sigma_angle_rad=np.radians(0.0012),
-                              rng=rng)
-    v = sim.truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()
-    meas = sd.meas.copy()
-    meas[:, :3] += bias[:, :3] + v * bias[:, 3:4]
-    return replace(sd, meas=meas)
+    return biased_shot_data(sim, bias, SIGMA, rng, kind)
 
 
 @pytest.fixture(scope="module")

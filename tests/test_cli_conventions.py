@@ -1,4 +1,4 @@
-"""The command lines keep the conventions of good Unix tools (issue 17 item 5, docs/cli.md):
+"""The command lines keep the conventions of good Unix tools (docs/cli.md):
 ``--version``, a plain-text description and shown defaults on every subcommand, ``-q``/``-v``
 everywhere, negative number lists, one status line, labelled fit phases, one ``value ±
 sigma`` format, hints and plain warnings instead of ``nan ± nan``. Run in-process with

@@ -1,4 +1,4 @@
-"""``cadra2 motion`` (issue 19 part 4) on a trajectory made from the simulated sample shot
+"""``cadra2 motion`` on a trajectory made from the simulated sample shot
 CONE-1 (sample_shots/cone_1: a 10-degree cone rolling at 62.5 rad/s, Mach 2.3, bundled
 ``cone_linear`` aerodynamics as truth), with Gaussian noise of the stated sigmas.
 

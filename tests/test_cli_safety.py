@@ -1,4 +1,4 @@
-"""No input ever destroyed, and clean faults (issue 17, items 1 and 4).
+"""No input ever destroyed, and clean faults.
 
 Every command that writes refuses an output folder that is, or holds, one of its inputs (links
 and ``..`` resolved), the working folder, or an input file, with or without ``--overwrite``:

@@ -1,4 +1,4 @@
-"""The finned body in the renderer, the shot file and the sample shot (issue 20).
+"""The finned body in the renderer, the shot file and the sample shot.
 
 Truth: the renderer's exact coverage of the outline polygon (docs/renderer.md) against the
 polygon's own area and centroid (shapely), and against the hand outline of a side view at

@@ -296,7 +296,7 @@ def test_diverging_start_is_reported_not_raised(m2_2429):
 
 def test_nonfinite_start_names_the_coefficient_and_term(m1_2366):
     """A drag form that overflows above some Mach (finite at Mach 0.3, so the model loads)
-    gives a non-finite start; the failure names the coefficient and the term (issue 17)."""
+    gives a non-finite start; the failure names the coefficient and the term."""
     shot = m1_2366
     sd = _data(shot, np.random.default_rng(4))
     model = model_from_dict({
@@ -354,7 +354,7 @@ def test_bounds_are_respected_and_reported(m2_2429):
 
 
 def test_steps_won_on_the_two_evaluations_difference_end_as_convergence():
-    """Regression (issue 18): stage-one measurements of the seven M2 M0.70 shots (one
+    """Regression: stage-one measurements of the seven M2 M0.70 shots (one
     realisation of tools/bench_e2e.py, stored as arrays). The solver's trial steps
     (prediction only) and its Jacobian evaluation integrate on different step sequences and
     their chi^2 differ by ~1e-5; here a heavily damped step "won" on that difference alone at

@@ -1,5 +1,5 @@
 """The station history under concurrency and failure (docs/calibration.md, "Station history":
-locking, order, failed appends; issue 17 item 2).
+locking, order, failed appends).
 
 Truth is counted, not computed by the code under test: N processes released together append N
 estimates; the file must then hold N verified entries, in time order, and entry k must have

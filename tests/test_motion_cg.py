@@ -1,6 +1,6 @@
 """cadra.motion cg transfer (seed 001 eqs. 13-14; eq. 14 garbled in the OCR, derived in
 cadra.motion.coefficients.transfer_cg) against a kinematic evaluation of the aerodynamics about
-two points, a round trip, and a body "fitted" about three pivots (issue 19)."""
+two points, a round trip, and a body "fitted" about three pivots."""
 
 import numpy as np
 import pytest

@@ -20,6 +20,7 @@ from cadra.motion import (
     sectional_epicyclic,
     sectional_pitch,
 )
+from cadra.validation.motion_records import gimbal
 
 COND = FlightConditions(mass_kg=1.0, Ix_kg_m2=1.0e-3, I_kg_m2=5.0e-3, d_m=0.05,
                         density_kg_m3=1.2, speed_m_s=50.0)
@@ -87,26 +88,12 @@ def test_frequency_variation_correction_moves_the_nonlinear_damping_toward_truth
 
 SPIN = FlightConditions(mass_kg=1.0, Ix_kg_m2=1.0e-3, I_kg_m2=5.0e-3, d_m=0.05,
                         density_kg_m3=1.2, speed_m_s=50.0, spin_rad_s=297.0)
-GIMBAL = dict(m0=-30.0, m2=15.0, d0=-75.0, d2=-50.0, t0=5.0, t2=20.0)
+GIMBAL = {"Cm_alpha0": -30.0, "Cm_alpha2": 15.0, "Cmq_sum0": -75.0, "Cmq_sum2": -50.0,
+          "Cm_p_alpha0": 5.0, "Cm_p_alpha2": 20.0}
 
 
 def gimbal_history(t):
-    c, k = SPIN, GIMBAL
-    qsd = c.q_inf * c.S * c.d_m
-    G, Mf, P = qsd * c.d_m / (2 * c.speed_m_s * c.I_kg_m2), qsd / c.I_kg_m2, c.spin_rad_s / 5
-
-    def rhs(_, y):
-        x, v = y[0] + 1j * y[1], y[2] + 1j * y[3]
-        r2 = abs(x) ** 2
-        acc = ((1j * P + G * (k["d0"] + k["d2"] * r2)) * v
-               + (Mf * (k["m0"] + k["m2"] * r2) + 1j * c.spin_rad_s * G * (k["t0"] + k["t2"] * r2))
-               * x)
-        return [v.real, v.imag, acc.real, acc.imag]
-
-    x0, v0 = np.radians(12) * (0.6 + 0.8j), 1j * 40 * np.radians(3)
-    sol = solve_ivp(rhs, (t[0], t[-1]), [x0.real, x0.imag, v0.real, v0.imag], t_eval=t,
-                    method="DOP853", rtol=1e-11, atol=1e-13)
-    return sol.y[0] + 1j * sol.y[1]
+    return gimbal(t, SPIN, GIMBAL)
 
 
 def test_kb_3dof_recovers_restoring_damping_and_magnus_within_sigma():
@@ -117,9 +104,7 @@ def test_kb_3dof_recovers_restoring_damping_and_magnus_within_sigma():
     sec = sectional_epicyclic(t, xi.imag, xi.real, noise, noise, window=300, step=30)
     assert np.all(sec.omega[:, 0] > sec.omega[:, 1])
     kb = kb_reduction(sec, SPIN)
-    truth = {"Cm_alpha0": -30.0, "Cm_alpha2": 15.0, "Cmq_sum0": -75.0, "Cmq_sum2": -50.0,
-             "Cm_p_alpha0": 5.0, "Cm_p_alpha2": 20.0}
-    for name, v0 in truth.items():
+    for name, v0 in GIMBAL.items():
         v, s = getattr(kb, name), getattr(kb, name + "_sigma")
         assert abs(v - v0) < 2.5 * s, (name, v, s)
     assert kb.Cm_alpha2_sigma < 0.1 * 15.0 and kb.Cm_p_alpha0_sigma < 0.1 * 5.0

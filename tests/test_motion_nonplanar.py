@@ -1,5 +1,5 @@
 """cadra.motion: Nonplanar Ratio, Murphy's cubic correlator and seed 002's nonrolling-axis
-correction (issue 19).
+correction.
 
 Truths: planar and circular motion (NPR 0 and 1 by definition), solve_ivp of a spinning body
 with a cubic pitching moment (the correlator's frequency relation), and a numerically

@@ -1,4 +1,4 @@
-"""One look for ``value ± sigma`` (issue 17, "consistent number formatting"): the console and
+"""One look for ``value ± sigma``: the console and
 every report table use :func:`cadra.numfmt.pm`; the single-fit and quasi-linear tables of
 ``cadra2 single``, the fit report's coefficient table, the calibration and gap reports used
 their own formats (``1.2346 ± 0.012``, ``+0.1235 ± 0.0123``, ``nan ± nan``)."""

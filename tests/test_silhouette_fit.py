@@ -1,9 +1,9 @@
-"""Stage one's per-view measurement against the renderer's exact truth (issue 3).
+"""Stage one's per-view measurement against the renderer's exact truth.
 
 The full-size statistics (>= 200 renders per body, the Cramer-Rao ratio, the baseline) are in
-``tools/bench_cadra1.py``; these tests use a dozen renders per case so they stay fast, with the
-issue's targets as limits: sphere centre <= 0.01 px rms, capsule reference point <= 0.02 px,
-axis <= 0.005 deg; "no inverse crime" renders within 2x of those.
+``tools/bench_cadra1.py``; these tests use a dozen renders per case so they stay fast, with
+stage one's targets (docs/stage1.md) as limits: sphere centre <= 0.01 px rms, capsule
+reference point <= 0.02 px, axis <= 0.005 deg; "no inverse crime" renders within 2x of those.
 """
 
 import math
@@ -72,7 +72,7 @@ def test_noise_free_flat_light_floor():
     """Without noise and with an even beam the edge model is right: what remains (measured
     <= 4e-4 px and 6e-4 deg, well under the noise-limited 0.002 px / 0.0017 deg) is the
     1024-vertex outline polygon and the segment-wise straight-edge approximation, traded for
-    speed (docs/stage1.md). Limits: a tenth of the issue's targets (0.01 px, 0.005 deg)."""
+    speed (docs/stage1.md). Limits: a tenth of stage one's targets (0.01 px, 0.005 deg)."""
     cfg = RenderConfig(read_noise_sigma=0, shot_noise_sigma=0, film_grain_sigma=0, scratches=0,
                        dust=0, bow_shock=False, wake=False, bit_depth=16,
                        diffraction_fringe=0.0, illumination_variation=0,
@@ -269,7 +269,7 @@ def test_fit_settings_refuse_an_unknown_dark_level():
 
 
 def test_scaled_covariance_same_pose_and_honest_sigma():
-    """The default sigma (issue 18: the formal covariance times the offsets' reduced chi^2)
+    """The default sigma (the formal covariance times the offsets' reduced chi^2)
     against the Newey-West sandwich on the same images: the same pose (to where the
     iterations stop), a different covariance; and the errors in units of the scaled sigma
     have a standard deviation near 1 (40 random M2 views; the 1000-render figures are

@@ -1,4 +1,4 @@
-"""cadra1 over whole (short) shots: accuracy against truth, bad input, outputs (issue 3)."""
+"""cadra1 over whole (short) shots: accuracy against truth, bad input, outputs."""
 
 import dataclasses
 import shutil
@@ -146,7 +146,7 @@ def test_parallel_equals_serial(m2_shot):
 
 def test_truth_comparison_in_the_report(m2_shot, tmp_path):
     """With a truth table the outputs give measured minus truth per station and channel, equal
-    to the difference of the two files (issue 18)."""
+    to the difference of the two files."""
     out = tmp_path / "out"
     truth = pd.read_csv(m2_shot / "truth.csv")
     write_stage1(measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False),

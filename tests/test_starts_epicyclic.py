@@ -1,5 +1,5 @@
 """cadra2 fit's starting values: from an all-zero model, and from the epicyclic fit's arms for a
-spinning body (cadra.fitting.start, cadra.flight.starts.start_estimates; issue 19 deliverable 5).
+spinning body (cadra.fitting.start, cadra.flight.starts.start_estimates).
 
 Truth: the simulator's CONE-1 (10 deg cone, bundled ``cone_linear``) with its spin and C_m_alpha
 changed, flown by the same dynamics, measured as truth + Gaussian noise (20 um, 0.05 deg)."""

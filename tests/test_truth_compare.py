@@ -1,4 +1,4 @@
-"""Stage one's comparison with a known truth (issue 18, deliverable 3)."""
+"""Stage one's comparison with a known truth."""
 
 from __future__ import annotations
 

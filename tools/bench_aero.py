@@ -10,11 +10,14 @@ Last line: a JSON object with keys ``ns_float64`` and ``ns_complex128``.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import time
+from pathlib import Path
 
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
+
+one_thread()
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
@@ -22,7 +25,11 @@ def main() -> None:
     parser.add_argument("--model", default="m2_m070")
     parser.add_argument("--calls", type=int, default=2_000_000)
     args = parser.parse_args()
+    run_tool("bench_aero", ROOT, lambda: run(args.model, args.calls), seconds_key=None)
 
+
+def run(model_name: str, calls: int) -> dict:
+    """ns per evaluation of ``model_name``'s coefficients in float64 and complex128."""
     import numpy as np
     from numba import njit
 
@@ -37,7 +44,7 @@ def main() -> None:
             acc += out[0] + out[4] + out[7]
         return acc
 
-    model = load_bundled_model(args.model)
+    model = load_bundled_model(model_name)
     prog = model.compile()
     rng = np.random.default_rng(1)
     m = 256
@@ -46,7 +53,7 @@ def main() -> None:
     var[:, 1] = np.radians(rng.uniform(-5, 5, m))
     var[:, 2] = np.arccos(np.cos(var[:, 0]) * np.cos(var[:, 1]))
     var[:, 3] = rng.uniform(0.6, 0.8, m)
-    result = {"model": args.model, "ops": int(prog.ops.size), "temps": int(prog.n_temps),
+    result = {"model": model_name, "ops": int(prog.ops.size), "temps": int(prog.n_temps),
               "stack_size": int(prog.stack_size)}
     for dtype, key in ((np.float64, "ns_float64"), (np.complex128, "ns_complex128")):
         v = var.astype(dtype)
@@ -59,12 +66,12 @@ def main() -> None:
         best = np.inf
         for _ in range(3):
             t0 = time.perf_counter()
-            loop(prog.ops, prog.args, prog.starts, v, p, out, stack, args.calls)
+            loop(prog.ops, prog.args, prog.starts, v, p, out, stack, calls)
             best = min(best, time.perf_counter() - t0)
-        result[key] = round(best / args.calls * 1e9, 1)
-        print(f"{args.model} {np.dtype(dtype).name:10s}: {result[key]:7.1f} ns per "
+        result[key] = round(best / calls * 1e9, 1)
+        print(f"{model_name} {np.dtype(dtype).name:10s}: {result[key]:7.1f} ns per "
               f"9-coefficient evaluation ({prog.ops.size} ops, {prog.n_temps} temporaries)")
-    print(json.dumps(result))
+    return result
 
 
 if __name__ == "__main__":

@@ -30,17 +30,21 @@ The last printed line is a JSON object with the figures; it is also recorded in
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from cadra.validation.results import record
-from cadra.validation.stage1_bench import SCALE_MM_PER_PX, accuracy, figures, speed
+from cadra.validation.tool import one_thread, run_tool
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+one_thread()
+
+from cadra.validation.stage1_bench import (  # noqa: E402 (after one_thread)
+    SCALE_MM_PER_PX,
+    accuracy,
+    figures,
+    speed,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -54,6 +58,13 @@ def main() -> int:
     # 1000 renders per body: the baseline ratio's standard error is then ~3 % (at 200 it is
     # ~7 %, and one 200-render draw gave 9.5 where 1000 give 11)
     n_default, n_variant, n_crb = (30, 10, 2) if args.quick else (1000, 50, 6)
+    run_tool("bench_cadra1", ROOT, lambda: run(n_default, n_variant, n_crb, write_stage1),
+             seconds_key=None)
+    return 0
+
+
+def run(n_default: int, n_variant: int, n_crb: int, write_stage1) -> dict:
+    """The accuracy and speed sections, printed; their figures."""
     t0 = time.perf_counter()
     acc = accuracy(n_default, n_variant, n_crb)
     with tempfile.TemporaryDirectory() as tmp:
@@ -81,10 +92,7 @@ def main() -> int:
     print(f"   whole-shot errors vs truth: position rms (x, y, z) "
           f"{', '.join(f'{x:.4f}' for x in spd['shot_position_rms_mm'])} mm, "
           f"(theta, psi) {', '.join(f'{x:.5f}' for x in spd['shot_angle_rms_deg'])} deg")
-    result = figures(acc, spd, time.perf_counter() - t0)
-    print(json.dumps(result))
-    record("bench_cadra1", result, ROOT, seconds=result["bench_seconds"])
-    return 0
+    return figures(acc, spd, time.perf_counter() - t0)
 
 
 if __name__ == "__main__":

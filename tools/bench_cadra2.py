@@ -59,12 +59,10 @@ object with the figures; it is also recorded in ``results/bench_cadra2.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
-from cadra.validation.results import record
 from cadra.validation.stage2_bench import (
     cold_start,
     figures,
@@ -72,6 +70,7 @@ from cadra.validation.stage2_bench import (
     pulls,
     speed_and_baseline,
 )
+from cadra.validation.tool import run_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -93,8 +92,13 @@ def main() -> int:
     n_film = 6 if args.quick else args.realisations
     n_stage1 = (args.stage1_realisations if args.stage1_realisations is not None
                 else (3 if args.quick else max(1, round(args.realisations / 2.5))))
-    t_bench = time.perf_counter()
+    run_tool("bench_cadra2", ROOT, lambda: run(args, n_film, n_stage1), seconds_key=None)
+    return 0
 
+
+def run(args, n_film: int, n_stage1: int) -> dict:
+    """The sections ``args`` asks for, each announced; their figures."""
+    t_bench = time.perf_counter()
     print("== 1-2. speed (warm) and the SciPy baseline")
     sp = speed_and_baseline(args.seed, args.skip_baseline, args.quick)
     cold = nf = pl = None
@@ -108,10 +112,7 @@ def main() -> int:
               f" per multi-fit, {args.workers} processes")
         pl = pulls(args.seed, n_film, n_stage1, args.workers)
 
-    result = figures(sp, cold, nf, pl, time.perf_counter() - t_bench)
-    print(json.dumps(result))
-    record("bench_cadra2", result, ROOT, seconds=result["bench_seconds"])
-    return 0
+    return figures(sp, cold, nf, pl, time.perf_counter() - t_bench)
 
 
 if __name__ == "__main__":

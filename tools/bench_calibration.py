@@ -27,134 +27,13 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import time
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
+from cadra.validation.calibration_trials import end_to_end, trials
+from cadra.validation.tool import run_tool
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _measure(sim, bias, sigma, rng, kind=None):
-    from cadra.flight import shot_data_from_truth
-
-    sd = shot_data_from_truth(sim.truth, sim.rigid, sim.spec.shot_id, kind or sim.body.kind,
-                              sigma_position_m=sigma, sigma_angle_rad=np.radians(0.0012),
-                              rng=rng)
-    v = sim.truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()
-    meas = sd.meas.copy()
-    meas[:, :3] += bias[:, :3] + v * bias[:, 3:4]
-    return replace(sd, meas=meas)
-
-
-def random_biases(rng, n=16) -> np.ndarray:
-    b = np.zeros((n, 4))
-    st = rng.choice(n, size=7, replace=False)
-    for k in st[:3]:
-        b[k, 1] = rng.uniform(2e-4, 1e-3) * rng.choice([-1, 1])
-    for k in st[3:6]:
-        b[k, 2] = rng.uniform(2e-4, 1e-3) * rng.choice([-1, 1])
-    b[st[6], 3] = 1e-6
-    return b
-
-
-def _rms(result):
-    return float(np.sqrt(np.mean([result.rms()[c] ** 2 for c in "xyz"])))
-
-
-def trials(n, sigma, seed, capsule_sigma=None):
-    from tqdm import tqdm
-
-    from cadra.calibration.sphere import apply_bias_table, estimate_station_biases
-    from cadra.fitting import fit_shots
-    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
-
-    specs = ROOT / "sample_shots" / "specs"
-    spheres = [simulate_shot(load_shot_spec(specs / f"sphere_{k}.toml")) for k in (1, 2, 3)]
-    capsule = simulate_shot(load_shot_spec(specs / "m2_2429.toml"))
-    capsule_sigma = capsule_sigma or sigma
-    rng = np.random.default_rng(seed)
-    inj_ok = inj_n = all_ok = all_n = ff = ff_n = det = 0
-    ratios, seconds = [], []
-    for _ in tqdm(range(n), desc="calibration trials", unit="trial"):
-        b = random_biases(rng)
-        shots = [_measure(s, b, sigma, rng) for s in spheres]
-        t0 = time.perf_counter()
-        est = estimate_station_biases(shots, facility="hffaf")
-        seconds.append(time.perf_counter() - t0)
-        z = (est.bias - b) / est.sigma
-        injected = b != 0
-        inj_ok += int((np.abs(z[injected]) <= 2).sum())
-        inj_n += int(injected.sum())
-        all_ok += int((np.abs(z) <= 2).sum())
-        all_n += z.size
-        flagged = np.abs(est.bias / est.sigma) > 3
-        ff += int((flagged & ~injected).sum())
-        ff_n += int((~injected).sum())
-        det += int((flagged & injected).sum())
-        seed_c = int(rng.integers(1 << 31))
-        clean = _measure(capsule, np.zeros_like(b), capsule_sigma,
-                         np.random.default_rng(seed_c))
-        biased = _measure(capsule, b, capsule_sigma, np.random.default_rng(seed_c))
-        r_clean, _ = fit_shots([clean], capsule.model)
-        r_fixed, _ = fit_shots([apply_bias_table(biased, est.to_table())], capsule.model)
-        ratios.append(_rms(r_fixed) / _rms(r_clean))
-    return {
-        "trials": n, "sigma_um": sigma * 1e6, "capsule_sigma_um": capsule_sigma * 1e6,
-        "bias_within_2sigma_frac": inj_ok / inj_n,
-        "all_within_2sigma_frac": all_ok / all_n,
-        "false_flag_rate": ff / ff_n,
-        "detection_rate": det / inj_n,
-        "residual_ratio_after_correction": float(np.mean(ratios)),
-        "residual_ratio_after_correction_max": float(np.max(ratios)),
-        "residual_ratio_within_10pct_frac": float(np.mean(np.array(ratios) <= 1.10)),
-        "seconds_per_calibration": float(np.median(seconds)),
-    }
-
-
-def end_to_end() -> dict:
-    import pandas as pd
-
-    from cadra.calibration.sphere import estimate_station_biases
-    from cadra.flight import load_shot_data
-    from cadra.imaging.shot import measure_shot
-    from cadra.report.stage1 import write_stage1
-    from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
-
-    out = ROOT / "out" / "calibration_e2e"
-    shots, injected = [], None
-    for k in (1, 2, 3):
-        name = f"sphere_bias_{k}"
-        spec = ROOT / "sample_shots" / "specs" / f"{name}.toml"
-        if not spec.is_file():
-            return {"e2e": f"skipped: {spec} missing"}
-        d = out / name
-        write_shot(simulate_shot(load_shot_spec(spec)), d, images=True, overwrite=True,
-                   progress=False)
-        write_stage1(measure_shot(d / "shot.toml", progress=False, overlays=False),
-                     out / f"{name}_stage1", overwrite=True)
-        shots.append(load_shot_data(d / "shot.toml", out / f"{name}_stage1" / "trajectory.csv"))
-        injected = pd.read_csv(d / "station_biases.csv").sort_values("station")
-    est = estimate_station_biases(shots, facility="hffaf")
-    b = injected[["x_m", "y_m", "z_m", "time_s"]].to_numpy()
-    z = (est.bias - b) / est.sigma
-    inj = b != 0
-    flagged = np.abs(est.bias / est.sigma) > 3
-    print("end to end (images -> cadra1 -> calibrate): station, channel, injected, recovered "
-          "+- sigma")
-    for k, c in np.argwhere(inj | flagged):
-        f = 1e6 if c == 3 else 1e3
-        u = "us" if c == 3 else "mm"
-        print(f"  station {est.stations[k]:2d} {('x', 'y', 'z', 'time')[c]:4s} "
-              f"{b[k, c] * f:+.4f} {u}  ->  {est.bias[k, c] * f:+.4f} +- "
-              f"{est.sigma[k, c] * f:.4f}{'  FLAGGED' if flagged[k, c] else ''}")
-    return {"e2e_injected_within_2sigma_frac": float(np.mean(np.abs(z[inj]) <= 2)),
-            "e2e_max_abs_pull_injected": float(np.max(np.abs(z[inj]))),
-            "e2e_false_flags": int((flagged & ~inj).sum()),
-            "e2e_detected": int((flagged & inj).sum()), "e2e_injected": int(inj.sum())}
 
 
 def main(argv=None) -> int:
@@ -167,14 +46,19 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--e2e", action="store_true", help="also calibrate from images")
     args = parser.parse_args(argv)
-    figures = trials(args.trials, args.sigma_um * 1e-6, args.seed,
-                     args.capsule_sigma_um * 1e-6)
+    run_tool("bench_calibration", ROOT, lambda: run(args), argv=argv, seconds_key=None)
+    return 0
+
+
+def run(args) -> dict:
+    """The trials (each figure printed) and, with ``--e2e``, the calibration from images."""
+    figures = trials(ROOT, args.trials, args.sigma_um * 1e-6,
+                     args.seed, args.capsule_sigma_um * 1e-6)
     for k, v in figures.items():
         print(f"{k}: {v}")
     if args.e2e:
-        figures.update(end_to_end())
-    print(json.dumps(figures))
-    return 0
+        figures.update(end_to_end(ROOT))
+    return figures
 
 
 if __name__ == "__main__":

@@ -11,17 +11,13 @@ npr_planar, npr_circular, and the accuracy figures printed above it.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import time
 from pathlib import Path
 
-# small SVDs and products: a multi-threaded BLAS only spins on a shared machine
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.validation.motion_records import run
-from cadra.validation.results import record
+one_thread()
+
+from cadra.validation.motion_records import run  # noqa: E402 (after one_thread)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,10 +28,8 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--draws", type=int, default=5, help="noise draws per seed-000 case")
     args = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    out = run(args.reps, args.seed, args.draws)
-    print(json.dumps(out))
-    record("bench_motion", out, ROOT, argv=argv, seconds=time.perf_counter() - t0)
+    run_tool("bench_motion", ROOT, lambda: run(args.reps, args.seed, args.draws), argv=argv,
+             seconds_key=None)
 
 
 if __name__ == "__main__":

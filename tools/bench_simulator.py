@@ -12,12 +12,12 @@ Last line: a JSON object with key ``trajectories_per_s`` (target >= 500).
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import time
 from pathlib import Path
 
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
+
+one_thread()
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -27,14 +27,18 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement")
     parser.add_argument("--spec", default=str(ROOT / "sample_shots/specs/m2_2429.toml"))
     args = parser.parse_args()
+    run_tool("bench_simulator", ROOT, lambda: run(args.spec, args.seconds), seconds_key=None)
 
+
+def run(spec_path, seconds: float) -> dict:
+    """Trajectories per second of the shot ``spec_path`` in float64 and complex128."""
     t_import = time.perf_counter()
     import numpy as np
 
     from cadra.dynamics.setup import DT_MAX_DEFAULT, propagate_states
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
-    spec = load_shot_spec(args.spec)
+    spec = load_shot_spec(spec_path)
     t0 = time.perf_counter()
     shot = simulate_shot(spec)
     first_s = time.perf_counter() - t0
@@ -47,7 +51,7 @@ def main() -> None:
     def rate(dtype_y0, label):
         propagate_states(dtype_y0, 0.0, times, phys, program, params)
         n, t_start = 0, time.perf_counter()
-        while time.perf_counter() - t_start < args.seconds:
+        while time.perf_counter() - t_start < seconds:
             propagate_states(dtype_y0, 0.0, times, phys, program, params)
             n += 1
         r = n / (time.perf_counter() - t_start)
@@ -62,14 +66,14 @@ def main() -> None:
           f"import {t0 - t_import:.2f} s")
     real = rate(x0.copy(), "float64   ")
     cplx = rate(x0.astype(complex), "complex128")
-    print(json.dumps({
+    return {
         "trajectories_per_s": round(real, 1),
         "complex_trajectories_per_s": round(cplx, 1),
         "ms_per_trajectory": round(1e3 / real, 4),
         "rk4_steps": n_steps,
         "stations": len(times),
         "first_call_s": round(first_s, 3),
-    }))
+    }
 
 
 if __name__ == "__main__":

@@ -30,16 +30,14 @@ cadra.validation.starts_bench's.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.validation.results import record
-from cadra.validation.starts_bench import CASES, run_case, summary
+one_thread()
+
+from cadra.validation.starts_bench import CASES, run_case, summary  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -50,11 +48,17 @@ def main(argv=None) -> int:
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     parser.add_argument("--seed", type=int, default=19)
     args = parser.parse_args(argv)
-    t0 = time.perf_counter()
+    run_tool("bench_starts", ROOT, lambda: run(args.cases, args.draws, args.seed), argv=argv,
+             seconds_key="total_seconds")
+    return 0
+
+
+def run(cases, draws: int, seed: int) -> dict:
+    """Every case in ``cases``, printed as it ends; the summary over them."""
     results = {}
-    for case in args.cases:
+    for case in cases:
         print(f"== {case}", flush=True)
-        results[case] = run_case(case, args.draws, args.seed)
+        results[case] = run_case(case, draws, seed)
         r = results[case]
         print(f"   gyroscopic stability factor {r['gyro_factor']:.2f}; truth C_m_alpha "
               f"{r['truth_Cm_a']:+.3f}, C_mq {r['truth_Cmq_0']:+.2f}")
@@ -64,11 +68,7 @@ def main(argv=None) -> int:
                   f"{x['start_Cmq_0_median']:+.2f} (medians); to the truth's chi^2 "
                   f"{x['to_truth_frac']:.2f}; {x['iterations_median']:.0f} iterations, "
                   f"{x['seconds_median']:.1f} s (medians)")
-    out = summary(results, args.draws)
-    out["total_seconds"] = time.perf_counter() - t0
-    print(json.dumps(out))
-    record("bench_starts", out, ROOT, argv=argv, seconds=out["total_seconds"])
-    return 0
+    return summary(results, draws)
 
 
 if __name__ == "__main__":

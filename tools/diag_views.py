@@ -1,4 +1,4 @@
-"""Per-view decomposition of stage one's whole-shot errors (issue 18 diagnostic).
+"""Per-view decomposition of stage one's whole-shot errors (a diagnostic).
 
 Flies, renders and measures one sample shot several times (new seeds), and for every station
 and view compares with the renderer's exact truth:

@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import sys
-import time
 from pathlib import Path
 
 from cadra.validation.fuzz import PARSERS, run
-from cadra.validation.results import record
+from cadra.validation.tool import run_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -40,10 +38,9 @@ def main(argv=None) -> int:
     unknown = sorted(set(kinds) - set(PARSERS))
     if unknown:
         ap.error(f"unknown parser(s) {unknown}; known: {', '.join(PARSERS)}")
-    t0 = time.perf_counter()
-    result = run(kinds, args.n, args.seed, log=functools.partial(print, flush=True))
-    print(json.dumps(result))
-    record("fuzz_parsers", result, ROOT, argv=argv, seconds=time.perf_counter() - t0)
+    log = functools.partial(print, flush=True)
+    result = run_tool("fuzz_parsers", ROOT, lambda: run(kinds, args.n, args.seed, log=log),
+                      argv=argv, seconds_key=None)
     return 1 if result["uncaught"] else 0
 
 

@@ -18,14 +18,12 @@ recorded as ``results/gap_detection.json`` (:func:`cadra.validation.results.reco
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
-import time
 from pathlib import Path
 
 from cadra.validation.gap_detection import CASES, case_line, scan, summarize
-from cadra.validation.results import record
+from cadra.validation.tool import run_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,25 +39,27 @@ def main(argv=None) -> int:
     unknown = [c for c in cases if c not in CASES]
     if unknown:
         parser.error(f"unknown cases {unknown}; choose from {CASES}")
-    t0 = time.perf_counter()
-    per = scan(cases, args.trials, args.seed)
+    run_tool("gap_detection", ROOT, lambda: run(cases, args.trials, args.seed, args.verbose),
+             argv=argv, seconds_key="detection_total_seconds")
+    return 0
+
+
+def run(cases, trials: int, seed: int, verbose: bool) -> dict:
+    """The scan of ``cases``, a line a case (and its notable trials) printed; the summary."""
+    per = scan(cases, trials, seed)
     for case, rows in per.items():
         print(case_line(case, rows))
         for r in rows:
             if "error" in r:
                 print(f"    error: {r['error']}")
-            elif args.verbose or (r.get("valid") and not r["detected"] and r["m"] > 1.5):
+            elif verbose or (r.get("valid") and not r["detected"] and r["m"] > 1.5):
                 print(f"    {r['shot']} m {r['m']:.2f} k {r['k']} detected "
                       f"{r.get('detected')} (first-round dchi2 "
                       f"{r.get('dchi2_first_round', math.nan):.1f}, p_adj "
                       f"{r.get('p_adjusted_first_round', math.nan):.2g}; m^2 lambda90 "
                       f"{r['m'] ** 2 * r.get('lambda90', math.nan):.1f}): "
                       f"{r.get('verdict', '')[:160]}")
-    summary = summarize(per, args.trials)
-    summary["detection_total_seconds"] = time.perf_counter() - t0
-    print(json.dumps(summary, default=float))
-    record("gap_detection", summary, ROOT, argv=argv, seconds=time.perf_counter() - t0)
-    return 0
+    return summarize(per, trials)
 
 
 if __name__ == "__main__":

@@ -56,17 +56,15 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 from cadra.validation.gap_summary import case_line, summarize, trial_notes
 from cadra.validation.gap_trials import CASES, multifit_timing, run_case
-from cadra.validation.results import record
+from cadra.validation.tool import run_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -94,25 +92,28 @@ def main(argv=None) -> int:
     parser.add_argument("--verbose", action="store_true",
                         help="also list trials whose size or shrink ratio fails")
     args = parser.parse_args(argv)
-    rng = np.random.default_rng(args.seed)
     cases = [c for c in args.cases.split(",") if c]
+    run_tool("validate_gap", ROOT, lambda: run(cases, args), argv=argv,
+             seconds_key="total_seconds")
+    return 0
+
+
+def run(cases, args) -> dict:
+    """Every case's trials, a line a case printed; the summary with the timing and the
+    detection scan unless ``args`` leaves them out."""
+    rng = np.random.default_rng(args.seed)
     per, redrawn = {}, {}
-    t_all = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
             per[case], redrawn[case] = run_case(case, rng, tmp, args.trials, progress=True)
             print(case_line(case, per[case], redrawn[case]))
             for line in trial_notes(case, per[case], args.verbose):
                 print(line)
-    summary = {
+    return {
         **summarize(per, redrawn, args.trials),
         **({} if args.no_multifit else multifit_timing()),
         **({} if args.no_detection else detection(cases, args.trials, args.seed)),
-        "total_seconds": time.perf_counter() - t_all,
     }
-    print(json.dumps(summary, default=float))
-    record("validate_gap", summary, ROOT, argv=argv, seconds=time.perf_counter() - t_all)
-    return 0
 
 
 if __name__ == "__main__":

@@ -40,17 +40,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.validation.m80 import DEFAULT_OUT, run
-from cadra.validation.results import record
+one_thread()
+
+from cadra.validation.m80 import DEFAULT_OUT, run  # noqa: E402 (after one_thread)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -65,9 +62,14 @@ def main(argv=None) -> int:
     ap.add_argument("--no-film", action="store_true", help="skip the film-noise round")
     ap.add_argument("--seed", type=int, default=1, help="seed of the film-noise draw")
     args = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    s = run(args.draws, Path(args.out), args.keep_images, not args.no_film, args.seed,
-            reuse=args.reuse)
+    s = run_tool("validate_m80", ROOT, lambda: show(run(
+        args.draws, Path(args.out), args.keep_images, not args.no_film, args.seed,
+        reuse=args.reuse)), argv=argv, seconds_key="run_s")
+    return 0 if not s["failures"] else 1
+
+
+def show(s: dict) -> dict:
+    """Print the tables of ``s``; returns it."""
     print("\nS_g and Mach (first/last station):", json.dumps(s["conditions"]))
     print(f"{'6-DOF':6s} {'truth':>9s} {'pull mean':>10s} {'pull std':>9s} {'max|pull|':>10s} "
           f"{'mean sigma':>11s}")
@@ -85,11 +87,7 @@ def main(argv=None) -> int:
     if "cmq_sigma_film_per_round" in s:
         print(f"CMQ per-round sigma with film-range noise (0.1 mm, 0.1 deg): "
               f"{s['cmq_sigma_film_per_round']:.3g}; MR 1833 Table II spread -4.5 to -2.8")
-    elapsed = time.perf_counter() - t0
-    s["run_s"] = round(elapsed, 1)
-    print(json.dumps(s))
-    record("validate_m80", s, ROOT, argv=argv, seconds=elapsed)
-    return 0 if not s["failures"] else 1
+    return s
 
 
 if __name__ == "__main__":

@@ -22,17 +22,13 @@ epicyclic_fit_ms, kb_reduction_s and the per-case figures).
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.validation.motion_validation import run
-from cadra.validation.results import record
+one_thread()
+
+from cadra.validation.motion_validation import run  # noqa: E402 (after one_thread)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,13 +40,8 @@ def main(argv=None) -> None:
     ap.add_argument("--no-sensitivity", action="store_true",
                     help="skip the classic method's sensitivity to the unstated record")
     args = ap.parse_args(argv)
-    t_start = time.perf_counter()
-    out = run(args.draws, args.seed, not args.no_sensitivity)
-    elapsed = time.perf_counter() - t_start
-    out["run_s"] = round(elapsed, 1)
-    print(f"run time {out['run_s']} s")
-    print(json.dumps(out))
-    record("validate_motion", out, ROOT, argv=argv, seconds=elapsed)
+    run_tool("validate_motion", ROOT, lambda: run(args.draws, args.seed, not args.no_sensitivity),
+             argv=argv, seconds_key="run_s")
 
 
 if __name__ == "__main__":

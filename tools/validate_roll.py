@@ -36,23 +36,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
-import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.validation.finner_range import finner_e2e
-from cadra.validation.results import record
+one_thread()
+
+from cadra.validation.finner_range import finner_e2e  # noqa: E402 (after one_thread)
 
 ROOT = Path(__file__).resolve().parents[1]
 PARTS = ("seed001", "seed003", "images", "e2e")
 
 
-def run_tool(script: str, args: list[str]) -> dict:
+def run_part(script: str, args: list[str]) -> dict:
     """Run ``tools/<script>`` and return its last line's JSON (its table goes to stdout)."""
     cmd = [sys.executable, str(ROOT / "tools" / script), *args]
     print(f"$ {' '.join(cmd[1:])}", flush=True)
@@ -81,24 +79,23 @@ def main(argv=None) -> int:
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
         ap.error(f"unknown part(s) {unknown}; choose from {list(PARTS)}")
-    t0 = time.perf_counter()
+    run_tool("validate_roll", ROOT, lambda: run(parts, args), argv=argv)
+    return 0
+
+
+def run(parts, args) -> dict:
+    """The parts in ``parts``: the three tools' figures and the end-to-end shot's."""
     out: dict = {}
     if "seed001" in parts:
-        out.update(run_tool("validate_roll_seed001.py", []))
+        out.update(run_part("validate_roll_seed001.py", []))
     if "seed003" in parts:
-        out.update(run_tool("validate_roll_seed003.py", ["--draws", str(args.seed003_draws)]))
+        out.update(run_part("validate_roll_seed003.py", ["--draws", str(args.seed003_draws)]))
     if "images" in parts:
-        out.update(run_tool("validate_roll_images.py", ["--n", str(args.images_n)]))
+        out.update(run_part("validate_roll_images.py", ["--n", str(args.images_n)]))
     if "e2e" in parts:
         out.update(finner_e2e(args.e2e_realisations, args.seed))
     out["parts"] = parts
-    elapsed = time.perf_counter() - t0
-    out["seconds"] = round(elapsed, 1)
-    line = json.dumps(out, default=lambda v: None if isinstance(v, float) and math.isnan(v)
-                      else str(v))
-    print(line)
-    record("validate_roll", json.loads(line), ROOT, argv=argv, seconds=elapsed)
-    return 0
+    return out
 
 
 if __name__ == "__main__":

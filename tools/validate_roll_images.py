@@ -28,16 +28,14 @@ The cases and figures are cadra.validation.roll_images'.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.validation.results import record
-from cadra.validation.roll_images import run
+one_thread()
+
+from cadra.validation.roll_images import run  # noqa: E402 (after one_thread)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,11 +46,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=2020)
     parser.add_argument("--no-crb", action="store_true", help="skip the Cramér–Rao bounds")
     args = parser.parse_args(argv)
-    t0 = time.perf_counter()
-    out = run(args.n, args.seed, crb=not args.no_crb)
-    out["seconds"] = time.perf_counter() - t0
-    print(json.dumps(out))
-    record("validate_roll_images", out, ROOT, argv=argv, seconds=out["seconds"])
+    run_tool("validate_roll_images", ROOT, lambda: run(args.n, args.seed, crb=not args.no_crb),
+             argv=argv)
     return 0
 
 

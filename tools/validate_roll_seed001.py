@@ -25,17 +25,13 @@ lockin_cadra_over_mdc_error_max, limit_cycle_rel_err, seconds, and the other fig
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.validation.lockin import run
-from cadra.validation.results import record
+one_thread()
+
+from cadra.validation.lockin import run  # noqa: E402 (after one_thread)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,14 +41,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--noise-seed", type=int, default=1)
     ap.add_argument("--draws", type=int, default=5, help="noise realisations (default 5)")
     args = ap.parse_args(argv)
-    t_start = time.perf_counter()
-    out = run(args.noise_seed, args.draws)
-    elapsed = time.perf_counter() - t_start
-    out["seconds"] = round(elapsed, 1)
-    print(json.dumps(out, default=float))
-    record("validate_roll_seed001", json.loads(json.dumps(out, default=float)), ROOT,
-           argv=argv, seconds=elapsed)
-    return out
+    return run_tool("validate_roll_seed001", ROOT, lambda: run(args.noise_seed, args.draws),
+                    argv=argv)
 
 
 if __name__ == "__main__":

@@ -18,14 +18,11 @@ phi = 41.16 deg (breaks out positive), run 2 at 42.16 deg (breaks out negative).
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
-import time
 from pathlib import Path
 
-from cadra.validation.results import record
 from cadra.validation.seed003_runs import DEFAULT_DRAWS, run
+from cadra.validation.tool import run_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,15 +38,9 @@ def main(argv=None) -> int:
                     help="a new folder for the first draw's fit and the tables over the draws "
                          "(report, CSV, Markdown, plot)")
     args = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    out = run(args.draws, args.seed, args.stepwise, args.out)
-    elapsed = time.perf_counter() - t0
-    out["seconds"] = round(elapsed, 1)
-    # strict JSON: a figure one draw cannot give (a spread) is null, not NaN
-    out = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-           for k, v in out.items()}
-    print(json.dumps(out))
-    record("validate_roll_seed003", out, ROOT, argv=argv, seconds=elapsed)
+    # a figure one draw cannot give (a spread) is null in the JSON line
+    run_tool("validate_roll_seed003", ROOT,
+             lambda: run(args.draws, args.seed, args.stepwise, args.out), argv=argv)
     return 0
 
 

@@ -10,7 +10,7 @@ fitted by ``cadra.motion.fit_epicyclic`` in the air's distance x = integral of V
 paper does, in its four programs: 10-constant, 10-constant with the nonrolling-axis
 correction (NR, eq. 8, one iteration), 12-constant (eq. 12's phi'' terms) and 12-constant
 with NR. The rms angle-of-attack deviations (rms |xi - xi_fit|, deg) are printed beside the
-paper's Table 2 (``../shared/seed_eval_tables.md``; row placement restored from the text).
+paper's Table 2 (its rows placed as the text describes them).
 
 Then ``cadra2 diagnose`` (the CLI, in process; docs/gap.md) is run on the mass-asymmetry and
 flow cases written as a tunnel shot file and trajectory file with measurement noise: the 6-DOF
@@ -32,18 +32,14 @@ seed002_cubic_12nr_over_10_ratio, seed002_diagnose_named, seconds and the per-ca
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+from cadra.validation.tool import one_thread, run_tool
 
-from cadra.cli.cadra2 import main as cadra2_main
-from cadra.validation.results import record
-from cadra.validation.tricyclic_table import run
+one_thread()
+
+from cadra.cli.cadra2 import main as cadra2_main  # noqa: E402 (after one_thread)
+from cadra.validation.tricyclic_table import run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -63,14 +59,10 @@ def main(argv=None) -> None:
                     help="skip the tricyclic table's sensitivity to the unstated choices")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
-    t_start = time.perf_counter()
-    out = run(diagnosis=not args.no_diagnose, noise_deg=args.noise_deg,
-              paper_noise=args.paper_noise, cadra2_main=cadra2_main if args.cli else None,
-              with_sensitivity=not args.no_sensitivity, seed=args.seed)
-    elapsed = time.perf_counter() - t_start
-    out["seconds"] = round(elapsed, 1)
-    print(json.dumps(out))
-    record("validate_tricyclic", out, ROOT, argv=argv, seconds=elapsed)
+    run_tool("validate_tricyclic", ROOT, lambda: run(
+        diagnosis=not args.no_diagnose, noise_deg=args.noise_deg, paper_noise=args.paper_noise,
+        cadra2_main=cadra2_main if args.cli else None,
+        with_sensitivity=not args.no_sensitivity, seed=args.seed), argv=argv)
 
 
 if __name__ == "__main__":

@@ -24,11 +24,9 @@ noise-free, the median reported sigma (um) and the number of renders; it is also
 from __future__ import annotations
 
 import argparse
-import json
-import time
 from pathlib import Path
 
-from cadra.validation.results import record
+from cadra.validation.tool import run_tool
 from cadra.validation.wire_images import wire_sigma
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,7 +41,12 @@ def main(argv=None) -> dict:
     ap.add_argument("--blur", type=float, default=None,
                     help="optics blur sigma (px) of the renders (default: the renderer's)")
     args = ap.parse_args(argv)
-    t0 = time.perf_counter()
+    return run_tool("validate_wire_sigma", ROOT, lambda: run(args), argv=argv,
+                    seconds_key=None)
+
+
+def run(args) -> dict:
+    """The renders' error-over-sigma figures, printed; the failures listed first."""
     out, failures = wire_sigma(args.n, args.seed0, profile_model=not args.centroid,
                                blur_px=args.blur)
     for line in failures:
@@ -52,8 +55,6 @@ def main(argv=None) -> dict:
           f"{out['z_rms_ab'][0]}, b {out['z_rms_ab'][1]}; noise-free "
           f"{out['z_rms_noise_free_ab']}; error rms {out['error_rms_um_ab']} um; sigma "
           f"{out['sigma_median_um_ab']} um")
-    print(json.dumps(out))
-    record("validate_wire_sigma", out, ROOT, argv=argv, seconds=time.perf_counter() - t0)
     return out
 
 

@@ -30,6 +30,7 @@ from cadra.dynamics.modes import TestMode
 from cadra.facility.reference import VIEW_AXES
 from cadra.fields import frozen_array
 from cadra.io.atomic import atomic_write_text
+from cadra.io.plain import plain
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
 #: Current shot-file schema version.
@@ -446,21 +447,9 @@ def _test_mode_from_dict(table) -> TestMode:
         raise ShotFileError(str(exc)) from None
 
 
-def _plain(value):
-    """numpy scalars/arrays -> plain Python for writing."""
-    if isinstance(value, np.ndarray):
-        return [_plain(v) for v in value.tolist()]
-    if isinstance(value, np.bool_ | bool):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating | float):
-        return float(value)
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    return value
+def _toml(value):
+    """``value`` as TOML holds it (a NaN or inf stays: TOML writes them)."""
+    return plain(value, nonfinite_as_none=False)
 
 
 def shot_to_dict(shot: ShotFile) -> dict:
@@ -485,17 +474,17 @@ def shot_to_dict(shot: ShotFile) -> dict:
         "notes": shot.notes or "",
     }
     if shot.nominal_velocity_m_s is not None:
-        out["nominal_velocity_m_s"] = _plain(shot.nominal_velocity_m_s)
-    out["model"] = _plain(dict(shot.model))
+        out["nominal_velocity_m_s"] = _toml(shot.nominal_velocity_m_s)
+    out["model"] = _toml(dict(shot.model))
     out["mass"] = mass_d
-    out["range"] = {"pressure_torr": p_torr, "temperature_k": _plain(shot.temperature_k)}
+    out["range"] = {"pressure_torr": p_torr, "temperature_k": _toml(shot.temperature_k)}
     mode = shot.test_mode
     if mode.kind != "range":
         out["test_mode"] = {"kind": mode.kind, "stream_m_s": c(mode.stream_m_s)}
         if mode.mounted:
             pivot = units.m_to_cm(model_to_body_vector(np.array(mode.pivot_from_cg_body_m)))
             out["test_mode"]["pivot_from_cg_cm"] = [c(float(v)) for v in pivot]
-    out["stations"] = [{"station": _plain(r.station), "time_s": _plain(r.time_s),
+    out["stations"] = [{"station": _toml(r.station), "time_s": _toml(r.time_s),
                         "images": {str(k): str(v) for k, v in r.images.items()}}
                        for r in shot.stations]
     return out

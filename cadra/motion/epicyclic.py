@@ -28,6 +28,7 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
 
 from cadra.motion import _checks
+from cadra.motion._named import ByName
 from cadra.motion.nonrolling import nonrolling_rate
 from cadra.motion.starts import fft_exponents, linear_amplitudes, pencil_exponents
 
@@ -134,7 +135,7 @@ class Arm:
 
 
 @dataclass(frozen=True)
-class EpicyclicFit:
+class EpicyclicFit(ByName):
     """The result of :func:`fit_epicyclic` (a failed fit raises :class:`MotionFitError`).
 
     ``values``, ``sigmas``, ``covariance`` and ``correlation`` follow ``names``; sigmas are
@@ -163,12 +164,6 @@ class EpicyclicFit:
     nfev: int
     nonrolling_iterations: int = 0
     nonrolling: np.ndarray | None = field(default=None, repr=False)
-
-    def value(self, name: str) -> float:
-        return float(self.values[self.layout.index(name)])
-
-    def sigma(self, name: str) -> float:
-        return float(self.sigmas[self.layout.index(name)])
 
     def predict(self, s, derivative: bool = False) -> np.ndarray:
         """The fitted xi (or dxi/ds) at ``s``, in the frame the fit was made in."""

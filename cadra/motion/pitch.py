@@ -14,6 +14,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from cadra.motion import _checks
+from cadra.motion._named import ByName
 from cadra.motion.epicyclic import MotionFitError, covariance
 from cadra.motion.starts import pencil_exponents
 
@@ -21,7 +22,7 @@ NAMES = ("alpha_T", "a", "b", "lambda", "omega")
 
 
 @dataclass(frozen=True)
-class PitchFit:
+class PitchFit(ByName):
     """Result of :func:`fit_pitch`; ``values``/``sigmas``/``covariance`` follow ``NAMES``."""
 
     values: np.ndarray
@@ -40,12 +41,6 @@ class PitchFit:
     nfev: int
 
     names = NAMES
-
-    def value(self, name: str) -> float:
-        return float(self.values[NAMES.index(name)])
-
-    def sigma(self, name: str) -> float:
-        return float(self.sigmas[NAMES.index(name)])
 
     @property
     def K(self) -> float:

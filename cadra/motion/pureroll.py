@@ -43,6 +43,7 @@ from scipy.optimize import brentq, least_squares
 from scipy.special import ellipj, ellipk, j1, jvp
 
 from cadra.motion import _checks
+from cadra.motion._named import ByName
 from cadra.motion.epicyclic import MotionFitError, covariance
 from cadra.motion.pitch import fit_pitch
 from cadra.motion.sectional import Sections, sectional_pitch
@@ -216,7 +217,7 @@ class SectionEstimates:
 
 
 @dataclass(frozen=True)
-class RollFit:
+class RollFit(ByName):
     """Result of :func:`mdc_fit`; ``values``/``sigmas``/``covariance`` follow ``NAMES``:
     γ_T (rad), K0 the amplitude at ``t0`` (rad; the peak for ``"pendulum"``, the fundamental
     for ``"harmonic"``), ψ0 the phase at ``t0`` (rad), A (1/s²), a0 (1/s), a2 (1/(s rad²))."""
@@ -235,12 +236,6 @@ class RollFit:
     nfev: int
 
     names = NAMES
-
-    def value(self, name: str) -> float:
-        return float(self.values[NAMES.index(name)])
-
-    def sigma(self, name: str) -> float:
-        return float(self.sigmas[NAMES.index(name)])
 
     def amplitude(self, t) -> np.ndarray:
         """K(t) (rad) of the fitted averaged motion at times ``t`` (s, increasing, ≥ t0)."""

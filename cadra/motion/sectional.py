@@ -64,6 +64,20 @@ def _determined(fit, arms) -> bool:
     return all(a.K > a.K_sigma for a in arms)
 
 
+def _fit_windows(s, window: int, step: int, fit) -> list[tuple]:
+    """``fit(i, j, centre, previous)`` -> (fit, arms, row) over the windows of ``s``, each
+    started from the last fit whose arms were all determined; the rows, each led by its
+    window's centre."""
+    rows, prev = [], None
+    for i, j in _windows(s.size, window, step):
+        c = 0.5 * (s[i] + s[j - 1])
+        f, arms, row = fit(i, j, c, prev)
+        if _determined(f, arms):
+            prev = f
+        rows.append((c, *row))
+    return rows
+
+
 def sectional_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, window: int,
                         step: int, variable: str = "time", **fit_kwargs) -> Sections:
     """Epicyclic fits (:func:`fit_epicyclic`, two arms) of windows of ``window`` points every
@@ -74,18 +88,16 @@ def sectional_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, wi
     sa = _checks.sigmas("sigma_alpha", sigma_alpha, s.size)
     sb = _checks.sigmas("sigma_beta", sigma_beta, s.size)
     window, step = _check_window(window, step, 8)
-    rows = []
-    prev = None
-    for i, j in _windows(s.size, window, step):
-        c = 0.5 * (s[i] + s[j - 1])
+
+    def fit(i, j, c, prev):
         f = fit_epicyclic(s[i:j], a[i:j], b[i:j], sa[i:j], sb[i:j], s_ref=c, start=prev,
                           variable=variable, **fit_kwargs)
         arms = [f.arm(k) for k in (1, 2)]
-        if _determined(f, arms):
-            prev = f
-        rows.append((c, [m.K for m in arms], [m.K_sigma for m in arms], [m.lam for m in arms],
-                     [m.lam_sigma for m in arms], [m.omega for m in arms],
-                     [m.omega_sigma for m in arms], f.rms, 0.0))
+        return f, arms, ([m.K for m in arms], [m.K_sigma for m in arms], [m.lam for m in arms],
+                         [m.lam_sigma for m in arms], [m.omega for m in arms],
+                         [m.omega_sigma for m in arms], f.rms, 0.0)
+
+    rows = _fit_windows(s, window, step, fit)
     return _pack("epicyclic", variable, rows, window, step, fit_kwargs.get("trim_rate"))
 
 
@@ -96,16 +108,14 @@ def sectional_pitch(s, alpha, sigma_alpha=None, *, window: int, step: int,
     a = _checks.series("alpha", alpha, s.size)
     sa = _checks.sigmas("sigma_alpha", sigma_alpha, s.size)
     window, step = _check_window(window, step, 6)
-    rows = []
-    prev = None
-    for i, j in _windows(s.size, window, step):
-        c = 0.5 * (s[i] + s[j - 1])
+
+    def fit(i, j, c, prev):
         f = fit_pitch(s[i:j], a[i:j], sa[i:j], trim=trim, variable=variable, s_ref=c,
                       start=prev)
-        if _determined(f, [f]):
-            prev = f
-        rows.append((c, [f.K], [f.K_sigma], [f.value("lambda")], [f.sigma("lambda")],
-                     [f.value("omega")], [f.sigma("omega")], f.rms, f.value("alpha_T")))
+        return f, [f], ([f.K], [f.K_sigma], [f.value("lambda")], [f.sigma("lambda")],
+                        [f.value("omega")], [f.sigma("omega")], f.rms, f.value("alpha_T"))
+
+    rows = _fit_windows(s, window, step, fit)
     return _pack("pitch", variable, rows, window, step, None)
 
 

@@ -50,6 +50,7 @@ from cadra.fitting.problem import result_problem
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, apply_local, observables
 from cadra.flight.data import CHANNELS, ShotData
+from cadra.io.plain import plain
 from cadra.numfmt import pm
 from cadra.report import figures, markdown
 
@@ -68,26 +69,6 @@ _FD_STEP = 1e-6
 
 
 # --------------------------------------------------------------------------- plain data
-
-
-def _plain(x):
-    """``x`` as plain JSON types: numpy -> Python, non-finite floats -> None."""
-    if isinstance(x, Mapping):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [_plain(v) for v in x.tolist()]
-    if isinstance(x, bool | np.bool_):
-        return bool(x)
-    if isinstance(x, int | np.integer):
-        return int(x)
-    if isinstance(x, float | np.floating):
-        x = float(x)
-        return x if math.isfinite(x) else None
-    if x is None or isinstance(x, str):
-        return x
-    return str(x)
 
 
 def _shots_by_id(shots: Sequence[ShotData]) -> dict[str, ShotData]:
@@ -236,7 +217,7 @@ def results_dict(result: FitResult, shots: Sequence[ShotData], *,
         "param_names": list(result.param_names),
         "options": result.options,
     }
-    return _plain(out)
+    return plain(out)
 
 
 def residuals_table(result: FitResult) -> pd.DataFrame:
@@ -580,7 +561,7 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
         reference_lines: list[str] = []
         if cmp is not None:
             cmp.table.to_csv(tmp / "reference_pulls.csv", index=False, float_format="%.10g")
-            data["reference"] = _plain({"label": cmp.label, "chi2": cmp.chi2, "dof": cmp.dof,
+            data["reference"] = plain({"label": cmp.label, "chi2": cmp.chi2, "dof": cmp.dof,
                                         "p": cmp.p, "not_compared": list(cmp.not_compared),
                                         "pulls": cmp.table.to_dict(orient="records")})
             reference_lines = reference_markdown(cmp)

@@ -40,10 +40,11 @@ PITCH = {"Cm_alpha0": -30.0, "Cm_alpha2": 15.0, "Cmq_sum0": -75.0, "Cmq_sum2": -
 SEED001_T2 = {"Cm_alpha0": 0.18, "Cm_alpha2": 0.47, "Cmq_sum0": 0.21, "Cmq_sum2": 11.49}
 
 
-def gimbal(t):
-    """xi = beta + i alpha (rad) at ``t`` of the spinning gimbal (seed 000 eq. 8 forms,
-    :data:`GIMBAL`, spin :data:`COND`'s p over 5 in the gyroscopic term), from 12 deg."""
-    c, k = COND, GIMBAL
+def gimbal(t, conditions=COND, coefficients=GIMBAL):
+    """xi = beta + i alpha (rad) at ``t`` of the spinning gimbal (seed 000 eq. 8 forms with
+    ``coefficients``' values, default :data:`GIMBAL`; spin ``conditions``' p over 5 in the
+    gyroscopic term, default :data:`COND`), from 12 deg."""
+    c, k = conditions, coefficients
     qsd = c.q_inf * c.S * c.d_m
     G, Mf, P = qsd * c.d_m / (2 * c.speed_m_s * c.I_kg_m2), qsd / c.I_kg_m2, c.spin_rad_s / 5
 
@@ -76,6 +77,30 @@ def pitch(t):
                      rtol=1e-11, atol=1e-13).y[0]
 
 
+def tricyclic(t):
+    """xi (rad) at ``t`` of the benchmark's tricyclic history: arms (-0.5 + 12i) and
+    (-0.8 + 3i) 1/s, a trim arm at 30 rad/s."""
+    return (0.1 * np.exp(0.3j + (-0.5 + 12j) * t) + 0.05 * np.exp(-1j + (-0.8 + 3j) * t)
+            + 0.01 * np.exp(1j * (30 * t + 0.2)))
+
+
+def timed_kb(rng, repeats: int = 3):
+    """The sectional K-B reduction of the 2000-point spinning-gimbal record with 0.05 deg of
+    noise from ``rng``, timed ``repeats`` times: (t, the noise-free xi, the sections, the
+    K-B result, the median seconds)."""
+    t = np.linspace(0.0, 4.0, 2000)
+    xi = gimbal(t)
+    noise = np.radians(0.05)
+    xn = xi + rng.normal(0, noise, t.size) + 1j * rng.normal(0, noise, t.size)
+    durations = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        sec = sectional_epicyclic(t, xn.imag, xn.real, noise, noise, window=300, step=30)
+        kb = kb_reduction(sec, COND)
+        durations.append(time.perf_counter() - t0)
+    return t, xi, sec, kb, float(np.median(durations))
+
+
 def errors(res, truth):
     """% errors of a K-B result's coefficients against ``truth`` (name -> value)."""
     return {k: round(100 * abs(getattr(res, k) / v - 1), 3) for k, v in truth.items()}
@@ -89,8 +114,7 @@ def run(reps: int = 30, seed: int = 1, draws: int = 5) -> dict:
 
     # 1. epicyclic fit speed and pulls: 200-point tricyclic history, 0.3 deg noise
     t = np.linspace(0.0, 2.0, 200)
-    xi = (0.1 * np.exp(0.3j + (-0.5 + 12j) * t) + 0.05 * np.exp(-1j + (-0.8 + 3j) * t)
-          + 0.01 * np.exp(1j * (30 * t + 0.2)))
+    xi = tricyclic(t)
     sig = np.radians(0.3)
     fit_epicyclic(t, xi.imag, xi.real, trim_rate=30.0)          # warm-up
     times, pulls = [], []
@@ -111,17 +135,8 @@ def run(reps: int = 30, seed: int = 1, draws: int = 5) -> dict:
           f"{reps}); pull std of lambda1, omega1, lambda2, omega2: {np.round(sd, 3)}")
 
     # 2. sectional K-B reduction of a 2000-point spinning-gimbal record (0.05 deg noise)
-    t = np.linspace(0.0, 4.0, 2000)
-    xi = gimbal(t)
-    noise = np.radians(0.05)
-    xn = xi + rng.normal(0, noise, t.size) + 1j * rng.normal(0, noise, t.size)
-    durations = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        sec = sectional_epicyclic(t, xn.imag, xn.real, noise, noise, window=300, step=30)
-        kb = kb_reduction(sec, COND)
-        durations.append(time.perf_counter() - t0)
-    out["kb_reduction_s"] = round(float(np.median(durations)), 3)
+    t, xi, sec, kb, seconds = timed_kb(rng)
+    out["kb_reduction_s"] = round(seconds, 3)
     out["kb_sections"] = int(sec.centre.size)
     clean = kb_reduction(sectional_epicyclic(t, xi.imag, xi.real, window=300, step=30), COND)
     raw = kb_reduction(sectional_epicyclic(t, xi.imag, xi.real, window=300, step=30), COND,
@@ -195,8 +210,7 @@ def speed_and_npr(rng) -> dict:
     """The speed and NPR figures of :func:`run` (its record and body) for
     ``tools/validate_motion.py``: 20 timed epicyclic fits, 3 timed K-B reductions."""
     t = np.linspace(0.0, 2.0, 200)
-    xi = (0.1 * np.exp(0.3j + (-0.5 + 12j) * t) + 0.05 * np.exp(-1j + (-0.8 + 3j) * t)
-          + 0.01 * np.exp(1j * (30 * t + 0.2)))
+    xi = tricyclic(t)
     sig = np.radians(0.3)
     fit_epicyclic(t, xi.imag, xi.real, trim_rate=30.0)
     times = []
@@ -205,21 +219,12 @@ def speed_and_npr(rng) -> dict:
         t0 = time.perf_counter()
         fit_epicyclic(t, xi.imag + n[0], xi.real + n[1], trim_rate=30.0)
         times.append(time.perf_counter() - t0)
-    t = np.linspace(0.0, 4.0, 2000)
-    xg = gimbal(t)
-    nz = np.radians(0.05)
-    xn = xg + rng.normal(0, nz, t.size) + 1j * rng.normal(0, nz, t.size)
-    durations = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        kb_reduction(sectional_epicyclic(t, xn.imag, xn.real, nz, nz, window=300, step=30),
-                     COND)
-        durations.append(time.perf_counter() - t0)
+    kb_seconds = timed_kb(rng)[-1]
     s = np.linspace(0.0, 3.0, 3001)
     r = 0.2 * np.exp(-0.3 * s) * np.cos(9 * s)
     dr = 0.2 * np.exp(-0.3 * s) * (-0.3 * np.cos(9 * s) - 9 * np.sin(9 * s))
     circ = 0.1 * np.exp(7j * s)
     return {"epicyclic_fit_ms": round(1e3 * float(np.median(times)), 2),
-            "kb_reduction_s": round(float(np.median(durations)), 3),
+            "kb_reduction_s": round(kb_seconds, 3),
             "npr_planar": float(nonplanar_ratio(s, r * np.exp(0.7j), dr * np.exp(0.7j)).npr),
             "npr_circular": float(nonplanar_ratio(s, circ, 7j * circ).npr)}

@@ -9,7 +9,6 @@ are generated from these files (:mod:`cadra.validation.figures`), never copied b
 from __future__ import annotations
 
 import json
-import math
 import os
 import platform
 import subprocess
@@ -17,22 +16,10 @@ import sys
 from datetime import UTC, datetime
 from pathlib import Path
 
+from cadra.io.plain import plain
+
 #: the format tag of a results file
 FORMAT = "cadra.tool-results/1"
-
-
-def _plain(x):
-    """``x`` as plain JSON: numpy scalars and arrays as Python numbers and lists, a number
-    that is not finite as None."""
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_plain(v) for v in x]
-    if hasattr(x, "tolist"):
-        return _plain(x.tolist())
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 
 
 def _commit(root: Path) -> str:
@@ -64,7 +51,7 @@ def record(tool: str, figures: dict, root: str | os.PathLike, *,
             "date": datetime.now(UTC).strftime("%Y-%m-%d"),
             "commit": _commit(root), "machine": machine(),
             "seconds": None if seconds is None else round(float(seconds), 1),
-            "figures": _plain(figures)}
+            "figures": plain(figures)}
     path = root / "results" / f"{tool}.json"
     path.parent.mkdir(exist_ok=True)
     return atomic_write_text(path, json.dumps(data, indent=1, sort_keys=False) + "\n",

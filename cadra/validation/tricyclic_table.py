@@ -1,6 +1,6 @@
 """Seed 002 Table 2 re-run: our table of the rms angle-of-attack deviations of the tricyclic
 fits to the 6-DOF simulations of Run 21 (:mod:`cadra.validation.tricyclic`) against the
-paper's (``../shared/seed_eval_tables.md``; row placement restored from the text), the
+paper's (seed 002 Table 2, its rows placed as the text describes them), the
 paper's statements checked on it (:func:`compare`), its sensitivity to the choices the seed
 leaves unstated (:func:`sensitivity`), and the gap diagnosis of the mass and flow cases
 (:mod:`cadra.validation.tricyclic_gap`). :func:`run` is ``tools/validate_tricyclic.py``'s

@@ -87,7 +87,7 @@ class FitSettings:
     #: noise (measure.silhouette.noise), scaled up, never down, by their reduced chi^2
     #: about it; "correlated": the formal covariance times the offsets' reduced chi^2, with
     #: the predicted correlation between segments; "scaled": that without the correlation;
-    #: "sandwich": Newey-West over the contour-ordered segments (the pre-issue-18 sigma)
+    #: "sandwich": Newey-West over the contour-ordered segments (the earlier default sigma)
     covariance: str = "predicted"
     noise_lag_px: int = 5           # pixel-noise correlation measured to this lag
     fit_curvature_bias: bool = True

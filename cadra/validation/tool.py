@@ -1,0 +1,43 @@
+"""What every script in ``tools/`` does around its own work: one thread per process where the
+figures are per core, the run timed, its figures printed as the last line (a JSON object) and
+recorded in ``results/<tool>.json`` (:func:`cadra.validation.results.record`)."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable
+
+#: the thread counts a benchmark on one core pins (BLAS, OpenMP, numba)
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def one_thread(variables=THREAD_VARIABLES) -> None:
+    """One thread for each library in ``variables`` unless the environment says otherwise;
+    call it before numpy or numba is imported (small SVDs and products: a multi-threaded
+    BLAS only spins on a shared machine)."""
+    for name in variables:
+        os.environ.setdefault(name, "1")
+
+
+def run_tool(tool: str, root, compute: Callable[[], dict], *, argv=None,
+             seconds_key: str | None = "seconds") -> dict:
+    """Time ``compute()``, add the time under ``seconds_key`` (rounded to 0.1 s; None: not
+    added), print the figures as one line of strict JSON (:func:`cadra.io.plain.plain`) and
+    record them as ``tool``'s results under ``root``; returns the figures as printed."""
+    from cadra.io.plain import plain
+    from cadra.validation.results import record
+
+    t0 = time.perf_counter()
+    out = compute()
+    elapsed = time.perf_counter() - t0
+    if seconds_key:
+        out[seconds_key] = round(elapsed, 1)
+    out = plain(out)
+    print(json.dumps(out, allow_nan=False))
+    record(tool, out, root, argv=argv, seconds=elapsed)
+    return out
+
+
+__all__ = ["THREAD_VARIABLES", "one_thread", "run_tool"]
