@@ -65,38 +65,20 @@ def test_bias_table_not_csv(tmp_path, table_text, body, why):
         load_bias_table(p)
 
 
-def test_bias_table_text_cell_names_row_and_column(tmp_path, table_text):
+@pytest.mark.parametrize("row, column, value, message", [
+    # a text cell: named by row and column
+    (2, "bias_y_m", "exp(1)", r"row 2, column bias_y_m: 'exp\(1\)' is not a number"),
+    # 1e300 as a station id: refused by row, not a RuntimeWarning (invalid cast) out of numpy
+    (3, "station", "1e300", r"stations: row 3: 1e\+300 is not a station id"),
+    # a 400-digit integer: refused by station and channel, not an OverflowError (int too
+    # large to convert to float)
+    (4, "sigma_time_s", "9" * 400, r"station 4 time: sigma inf must be > 0 and finite"),
+    (5, "bias_x_m", "-inf", r"station 5 x: bias -inf is not finite"),
+])
+def test_bias_table_bad_cell_is_named(tmp_path, table_text, row, column, value, message):
     p = tmp_path / "t.csv"
-    p.write_text(_cell(table_text, 2, "bias_y_m", "exp(1)"))
-    with pytest.raises(StationHistoryError, match=r"t\.csv: row 2, column bias_y_m: "
-                                                  r"'exp\(1\)' is not a number"):
-        load_bias_table(p)
-
-
-def test_bias_table_station_not_an_id(tmp_path, table_text):
-    """1e300 as a station id: refused by row, not a RuntimeWarning (invalid cast) out of numpy."""
-    p = tmp_path / "t.csv"
-    p.write_text(_cell(table_text, 3, "station", "1e300"))
-    with pytest.raises(StationHistoryError, match=r"t\.csv: stations: row 3: 1e\+300 is not "
-                                                  r"a station id"):
-        load_bias_table(p)
-
-
-def test_bias_table_integer_beyond_float(tmp_path, table_text):
-    """A 400-digit integer: refused by station and channel, not an OverflowError (int too large
-    to convert to float)."""
-    p = tmp_path / "t.csv"
-    p.write_text(_cell(table_text, 4, "sigma_time_s", "9" * 400))
-    with pytest.raises(StationHistoryError, match=r"t\.csv: station 4 time: sigma inf must "
-                                                  r"be > 0 and finite"):
-        load_bias_table(p)
-
-
-def test_bias_table_nonfinite_bias_names_station(tmp_path, table_text):
-    p = tmp_path / "t.csv"
-    p.write_text(_cell(table_text, 5, "bias_x_m", "-inf"))
-    with pytest.raises(StationHistoryError, match=r"t\.csv: station 5 x: bias -inf is not "
-                                                  r"finite"):
+    p.write_text(_cell(table_text, row, column, value))
+    with pytest.raises(StationHistoryError, match=r"t\.csv: " + message):
         load_bias_table(p)
 
 

@@ -14,49 +14,32 @@ import numpy as np
 import pytest
 
 from cadra.channels import residual
-from cadra.dynamics.effects import Effects
 from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET
-from cadra.fitting.extras import Extra
+from cadra.fitting.extras import Extra, phys_direction
 from cadra.fitting.sensitivity import predict, predict_with_jacobian
 from cadra.fitting.solver import fit
-from cadra.flight import shot_data_from_truth
-from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
-CG_Z = 2e-4          # m, body z
+CG_Z = 2e-4          # m, body z (the cg_offset_shot fixture's)
 BIAS_Y = 3e-6        # m, station 6 y
 DT = 1e-7            # s, station 10
 
 
-def _dir(i):
-    d = np.zeros(N_PHYS)
-    d[i] = 1.0
-    return tuple(d)
-
-
 @pytest.fixture(scope="module")
-def case():
-    spec = load_shot_spec("sample_shots/specs/m2_2429.toml")
-    sim = simulate_shot(replace(spec, effects=Effects(cg_offset_body_m=(0.0, 0.0, CG_Z))))
-    nominal = sim.rigid.with_effects(Effects())
-    sd = shot_data_from_truth(sim.truth, nominal, "M2-2429", "capsule",
-                              sigma_position_m=2.8e-7, sigma_angle_rad=np.radians(0.0012))
+def case(cg_offset_shot):
+    """The shot with a station-6 y bias and a station-10 timing bias added."""
+    sim, sd = cg_offset_shot.sim, cg_offset_shot.data
     meas = sd.meas.copy()
     i6 = int(np.flatnonzero(sd.stations == 6)[0])
     i10 = int(np.flatnonzero(sd.stations == 10)[0])
     meas[i6, 1] += BIAS_Y
     meas[i10, :3] += sim.truth[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()[i10] * DT
-    sd = replace(sd, meas=meas)
-    # the true state at the middle station's time, about the TRUE cg: the fit's start
-    t = sim.truth.iloc[sd.epoch_index]
-    y0 = np.array([t.x_cg_m, t.y_cg_m, t.z_cg_m, t.vx_m_s, t.vy_m_s, t.vz_m_s,
-                   t.q0, t.q1, t.q2, t.q3, t.p_rad_s, t.q_rad_s, t.r_rad_s])
-    return sim, sd, y0
+    return sim, replace(sd, meas=meas), cg_offset_shot.y0
 
 
 def test_fit_recovers_cg_offset_station_bias_and_timing(case):
     sim, sd, y0 = case
-    extras = [Extra("cg_y", phys_direction=_dir(P_CG_OFFSET + 1)),
-              Extra("cg_z", phys_direction=_dir(P_CG_OFFSET + 2)),
+    extras = [Extra("cg_y", phys_direction=phys_direction(P_CG_OFFSET + 1)),
+              Extra("cg_z", phys_direction=phys_direction(P_CG_OFFSET + 2)),
               Extra("st6_y", station=6, measure="position_y"),
               Extra("st10_dt", station=10, measure="timing")]
     res = fit([sd], sim.model.with_values({}), [y0], extras=extras)
@@ -81,7 +64,7 @@ def test_cg_offset_column_moves_the_observed_reference_point(case):
     params = sim.model.values()
     phys = sd.rigid.phys()
     ref = sd.rigid.ref_from_cg_body_m()
-    d = np.array(_dir(P_CG_OFFSET + 1))
+    d = np.array(phys_direction(P_CG_OFFSET + 1))
     _, J = predict_with_jacobian(y0, sd.t_s[sd.epoch_index], sd.t_s, phys, program, params,
                                  ref, [], [], phys_dirs=d[None, :])
     h = 1e-5            # the offset's effect is smooth: central-difference error ~h^2
@@ -101,7 +84,7 @@ def test_cg_offset_column_moves_the_observed_reference_point(case):
 
 
 @pytest.mark.parametrize("kwargs", [
-    {"phys_direction": _dir(0), "station": 3, "measure": "position_x"},   # both kinds
+    {"phys_direction": phys_direction(0), "station": 3, "measure": "position_x"},   # both kinds
     {},                                                                     # neither
     {"station": 3, "measure": "rotation"},                                 # unknown measure
     {"phys_direction": (0.0,) * N_PHYS},                                   # zero direction
@@ -123,7 +106,7 @@ def test_fit_shots_carries_extras_through_both_stages(case):
     from cadra.fitting import fit_shots
 
     sim, sd, _ = case
-    extras = [Extra("cg_z", phys_direction=_dir(P_CG_OFFSET + 2)),
+    extras = [Extra("cg_z", phys_direction=phys_direction(P_CG_OFFSET + 2)),
               Extra("st6_y", station=6, measure="position_y"),
               Extra("st10_dt", station=10, measure="timing")]
     res, _ = fit_shots([sd], sim.model, extras=extras)
@@ -141,7 +124,7 @@ def test_held_extras_act_but_are_not_fitted(case):
     Held at a wrong value it leaves a misfit no free unknown can remove."""
     sim, sd, y0 = case
     free = Extra("st6_y", station=6, measure="position_y")
-    held = [Extra("cg_z", phys_direction=_dir(P_CG_OFFSET + 2), value=CG_Z, held=True),
+    held = [Extra("cg_z", phys_direction=phys_direction(P_CG_OFFSET + 2), value=CG_Z, held=True),
             Extra("st10_dt", station=10, measure="timing", value=DT, held=True)]
     res = fit([sd], sim.model.with_values({}), [y0], extras=[free, *held])
     assert res.converged, res.message

@@ -17,40 +17,24 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cadra.dynamics.effects import Effects
-from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET, P_RHO_GRAD
-from cadra.fitting.extras import Extra
+from cadra.dynamics.layout import P_CG_OFFSET, P_RHO_GRAD
+from cadra.fitting.extras import Extra, phys_direction
 from cadra.fitting.solver import fit
-from cadra.flight import shot_data_from_truth
-from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 
-CG_Z = 2e-4                          # m, body z
-SIGMA_POS = 2.8e-7                   # m
+CG_Z = 2e-4                          # m, body z: the cg_offset_shot fixture's, and its
+SIGMA_POS = 2.8e-7                   # m    sigmas
 SIGMA_ANG = np.radians(0.0012)       # rad
 CHANNEL_ORDER = ("x", "y", "z", "theta", "psi")
 
 
-def _dir(i):
-    d = np.zeros(N_PHYS)
-    d[i] = 1.0
-    return tuple(d)
-
-
 @pytest.fixture(scope="module")
-def fitted():
-    spec = load_shot_spec("sample_shots/specs/m2_2429.toml")
-    sim = simulate_shot(replace(spec, effects=Effects(cg_offset_body_m=(0.0, 0.0, CG_Z))))
-    nominal = sim.rigid.with_effects(Effects())
-    sd = shot_data_from_truth(sim.truth, nominal, "M2-2429", "capsule",
-                              sigma_position_m=SIGMA_POS, sigma_angle_rad=SIGMA_ANG)
-    t = sim.truth.iloc[sd.epoch_index]
-    y0 = np.array([t.x_cg_m, t.y_cg_m, t.z_cg_m, t.vx_m_s, t.vy_m_s, t.vz_m_s,
-                   t.q0, t.q1, t.q2, t.q3, t.p_rad_s, t.q_rad_s, t.r_rad_s])
-    extras = [Extra("cg_y", phys_direction=_dir(P_CG_OFFSET + 1)),
-              Extra("cg_z", phys_direction=_dir(P_CG_OFFSET + 2)),
+def fitted(cg_offset_shot):
+    sim, sd, y0 = cg_offset_shot.sim, cg_offset_shot.data, cg_offset_shot.y0
+    extras = [Extra("cg_y", phys_direction=phys_direction(P_CG_OFFSET + 1)),
+              Extra("cg_z", phys_direction=phys_direction(P_CG_OFFSET + 2)),
               # held: part of the physics, not fitted (a profile point); 0 changes nothing
               # numerically but must travel with the problem
-              Extra("rho_grad", phys_direction=_dir(P_RHO_GRAD), held=True)]
+              Extra("rho_grad", phys_direction=phys_direction(P_RHO_GRAD), held=True)]
     res = fit([sd], sim.model.with_values({}), [y0], extras=extras)
     assert res.converged, res.message
     assert res.value("cg_z") == pytest.approx(CG_Z, rel=1e-4)

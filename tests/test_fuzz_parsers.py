@@ -73,181 +73,89 @@ def test_expression_numbers(x):
 
 # --- files ---------------------------------------------------------------------------------
 
+#: each file kind's valid seeds (the mutations start from them)
+SEEDS = {"model_file": MODELS, "trajectory_file": TRAJECTORIES, "shot_file": SHOTS,
+         "facility_file": FACILITIES, "shot_spec": SPECS, "truth_table": TRUTHS,
+         "bias_table": BIAS_TABLES, "station_history": HISTORIES}
+RANDOM_CONTENT = st.one_of(st.binary(max_size=300), st.text(max_size=300))
+#: random content for each kind (a trajectory file's behind its format line, to reach
+#: further than the format check)
+CONTENT = {kind: RANDOM_CONTENT for kind in SEEDS} | {
+    "trajectory_file": st.one_of(
+        st.binary(max_size=300),
+        st.text(max_size=300).map(lambda t: "# format: cadra-trajectory-1\n" + t))}
+BAD_VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(),
+                       st.sampled_from(['"x"', "true", "[1, 2]", "{}", "-1", "9" * 400,
+                                        "[[1, 2, 3], [4, 5]]", "[1e308, 1e308, 1e308]"]))
+#: the TOML keys of each kind given one bad value
+KEYS = {"shot_file": ["mass_g", "d_cm", "h_cm", "pressure_torr", "temperature_k", "time_s",
+                      "station", "schema_version"],
+        "facility_file": ["x_m", "width_px", "height_px", "bit_depth", "scale_m_per_px",
+                          "u_px", "arm_px", "diameter_m", "id", "schema_version"],
+        "shot_spec": ["mass_g", "pressure_torr", "temperature_k", "speed_m_s", "seed", "x_m",
+                      "q_deg_s", "inertia_g_cm2", "model", "aim"]}
+#: the CSV columns (and rows) of each kind given one bad cell, and the bad cells
+CELLS = {"trajectory_file": (7, ["t_s", "x_m", "z_m", "theta_deg", "sigma_y_m",
+                                 "sigma_psi_deg", "station", "x_consistency"],
+                             fuzz.NASTY + ["1e300", "-1e-9", "nan", "inf"]),
+         "bias_table": (15, ["station", "bias_x_m", "bias_time_s", "sigma_y_m", "sigma_time_s"],
+                        fuzz.NASTY + ["1e400", "-1e-9", "NaN", "inf", "9" * 30])}
 
+
+def test_new_seeds_parse():
+    """The unmutated seeds are valid: the mutations start from files the parsers accept."""
+    for kind, seeds in SEEDS.items():
+        for seed in seeds:
+            assert _run(kind, seed) == "ok", kind
+
+
+@pytest.mark.parametrize("kind", [k for k in SEEDS if k != "station_history"])
 @CI
-@given(st.randoms(use_true_random=False), st.sampled_from(MODELS))
-def test_model_file_mutations(r, seed):
-    assert _run("model_file", fuzz.mutate(r, seed)) in ("ok", "refused")
+@given(r=st.randoms(use_true_random=False), data=st.data())
+def test_mutations(kind, r, data):
+    seed = data.draw(st.sampled_from(SEEDS[kind]), label="seed")
+    assert _run(kind, fuzz.mutate(r, seed)) in ("ok", "refused")
 
 
+@pytest.mark.parametrize("kind", list(SEEDS))
 @CI
-@given(st.one_of(st.binary(max_size=300), st.text(max_size=300)))
-def test_model_file_random_content(content):
-    assert _run("model_file", content) in ("ok", "refused")
+@given(data=st.data())
+def test_random_content(kind, data):
+    assert _run(kind, data.draw(CONTENT[kind], label="content")) in ("ok", "refused")
 
 
+@pytest.mark.parametrize("kind", list(KEYS))
 @CI
-@given(st.randoms(use_true_random=False), st.sampled_from(TRAJECTORIES))
-def test_trajectory_file_mutations(r, seed):
-    assert _run("trajectory_file", fuzz.mutate(r, seed)) in ("ok", "refused")
+@given(data=st.data(), value=BAD_VALUES)
+def test_one_bad_value(kind, data, value):
+    """One TOML value of a valid file replaced: a result or a refusal."""
+    import re
+
+    key = data.draw(st.sampled_from(KEYS[kind]), label="key")
+    seed = data.draw(st.sampled_from(SEEDS[kind]), label="seed")
+    text = re.sub(rf"^{key} = .*$", f"{key} = {value}", seed, count=1, flags=re.M)
+    assert _run(kind, text) in ("ok", "refused")
 
 
+@pytest.mark.parametrize("kind", list(CELLS))
 @CI
-@given(st.one_of(st.binary(max_size=300),
-                 st.text(max_size=300).map(lambda t: "# format: cadra-trajectory-1\n" + t)))
-def test_trajectory_file_random_content(content):
-    assert _run("trajectory_file", content) in ("ok", "refused")
-
-
-@CI
-@given(st.sampled_from(fuzz.NASTY + ["1e300", "-1e-9", "nan", "inf"]),
-       st.integers(0, 7), st.sampled_from(["t_s", "x_m", "z_m", "theta_deg", "sigma_y_m",
-                                           "sigma_psi_deg", "station", "x_consistency"]))
-def test_trajectory_file_one_bad_cell(value, row, column):
-    """One cell of a valid file replaced: a result (NaN = not measured) or a refusal naming
+@given(data=st.data())
+def test_one_bad_cell(kind, data):
+    """One cell of a valid table replaced: a result (NaN = not measured) or a refusal naming
     the column."""
     import io
 
     import pandas as pd
 
-    text = TRAJECTORIES[0]
+    last_row, columns, values = CELLS[kind]
+    value = data.draw(st.sampled_from(values), label="value")
+    row = data.draw(st.integers(0, last_row), label="row")
+    column = data.draw(st.sampled_from(columns), label="column")
+    text = SEEDS[kind][0]
     head = "".join(line + "\n" for line in text.splitlines() if line.startswith("#"))
     t = pd.read_csv(io.StringIO(text), comment="#", dtype=str, keep_default_na=False)
     t.loc[row, column] = value
-    try:
-        out = _run("trajectory_file", head + t.to_csv(index=False))
-    except AssertionError:  # pragma: no cover - reported below
-        raise
-    assert out in ("ok", "refused")
-
-
-@CI
-@given(st.randoms(use_true_random=False), st.sampled_from(SHOTS))
-def test_shot_file_mutations(r, seed):
-    assert _run("shot_file", fuzz.mutate(r, seed)) in ("ok", "refused")
-
-
-@CI
-@given(st.one_of(st.binary(max_size=300), st.text(max_size=300)))
-def test_shot_file_random_content(content):
-    assert _run("shot_file", content) in ("ok", "refused")
-
-
-@CI
-@given(st.sampled_from(["mass_g", "d_cm", "h_cm", "pressure_torr", "temperature_k",
-                        "time_s", "station", "schema_version"]),
-       st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(),
-                 st.sampled_from(['"x"', "true", "[1, 2]", "{}", "-1", "9" * 400])))
-def test_shot_file_one_bad_value(key, value):
-    import re
-
-    text = re.sub(rf"^{key} = .*$", f"{key} = {value}", SHOTS[0], count=1, flags=re.M)
-    assert _run("shot_file", text) in ("ok", "refused")
-
-
-# --- the facility file, shot specifications, truth tables, bias tables, station histories ----
-
-RANDOM_CONTENT = st.one_of(st.binary(max_size=300), st.text(max_size=300))
-NEW_FILES = {"facility_file": FACILITIES, "shot_spec": SPECS, "truth_table": TRUTHS,
-             "bias_table": BIAS_TABLES, "station_history": HISTORIES}
-
-
-def test_new_seeds_parse():
-    """The unmutated seeds are valid: the mutations start from files the parsers accept."""
-    for kind, seeds in NEW_FILES.items():
-        for seed in seeds:
-            assert _run(kind, seed) == "ok", kind
-
-
-@CI
-@given(st.randoms(use_true_random=False), st.sampled_from(FACILITIES))
-def test_facility_file_mutations(r, seed):
-    assert _run("facility_file", fuzz.mutate(r, seed)) in ("ok", "refused")
-
-
-@CI
-@given(RANDOM_CONTENT)
-def test_facility_file_random_content(content):
-    assert _run("facility_file", content) in ("ok", "refused")
-
-
-@CI
-@given(st.sampled_from(["x_m", "width_px", "height_px", "bit_depth", "scale_m_per_px",
-                        "u_px", "arm_px", "diameter_m", "id", "schema_version"]),
-       st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(),
-                 st.sampled_from(['"x"', "true", "[1, 2]", "{}", "-1", "9" * 400])))
-def test_facility_file_one_bad_value(key, value):
-    import re
-
-    text = re.sub(rf"^{key} = .*$", f"{key} = {value}", FACILITIES[0], count=1, flags=re.M)
-    assert _run("facility_file", text) in ("ok", "refused")
-
-
-@CI
-@given(st.randoms(use_true_random=False), st.sampled_from(SPECS))
-def test_shot_spec_mutations(r, seed):
-    assert _run("shot_spec", fuzz.mutate(r, seed)) in ("ok", "refused")
-
-
-@CI
-@given(RANDOM_CONTENT)
-def test_shot_spec_random_content(content):
-    assert _run("shot_spec", content) in ("ok", "refused")
-
-
-@CI
-@given(st.sampled_from(["mass_g", "pressure_torr", "temperature_k", "speed_m_s", "seed",
-                        "x_m", "q_deg_s", "inertia_g_cm2", "model", "aim"]),
-       st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(),
-                 st.sampled_from(['"x"', "true", "[1, 2]", "{}", "-1", "9" * 400,
-                                  "[[1, 2, 3], [4, 5]]", "[1e308, 1e308, 1e308]"])),
-       st.sampled_from(SPECS))
-def test_shot_spec_one_bad_value(key, value, seed):
-    import re
-
-    text = re.sub(rf"^{key} = .*$", f"{key} = {value}", seed, count=1, flags=re.M)
-    assert _run("shot_spec", text) in ("ok", "refused")
-
-
-@CI
-@given(st.randoms(use_true_random=False), st.sampled_from(TRUTHS))
-def test_truth_table_mutations(r, seed):
-    assert _run("truth_table", fuzz.mutate(r, seed)) in ("ok", "refused")
-
-
-@CI
-@given(RANDOM_CONTENT)
-def test_truth_table_random_content(content):
-    assert _run("truth_table", content) in ("ok", "refused")
-
-
-@CI
-@given(st.randoms(use_true_random=False), st.sampled_from(BIAS_TABLES))
-def test_bias_table_mutations(r, seed):
-    assert _run("bias_table", fuzz.mutate(r, seed)) in ("ok", "refused")
-
-
-@CI
-@given(RANDOM_CONTENT)
-def test_bias_table_random_content(content):
-    assert _run("bias_table", content) in ("ok", "refused")
-
-
-@CI
-@given(st.sampled_from(fuzz.NASTY + ["1e400", "-1e-9", "NaN", "inf", "9" * 30]),
-       st.integers(0, 15), st.sampled_from(["station", "bias_x_m", "bias_time_s", "sigma_y_m",
-                                            "sigma_time_s"]))
-def test_bias_table_one_bad_cell(value, row, column):
-    """One cell of a valid table replaced: a result or a refusal."""
-    import io
-
-    import pandas as pd
-
-    text = BIAS_TABLES[0]
-    head = "".join(line + "\n" for line in text.splitlines() if line.startswith("#"))
-    t = pd.read_csv(io.StringIO(text), comment="#", dtype=str, keep_default_na=False)
-    t.loc[row, column] = value
-    assert _run("bias_table", head + t.to_csv(index=False)) in ("ok", "refused")
+    assert _run(kind, head + t.to_csv(index=False)) in ("ok", "refused")
 
 
 @CI
@@ -263,12 +171,6 @@ def test_station_history_mutations(r, seed):
 def test_station_history_entry_mutations(r, seed):
     """One entry's key deleted, duplicated or given a wrong-typed or extreme value, signed."""
     assert _run("station_history", fuzz.mutate_entry(r, seed)) in ("ok", "refused")
-
-
-@CI
-@given(RANDOM_CONTENT)
-def test_station_history_random_content(content):
-    assert _run("station_history", content) in ("ok", "refused")
 
 
 @pytest.mark.slow

@@ -25,7 +25,7 @@ import pandas as pd
 import pytest
 
 from cadra.aero import resolve_model
-from cadra.dynamics.observe import observe
+from cadra.dynamics.observe import complex_yaw
 from cadra.dynamics.setup import propagate_states
 from cadra.dynamics.trajectory import Launch
 from cadra.facility.reference import small_arms_range_text
@@ -106,13 +106,9 @@ def flight(sim):
     launch = Launch(speed_m_s=V0, theta_rad=math.radians(1.0), p_rad_s=p0, q_rad_s=20.0)
     states = propagate_states(launch.state(rb), 0.0, t, rb.phys(), model.compile(),
                               model.values(), 2e-6)
-    v = states[:, 3:6]
-    V = np.linalg.norm(v, axis=1)
-    obs = observe(states, rb.ref_from_cg_body_m())
-    b = (v[:, 1] + 1j * v[:, 2]) / V
-    xi = np.sin(obs["psi_rad"]) + 1j * np.sin(obs["theta_rad"]) - b
-    return dict(s=s, ds=ds, xi=xi, V0=V0, p0=p0, kappa=kappa, model=model, rb=rb,
-                p_hat=states[:, 10] * d / V)
+    V = np.linalg.norm(states[:, 3:6], axis=1)
+    return dict(s=s, ds=ds, xi=complex_yaw(states), V0=V0, p0=p0, kappa=kappa, model=model,
+                rb=rb, p_hat=states[:, 10] * d / V)
 
 
 def mccoy_roots(f):

@@ -24,7 +24,7 @@ import pytest
 from cadra.aero import load_model, model_from_dict
 from cadra.dynamics.eom import aero_force_moment
 from cadra.dynamics.layout import PLANE_SIGMA
-from cadra.dynamics.observe import observe
+from cadra.dynamics.observe import complex_yaw
 from cadra.dynamics.setup import RigidBody, propagate_states
 from cadra.dynamics.trajectory import Launch
 from cadra.validation.arms import fit_two_arms
@@ -89,11 +89,9 @@ def flight():
                               model.values(), 5e-6)
     v = states[:, 3:6]
     V = np.linalg.norm(v, axis=1)
-    obs = observe(states, BODY.ref_from_cg_body_m())
-    # complex yaw: nose axis minus velocity direction, (port, up) components of F
+    # the velocity's direction; the complex yaw: nose axis minus it, (port, up) components of F
     b = (v[:, 1] + 1j * v[:, 2]) / V
-    xi = np.sin(obs["psi_rad"]) + 1j * np.sin(obs["theta_rad"]) - b
-    return dict(s=s, ds=ds, V0=V0, V=V, states=states, xi=xi, b=b)
+    return dict(s=s, ds=ds, V0=V0, V=V, states=states, xi=complex_yaw(states), b=b)
 
 
 def test_speed_and_spin_per_caliber_as_assumed(flight):

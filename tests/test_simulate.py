@@ -62,6 +62,18 @@ def test_table3_conditions_reproduced(m2_shot):
     assert t.mach.iloc[7:9].mean() == pytest.approx(0.69, abs=0.03)
 
 
+def _shadow_centroid(scene, cfg):
+    """(u, v, total shadow) of the scene's bodies rendered alone (no wires, no clutter) and
+    divided by the illumination: the exact shadow's centroid (px)."""
+    scene = type(scene)(width_px=scene.width_px, height_px=scene.height_px,
+                        bodies=scene.bodies, motion_blur_px=scene.motion_blur_px)
+    img = render_clean(scene, cfg)
+    shadow = 1.0 - img / illumination_field(scene.width_px, scene.height_px, cfg)
+    vv, uu = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+    w = shadow.sum()
+    return (uu * shadow).sum() / w, (vv * shadow).sum() / w, w
+
+
 def test_sphere_image_centroid_is_the_truth_reference_point():
     """Geometry chain (trajectory -> silhouette -> film affine -> pixels) against the exact
     shadow: for a sphere the reference point is the centre, the shadow's centroid."""
@@ -71,14 +83,7 @@ def test_sphere_image_centroid_is_the_truth_reference_point():
                        scratches=0, dust=0)
     for k in range(3):
         for item in station_scenes(shot, k, np.random.default_rng(k)):
-            scene = item["scene"]
-            scene = type(scene)(width_px=scene.width_px, height_px=scene.height_px,
-                                bodies=scene.bodies, motion_blur_px=scene.motion_blur_px)
-            img = render_clean(scene, cfg)
-            shadow = 1.0 - img / illumination_field(scene.width_px, scene.height_px, cfg)
-            vv, uu = np.mgrid[0:img.shape[0], 0:img.shape[1]]
-            w = shadow.sum()
-            u_c, v_c = (uu * shadow).sum() / w, (vv * shadow).sum() / w
+            u_c, v_c, w = _shadow_centroid(item["scene"], cfg)
             assert u_c == pytest.approx(item["truth"]["u_ref_px"], abs=0.01)
             assert v_c == pytest.approx(item["truth"]["v_ref_px"], abs=0.01)
             # radius of the shadow: d / 2 at the nominal 0.127 mm/px (film scale within 0.3 %)
@@ -285,14 +290,7 @@ def test_position_bias_moves_the_rendered_shadow():
         view = biased.facility.view(2, ib["view"])
         centroids = []
         for item in (ip, ib):
-            scene = item["scene"]
-            scene = type(scene)(width_px=scene.width_px, height_px=scene.height_px,
-                                bodies=scene.bodies, motion_blur_px=scene.motion_blur_px)
-            img = render_clean(scene, cfg)
-            shadow = 1.0 - img / illumination_field(scene.width_px, scene.height_px, cfg)
-            vv, uu = np.mgrid[0:img.shape[0], 0:img.shape[1]]
-            w = shadow.sum()
-            uv = np.array([[(uu * shadow).sum() / w, (vv * shadow).sum() / w]])
+            uv = np.array([_shadow_centroid(item["scene"], cfg)[:2]])
             centroids.append(view.pixels_to_plane(uv, affine=item["affine"])[0])
         shift = centroids[1] - centroids[0]
         # 0.01 px of centroid accuracy at 0.127 mm/px: 1.3 um

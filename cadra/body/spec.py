@@ -144,15 +144,21 @@ def _build(kind: str, spec: Mapping, val: dict, name: str | None) -> Body | Finn
                    l1_m=val["l1"], name=name)
 
 
+def _preset(spec: Mapping, presets) -> str | None:
+    """The spec's ``preset``, one of ``presets``, or None."""
+    preset = spec.get("preset")
+    if preset is not None and preset not in presets:
+        raise ValueError(f"preset: {preset!r} is not one of {list(presets)}")
+    return preset
+
+
 def _bullet_from_spec(spec: Mapping, val: dict, name: str | None) -> Body:
     kw = {"d_m": val["d"], "length_m": val["length"], "ogive_length_m": val["ogive_length"],
           "boattail_length_m": val["boattail_length"],
           "boattail_angle_rad": val["boattail_angle"], "ogive_radius_m": val["ogive_radius"],
           "meplat_m": val["meplat"]}
-    preset = spec.get("preset")
+    preset = _preset(spec, _BULLET_PRESETS)
     if preset is not None:
-        if preset not in _BULLET_PRESETS:
-            raise ValueError(f"preset: {preset!r} is not one of {list(_BULLET_PRESETS)}")
         return bullet_preset(preset, name=name, **kw)
     for q in ("d", "length", "ogive_length"):
         if val[q] is None:
@@ -168,10 +174,8 @@ def _finner_from_spec(spec: Mapping, val: dict, name: str | None) -> FinnedBody:
     kw = {"length_m": val["length"], "half_angle_rad": val["half_angle"],
           "fin_chord_m": val["fin_chord"], "fin_span_m": val["fin_span"],
           "fin_thickness_m": val["fin_thickness"]}
-    preset = spec.get("preset")
+    preset = _preset(spec, _FINNER_PRESETS)
     if preset is not None:
-        if preset not in _FINNER_PRESETS:
-            raise ValueError(f"preset: {preset!r} is not one of {list(_FINNER_PRESETS)}")
         return finner_preset(preset, name=name, d_m=val["d"], **kw)
     for q in ("d", "length", "fin_chord", "fin_span"):
         if val[q] is None:

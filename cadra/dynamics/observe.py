@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from cadra.conventions import aero_angles, aero_roll_angle
-from cadra.dynamics.layout import P_D, P_SOUND, P_WIND, P_WIND_GRAD, S_POS, S_QUAT
+from cadra.dynamics.layout import P_D, P_SOUND, P_WIND, P_WIND_GRAD, S_POS, S_QUAT, S_VEL
 
 
 def rotation_fb_batch(quats: np.ndarray) -> np.ndarray:
@@ -70,6 +70,16 @@ def observe(states: np.ndarray, ref_from_cg_body_m: np.ndarray) -> dict[str, np.
         "phi_rad": _atan2(-R[:, 2, 1], -R[:, 2, 2]),
         "axis": axis,
     }
+
+
+def complex_yaw(states: np.ndarray) -> np.ndarray:
+    """Linear theory's complex yaw at each state: the nose axis minus the velocity's direction,
+    their (y, z) components in F as y + i z (the sines of the yaw angles; still air)."""
+    states = np.atleast_2d(states)
+    axis = rotation_fb_batch(states[:, S_QUAT])[:, :, 0]
+    v = states[:, S_VEL]
+    speed = np.linalg.norm(v, axis=1)
+    return axis[:, 1] + 1j * axis[:, 2] - (v[:, 1] + 1j * v[:, 2]) / speed
 
 
 def air_angles(states: np.ndarray, rigid, phys: np.ndarray | None = None

@@ -51,6 +51,17 @@ MEASURES = ("position_x", "position_y", "position_z", "timing", "scale", "angle_
 _YZ = np.array([CHANNELS.index("y"), CHANNELS.index("z")])
 
 
+def phys_direction(*terms) -> tuple[float, ...]:
+    """A direction in the physics vector (``cadra.dynamics.layout``) for
+    :attr:`Extra.phys_direction`: each term an index (weight 1) or an (index, weight) pair,
+    weights at one index adding up."""
+    d = np.zeros(N_PHYS)
+    for term in terms:
+        idx, val = (term, 1.0) if isinstance(term, int | np.integer) else term
+        d[idx] += val
+    return tuple(d)
+
+
 @dataclass(frozen=True)
 class Extra:
     """One extra unknown (module doc). ``shots``: the shot ids it applies to (None: all);
@@ -136,5 +147,5 @@ def add_station_terms(pred: np.ndarray, extras: Sequence[Extra], values, shot_id
     return pred + C @ np.asarray(values, dtype=float)
 
 
-__all__ = ["MEASURES", "Extra", "add_station_terms", "shot_phys", "shot_ref",
+__all__ = ["MEASURES", "Extra", "add_station_terms", "phys_direction", "shot_phys", "shot_ref",
            "station_columns"]

@@ -35,12 +35,12 @@ import numpy as np
 
 from cadra.aero import AeroModel, Parameter
 from cadra.dynamics.layout import (
-    N_PHYS,
     P_CG_OFFSET,
     P_INERTIA,
     P_RHO_GRAD,
     P_WIND,
 )
+from cadra.fitting.extras import phys_direction
 
 
 @dataclass(frozen=True)
@@ -67,13 +67,6 @@ class Candidate:
     @property
     def n_params(self) -> int:
         return len(self.params)
-
-
-def _dir(*pairs) -> np.ndarray:
-    d = np.zeros(N_PHYS)
-    for idx, val in pairs:
-        d[idx] += val
-    return d
 
 
 #: held parameters that are reference points of the forms (the Mach and angle about which a
@@ -127,7 +120,7 @@ def _dynamics() -> list[Candidate]:
     return [
         Candidate("lateral cg offset", "dynamics", ("cg_offset_y_m", "cg_offset_z_m"),
                   "true cg off the nominal one across the axis (body y, z)",
-                  np.array([_dir((P_CG_OFFSET + 1, 1.0)), _dir((P_CG_OFFSET + 2, 1.0))])),
+                  np.array([phys_direction(P_CG_OFFSET + 1), phys_direction(P_CG_OFFSET + 2)])),
         # a body of revolution's transverse asymmetry as the pair (Iyy - Izz, Iyz) in the
         # fit's body frame: the pair turns by 2 phi with the roll, so it spans every
         # orientation of the transverse principal axes with the roll held, and the data are
@@ -136,19 +129,18 @@ def _dynamics() -> list[Candidate]:
         Candidate("inertia asymmetry", "dynamics", ("Iyy_minus_Izz_kg_m2", "Iyz_kg_m2"),
                   "transverse moments of inertia differ (principal difference "
                   "sqrt((Iyy - Izz)^2 + 4 Iyz^2))",
-                  np.array([_dir((I + 4, 0.5), (I + 8, -0.5)),
-                            _dir((I + 5, 1.0), (I + 7, 1.0))])),
+                  np.array([phys_direction((I + 4, 0.5), (I + 8, -0.5)),
+                            phys_direction(I + 5, I + 7)])),
         # the products coupling roll with pitch and yaw (the body axis is not a principal
         # axis); the pair turns with the roll, so it too spans every orientation
         Candidate("products of inertia", "dynamics", ("Ixy_kg_m2", "Ixz_kg_m2"),
                   "the body axis is not a principal axis of inertia (mass asymmetry)",
-                  np.array([_dir((I + 1, 1.0), (I + 3, 1.0)),
-                            _dir((I + 2, 1.0), (I + 6, 1.0))])),
+                  np.array([phys_direction(I + 1, I + 3), phys_direction(I + 2, I + 6)])),
         Candidate("density gradient", "dynamics", ("drho_dx_over_rho_per_m",),
-                  "air density varies along the range", np.array([_dir((P_RHO_GRAD, 1.0))])),
+                  "air density varies along the range", np.array([phys_direction(P_RHO_GRAD)])),
         Candidate("cross-flow", "dynamics", ("wind_y_m_s", "wind_z_m_s"),
-                  "air moving across the range", np.array([_dir((P_WIND + 1, 1.0)),
-                                                           _dir((P_WIND + 2, 1.0))])),
+                  "air moving across the range",
+                  np.array([phys_direction(P_WIND + 1), phys_direction(P_WIND + 2)])),
     ]
 
 

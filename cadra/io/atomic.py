@@ -157,11 +157,9 @@ def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]
                                 "choose a new folder")
     for p in inputs:
         for form in _input_forms(Path(p)):
-            if form == out_r:
-                raise UnsafeOutputError(f"output {shown} is the input {p}; choose a new "
-                                        "folder (inputs are never overwritten)")
-            if out_r in form.parents:
-                raise UnsafeOutputError(f"output {shown} holds the input {p}; choose a new "
+            if form == out_r or out_r in form.parents:
+                how = "is" if form == out_r else "holds"
+                raise UnsafeOutputError(f"output {shown} {how} the input {p}; choose a new "
                                         "folder (inputs are never overwritten)")
     if out_r.exists() and not out_r.is_dir():
         raise UnsafeOutputError(f"output {shown} is an existing file, not a folder; choose "

@@ -81,16 +81,27 @@ def _omega_dot(sec: Sections) -> np.ndarray:
     return np.gradient(sec.omega, sec.centre, axis=0)
 
 
+_KB_FOR = {"epicyclic": ("two-arm epicyclic", "kb_pitch_reduction"),
+           "pitch": ("1-DOF pitch", "kb_reduction")}
+
+
+def _checked(sections: Sections, kind: str) -> Sections:
+    """``sections`` if they are of ``kind`` and fitted in time, else a ValueError naming the
+    reduction to use."""
+    if sections.kind != kind:
+        what, other = _KB_FOR[kind]
+        raise ValueError(f"sections: needs {what} sections (use {other})")
+    if sections.variable != "time":
+        raise ValueError("sections: the K-B reduction takes sections fitted in time")
+    return sections
+
+
 def kb_reduction(sections: Sections, conditions: FlightConditions, *,
                  frequency_correction: bool = True) -> KBResult:
     """The 3-DOF reduction (seed 000; seed 001 eqs. 39-45) of two-arm sectional fits in
     time; see the module docstring. Magnus terms are solved for only when the spin is
     nonzero."""
-    sec, c = sections, conditions
-    if sec.kind != "epicyclic":
-        raise ValueError("sections: needs two-arm epicyclic sections (use kb_pitch_reduction)")
-    if sec.variable != "time":
-        raise ValueError("sections: the K-B reduction takes sections fitted in time")
+    sec, c = _checked(sections, "epicyclic"), conditions
     s_m, s_d, ix_i = c.scales()
     P = c.spin_rad_s * ix_i
     K1, K2 = sec.K[:, 0], sec.K[:, 1]
@@ -137,11 +148,7 @@ def kb_pitch_reduction(sections: Sections, conditions: FlightConditions, *,
                        frequency_correction: bool = True) -> KBResult:
     """The 1-DOF reduction (seed 001 eqs. 16-20) of sectional pitch fits in time: C_mα and
     C_mq + C_mα̇ quadratic in the angle (α², rad²); see the module docstring."""
-    sec, c = sections, conditions
-    if sec.kind != "pitch":
-        raise ValueError("sections: needs 1-DOF pitch sections (use kb_reduction)")
-    if sec.variable != "time":
-        raise ValueError("sections: the K-B reduction takes sections fitted in time")
+    sec, c = _checked(sections, "pitch"), conditions
     s_m, s_d, _ = c.scales()
     K, lam, om = sec.K[:, 0], sec.lam[:, 0], sec.omega[:, 0]
     x = 0.75 * K**2

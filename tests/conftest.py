@@ -1,0 +1,45 @@
+"""What several test modules share: the suite runs from the repository root (the sample specs'
+paths are relative to it) whichever folder pytest is started in, and the capsule shot with
+an offset centre of gravity that the fit's extras and its problem tests both fit.
+
+Shared harness code (simulated records, gap cases, trajectory writers, image fixtures) lives
+in :mod:`cadra.validation`, which the tools use too; tests never import a tool or another
+test."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    os.chdir(ROOT)
+
+
+@pytest.fixture(scope="session")
+def cg_offset_shot():
+    """M2-2429 flown with its cg 0.2 mm off the axis (body z) and read, noise-free, with the
+    nominal body (cg on the axis), sigmas 0.28 um and 0.0012 deg. Fields: ``cg_z`` (m),
+    ``sim`` (the simulated shot), ``data`` (its ShotData), ``y0`` (the true state at the
+    epoch station, about the true cg: a fit's start)."""
+    from cadra.dynamics.effects import Effects
+    from cadra.flight import shot_data_from_truth
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot
+
+    cg_z = 2e-4
+    spec = load_shot_spec("sample_shots/specs/m2_2429.toml")
+    sim = simulate_shot(replace(spec, effects=Effects(cg_offset_body_m=(0.0, 0.0, cg_z))))
+    nominal = sim.rigid.with_effects(Effects())
+    sd = shot_data_from_truth(sim.truth, nominal, "M2-2429", "capsule",
+                              sigma_position_m=2.8e-7, sigma_angle_rad=np.radians(0.0012))
+    t = sim.truth.iloc[sd.epoch_index]
+    y0 = np.array([t.x_cg_m, t.y_cg_m, t.z_cg_m, t.vx_m_s, t.vy_m_s, t.vz_m_s,
+                   t.q0, t.q1, t.q2, t.q3, t.p_rad_s, t.q_rad_s, t.r_rad_s])
+    return SimpleNamespace(cg_z=cg_z, sim=sim, data=sd, y0=y0)
