@@ -19,16 +19,16 @@ from pathlib import Path
 
 import pytest
 
-from cadra.cli.cadra1 import main as cadra1
-from cadra.cli.cadra2 import main as cadra2
-from cadra.imaging.shot import measure_shot
-from cadra.io.atomic import (
+from cadra.atomic import (
     UnsafeOutputError,
     atomic_output_dir,
     check_output_dir,
     clean_stale_temps,
     stale_temps,
 )
+from cadra.cli.cadra1 import main as cadra1
+from cadra.cli.cadra2 import main as cadra2
+from cadra.imaging.shot import measure_shot
 from cadra.report.stage1 import write_stage1
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
@@ -235,7 +235,7 @@ def _dead_pid() -> int:
 
 
 def test_stale_temps_cleaned_only_when_ours_and_dead(tmp_path):
-    from cadra.io.atomic import _host
+    from cadra.atomic import _host
 
     out = tmp_path / "out"
     dead, host = _dead_pid(), _host()
@@ -262,7 +262,7 @@ def test_stale_temps_cleaned_only_when_ours_and_dead(tmp_path):
 
 
 def test_stale_temporary_files_of_single_file_writes(tmp_path):
-    from cadra.io.atomic import _host, atomic_write_text
+    from cadra.atomic import _host, atomic_write_text
 
     dead, host = _dead_pid(), _host()
     stale = tmp_path / f".a.csv.cadra-{dead}@{host}-abcd1234.tmp"

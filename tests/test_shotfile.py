@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cadra import units
-from cadra.io.atomic import atomic_output_dir, atomic_write_bytes, atomic_write_text
+from cadra.atomic import atomic_output_dir, atomic_write_bytes, atomic_write_text
 from cadra.io.seed004 import load_seed004_table, seed004_row, seed004_shot_file
 from cadra.io.shotfile import (
     MassProperties,

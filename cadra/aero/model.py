@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +40,7 @@ from cadra.aero.program import (
     AeroProgram,
     eval_coefficients_batch,
 )
+from cadra.atomic import atomic_write_text
 from cadra.fields import Fields, read_toml
 
 #: the two kinds of model (docs/conventions.md, "Aerodynamic coefficients")
@@ -540,30 +540,14 @@ def load_model(path: str | os.PathLike) -> AeroModel:
 
 
 def save_model(model: AeroModel, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write ``model`` as TOML, atomically (temp file in the same directory + rename).
+    """Write ``model`` as TOML, atomically (:func:`cadra.atomic.atomic_write_text`).
 
     Refuses to replace an existing file unless ``overwrite=True`` (``FileExistsError``).
     Returns the path written.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists (pass overwrite=True to replace it)")
     text = ("# CADRA aerodynamic model (docs/aero_models.md), written by "
             "cadra.aero.save_model\n" + tomli_w.dumps(model.to_dict()))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
+    return atomic_write_text(path, text, overwrite=overwrite)
 
 
 class ModelNotFoundError(KeyError, ValueError):

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cadra.io.atomic import atomic_write_text
+from cadra.atomic import atomic_write_text
 
 #: format key of a history entry (one line of ``bias_history.jsonl``)
 HISTORY_FORMAT = "cadra-station-bias-1"

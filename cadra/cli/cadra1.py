@@ -68,8 +68,8 @@ def _main(argv: list[str] | None) -> int:
         return _check(args)
     from pathlib import Path
 
+    from cadra.atomic import check_output_dir
     from cadra.imaging.shot import measure_shot
-    from cadra.io.atomic import check_output_dir
     from cadra.io.shot_check import check_model_size
     from cadra.io.shotfile import load_shot
     from cadra.io.trajectory import load_truth

@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    from cadra.io.atomic import UnsafeOutputError, check_output_dir
+    from cadra.atomic import UnsafeOutputError, check_output_dir
 
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(join_number_lists(argv, NUMBER_LIST_OPTIONS))

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cadra.atomic import atomic_write_text
 from cadra.facility.reference import (
     REPO_ROOT,
     SCHEMA_VERSION,
@@ -33,7 +34,6 @@ from cadra.facility.reference import (
     fit_affine_to_wires,
     nominal_image_to_plane,
 )
-from cadra.io.atomic import atomic_write_text
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
 #: Projections the loader knows; only the first ones are supported.

@@ -25,11 +25,11 @@ import numpy as np
 
 from cadra import units
 from cadra.atmosphere import Atmosphere
+from cadra.atomic import atomic_write_text
 from cadra.conventions import model_to_body_vector
 from cadra.dynamics.modes import TestMode
 from cadra.facility.reference import VIEW_AXES
 from cadra.fields import frozen_array
-from cadra.io.atomic import atomic_write_text
 from cadra.io.plain import plain
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 

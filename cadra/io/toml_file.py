@@ -9,8 +9,8 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
+from cadra.atomic import atomic_write_text
 from cadra.fields import Fields, prefixed_by, read_toml
-from cadra.io.atomic import atomic_write_text
 
 
 def toml_text(data: Mapping, header: str = "") -> str:
@@ -25,7 +25,7 @@ def toml_text(data: Mapping, header: str = "") -> str:
 
 def write_toml(path: str | os.PathLike, data: Mapping, *, header: str = "",
                overwrite: bool = False) -> Path:
-    """Write :func:`toml_text` of ``data`` atomically (:func:`cadra.io.atomic.atomic_write_text`);
+    """Write :func:`toml_text` of ``data`` atomically (:func:`cadra.atomic.atomic_write_text`);
     an existing file is refused (:class:`FileExistsError`) unless ``overwrite``."""
     path = Path(path)
     if path.exists() and not overwrite:

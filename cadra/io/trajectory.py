@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cadra.atomic import atomic_write_text
 from cadra.channels import OBSERVED, to_si, trajectory_sigma_columns, trajectory_value_columns
-from cadra.io.atomic import atomic_write_text
 
 FORMAT = "cadra-trajectory-1"
 

@@ -10,7 +10,7 @@
   (:mod:`~cadra.report.roll`) and seed 004's studies (:mod:`~cadra.report.studies`).
 
 Display units come from the channel registry (:mod:`cadra.channels`); every writer builds
-its folder through the atomic output guard (:func:`cadra.io.atomic.atomic_output_dir`), so
+its folder through the atomic output guard (:func:`cadra.atomic.atomic_output_dir`), so
 an output appears whole or not at all and never replaces an input. Reports only read what
 the results stored: nothing here integrates the physics again.
 """

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cadra.atomic import atomic_output_dir
 from cadra.calibration.history import CHANNELS, BiasTable, compare, save_bias_table, table_sha256
-from cadra.io.atomic import atomic_output_dir
 from cadra.numfmt import pm
 from cadra.report import figures, markdown
 from cadra.units import from_si

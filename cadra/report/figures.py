@@ -31,7 +31,7 @@ def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **
 
 def save(fig, path: str | os.PathLike, dpi: int = DPI) -> None:
     """Write ``fig`` to ``path`` (its format from the suffix). Call it inside an output
-    guard (:func:`cadra.io.atomic.atomic_output_dir`): the reports never write elsewhere."""
+    guard (:func:`cadra.atomic.atomic_output_dir`): the reports never write elsewhere."""
     fig.savefig(path, dpi=dpi)
 
 

@@ -2,7 +2,7 @@
 
 :func:`write_fit_outputs` writes a :class:`cadra.fitting.result.FitResult` to a directory,
 atomically (everything is built in a temporary sibling directory and moved into place at the
-end by :func:`cadra.io.atomic.atomic_output_dir`; an existing directory is refused unless
+end by :func:`cadra.atomic.atomic_output_dir`; an existing directory is refused unless
 ``overwrite=True``; a failure leaves nothing behind):
 
 =============================  =================================================================
@@ -540,7 +540,7 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
     The output directory. On any error nothing is left at ``out_dir`` (an existing directory
     being replaced is kept unchanged).
     """
-    from cadra.io.atomic import atomic_output_dir
+    from cadra.atomic import atomic_output_dir
 
     out_dir = Path(out_dir)
     shots = list(shots)

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cadra.atomic import atomic_output_dir
 from cadra.channels import BY_NAME, NAMES
 from cadra.gap.score import size_text
 from cadra.gap.where import by_group
-from cadra.io.atomic import atomic_output_dir
 from cadra.report import figures, markdown
 
 

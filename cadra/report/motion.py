@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cadra.io.atomic import atomic_output_dir
+from cadra.atomic import atomic_output_dir
 from cadra.io.toml_file import toml_text
 from cadra.motion import EpicyclicFit, KBResult, LinearCoefficients
 from cadra.numfmt import pm

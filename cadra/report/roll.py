@@ -2,7 +2,7 @@
 segments, the steady spins, the report page and the plot of Figs. 5-6.
 
 :func:`write_roll` writes a :class:`cadra.studies.segmented_roll.SegmentedFit` to a folder
-atomically (:func:`cadra.io.atomic.atomic_output_dir`): ``report.md``, each table as
+atomically (:func:`cadra.atomic.atomic_output_dir`): ``report.md``, each table as
 ``<name>.csv`` and ``<name>.md`` (``table2``, ``table3``, ``paper_table3``, ``segments``,
 ``steady_spins``), and ``roll_fit.png``.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cadra.io.atomic import atomic_output_dir
+from cadra.atomic import atomic_output_dir
 from cadra.report import figures, markdown
 
 #: the report's sections: title and table name

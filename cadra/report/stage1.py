@@ -2,7 +2,7 @@
 and the report (docs/stage1.md).
 
 :func:`write_stage1` writes a :class:`cadra.imaging.shot.Stage1Result` to a folder, atomically
-(:func:`cadra.io.atomic.atomic_output_dir`: built in a temporary sibling and moved into place;
+(:func:`cadra.atomic.atomic_output_dir`: built in a temporary sibling and moved into place;
 an output that is or holds one of the measurement's inputs is refused, an existing one unless
 ``overwrite``)::
 
@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cadra.atomic import atomic_output_dir, check_output_dir
 from cadra.channels import OBSERVED
 from cadra.imaging.truth_compare import TruthComparison, compare_with_truth
-from cadra.io.atomic import atomic_output_dir, check_output_dir
 from cadra.io.trajectory import trajectory_to_csv
 from cadra.report import figures, markdown
 
@@ -67,7 +67,7 @@ def write_stage1(result, out_dir: str | os.PathLike, *, truth: pd.DataFrame | No
                  overwrite: bool = False) -> Path:
     """Write stage one's folder (module doc) for ``result``; ``truth``: an optional table
     (``x_m, y_m, z_m, theta_deg, psi_deg``) drawn on the trajectory plot and compared with
-    the measurement in the report. Raises :class:`cadra.io.atomic.UnsafeOutputError` for an
+    the measurement in the report. Raises :class:`cadra.atomic.UnsafeOutputError` for an
     output that is or holds an input, ``FileExistsError`` for an existing one (without
     ``overwrite``)."""
     out_dir = Path(out_dir)

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from cadra.aero import AeroModel
-from cadra.io.atomic import atomic_output_dir
+from cadra.atomic import atomic_output_dir
 from cadra.numfmt import pm
 from cadra.report import figures, markdown
 from cadra.studies.single import check_single_fits, quasi_linear_summary

@@ -41,8 +41,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from cadra.atomic import atomic_write_bytes
 from cadra.geometry import polygon_area_centroid
-from cadra.io.atomic import atomic_write_bytes
 from cadra.synthetic.blur import (
     _add_mark,
     _body_opacity,
@@ -188,7 +188,7 @@ def quantize(image: np.ndarray, bit_depth: int) -> np.ndarray:
 def write_image(path: str | os.PathLike, image: np.ndarray, overwrite: bool = False) -> Path:
     """Write a ``uint8``/``uint16`` grey image as PNG (bit depth kept), atomically.
 
-    Encoded in memory, then written by :func:`cadra.io.atomic.atomic_write_bytes` (temporary
+    Encoded in memory, then written by :func:`cadra.atomic.atomic_write_bytes` (temporary
     file in the destination folder, then ``os.replace``).
 
     Raises

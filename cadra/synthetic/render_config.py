@@ -25,7 +25,7 @@ from typing import Any
 
 import tomli_w
 
-from cadra.io.atomic import atomic_write_text
+from cadra.atomic import atomic_write_text
 
 
 class PsfShape(StrEnum):

@@ -400,7 +400,7 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
     so an interrupted or failed run leaves nothing behind; an existing ``out_dir`` is refused
     unless ``overwrite``.
     """
-    from cadra.io.atomic import atomic_output_dir
+    from cadra.atomic import atomic_output_dir
     from cadra.io.shotfile import save_shot
     from cadra.synthetic.render import write_image
 

@@ -183,7 +183,7 @@ def stale(root: str | os.PathLike) -> list[str]:
 
 def update(root: str | os.PathLike) -> list[Path]:
     """Write the generated pages that changed; returns them."""
-    from cadra.io.atomic import atomic_write_text
+    from cadra.atomic import atomic_write_text
 
     written = []
     for path, text in pages(root).items():

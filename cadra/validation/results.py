@@ -42,7 +42,7 @@ def record(tool: str, figures: dict, root: str | os.PathLike, *,
     """Write ``<root>/results/<tool>.json``: the tool's figures (its JSON last line) and how
     they were made. ``argv``: the tool's arguments (default ``sys.argv[1:]``). The file is
     replaced atomically; returns its path."""
-    from cadra.io.atomic import atomic_write_text
+    from cadra.atomic import atomic_write_text
 
     root = Path(root)
     argv = list(sys.argv[1:] if argv is None else argv)
