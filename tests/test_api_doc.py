@@ -1,4 +1,4 @@
-"""docs/api.md's worked example runs as written: simulate -> measure -> fit -> report, the
+"""docs/api.md's worked example (and the README's, its subset) runs as written: simulate -> measure -> fit -> report, the
 stages handing data to each other in memory, no file written (the repository and the
 working folder are as they were), and the fitted C_m A1 within 3 sigma of the truth the
 shot was flown with."""
@@ -16,6 +16,15 @@ def example() -> str:
     text = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
     section = text.split("## Images to coefficients, in memory", 1)[1]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+
+
+def test_the_readme_example_is_the_tested_one():
+    """Every line of the README's Python example is a line of docs/api.md's, which runs below:
+    the front page cannot drift from what is tested."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = re.search(r"## In Python\n+```python\n(.*?)```", readme, re.S).group(1)
+    tested = set(example().splitlines())
+    assert [line for line in block.splitlines() if line and line not in tested] == []
 
 
 def _files(folder: Path) -> set[str]:
