@@ -60,6 +60,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "bench_motion": ("Classic motion methods: speed and accuracy", "motion.md"),
     "bench_simulator": ("The 6-DOF simulator's speed", "dynamics.md"),
     "bench_aero": ("The aerodynamic model's evaluation speed", "aero_models.md"),
+    "time_suite": ("The test suite from a fresh clone", "install.md"),
 }
 
 #: the figures' table: ``cadra/data/validation_figures.csv`` (columns tool, key, label, target,
