@@ -80,7 +80,12 @@ def test_python_rhs_trajectory_matches_compiled(problem):
     assert np.max(np.abs(a[:, 6:] - b[:, 6:])) < 1e-12          # quaternion, rad/s
 
 
+@pytest.mark.slow
 def test_baseline_and_cadra_find_the_same_solution(problem):
+    """The reference fitter (scipy least_squares over solve_ivp) and CADRA's fit reach the same
+    minimum. Slow (the reference fitter is the slow thing the benchmark measures):
+    tools/bench_cadra2.py runs the same comparison and records it
+    (baseline_vs_cadra_single_max_sigma, docs/validation.md)."""
     sd, model, start, y0 = problem
     res = fit([sd], start, [y0])
     base = baseline_fit([sd], start, [y0])

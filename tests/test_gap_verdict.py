@@ -102,7 +102,10 @@ def test_a_fit_short_of_convergence_is_continued_and_diagnosed():
     assert dg.fit_given.converged
 
 
+@pytest.mark.slow
 def test_the_range_airs_shared_gradient_is_one_parameter_and_wins_over_the_per_shot_form():
+    """Slow (three M1 shots diagnosed); tools/validate_gap.py's ``shared_density`` case runs it
+    over many draws and records the rate it is named first (docs/validation.md)."""
     g = 4e-6
     shots, model = _shots(["m1_2366", "m1_2379", "m1_2388"],
                           effects=Effects(density_gradient_per_m=g), seed=5)
@@ -131,7 +134,7 @@ def test_a_held_parameter_the_data_reject_is_flagged_with_the_parameters_it_move
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "truth.toml"
         save_model(truth, path)
-        shots, _ = _shots(["m2_2425", "m2_2429", "m2_2433"], model=str(path), seed=9)
+        shots, _ = _shots(["m2_2425", "m2_2433"], model=str(path), seed=9)
     res, _ = fit_shots(shots, base)
     dg = diagnose_gap(res, shots, base)
     held = [a for a in dg.added if a["effect"] == "held CL_A2"]
