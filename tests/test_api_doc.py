@@ -1,7 +1,7 @@
-"""docs/api.md's worked example (and the README's, its subset) runs as written: simulate -> measure -> fit -> report, the
-stages handing data to each other in memory, no file written (the repository and the
-working folder are as they were), and the fitted C_m A1 within 3 sigma of the truth the
-shot was flown with."""
+"""docs/api.md's worked example (and the README's, a subset of it) runs as written:
+simulate -> measure -> fit -> report, the stages handing data to each other in memory, no
+file written (the repository and the working folder are as they were), and the fitted C_m A1
+within 3 sigma of the truth the shot was flown with."""
 
 import os
 import re
