@@ -35,6 +35,17 @@ class UnsafeOutputError(ValueError):
     """An output path that would destroy an input, the working folder or a file."""
 
 
+def _read_umask() -> int:
+    """The process's umask (read once, at import: setting it to read it is not thread-safe)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+#: temporary files are created private (0600); outputs get the mode a plain open() would give
+_UMASK = _read_umask()
+
+
 def _host() -> str:
     return re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname())[:32] or "host"
 
@@ -190,6 +201,8 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = F
     fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
+            if hasattr(os, "fchmod"):
+                os.fchmod(fh.fileno(), 0o666 & ~_UMASK)
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
@@ -240,6 +253,7 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
     clean_stale_temps(path)
     tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
     try:
+        os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp's folder is private (0700)
         yield tmp
         if path.exists():
             if not overwrite:

@@ -455,3 +455,21 @@ def test_sigkill_during_cadra2_fit_leaves_nothing_and_a_rerun_succeeds(work, tmp
     assert cadra2(["fit", str(work / "m2_stage1"), "--model", "m2_m070", "-o", str(out), "-q",
                    "--no-plots"]) == 0
     assert (out / "report.md").is_file() and _temps(out) == []
+
+
+def test_outputs_get_the_mode_of_a_plain_open(tmp_path, monkeypatch):
+    """The temporary files behind atomic writes are private (0600); what lands is not."""
+    import cadra.atomic as atomic
+
+    monkeypatch.setattr(atomic, "_UMASK", 0o027)  # read once at import: set both alike
+    mask = os.umask(0o027)
+    try:
+        plain = tmp_path / "plain.txt"
+        plain.write_text("x")
+        written = atomic.atomic_write_text(tmp_path / "a.txt", "x")
+        with atomic.atomic_output_dir(tmp_path / "d") as tmp:
+            (tmp / "f.txt").write_text("x")
+    finally:
+        os.umask(mask)
+    assert written.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777 == 0o640
+    assert (tmp_path / "d").stat().st_mode & 0o777 == 0o750
