@@ -56,7 +56,8 @@ def simulate(spec: ShotSpec | str | os.PathLike | dict, *, images: bool = True,
 
 
 def measure(shot, images=None, *, facility=None, workers: int | None = 1,
-            progress: bool = False, overlays: bool = False) -> Stage1Result:
+            progress: bool = False, overlays: bool = False,
+            formation="view") -> Stage1Result:
     """Stage one: every station's images -> the shot's trajectory, in memory.
 
     ``shot``: a :class:`SimulatedShot` with its images rendered (its images, record and
@@ -64,6 +65,8 @@ def measure(shot, images=None, *, facility=None, workers: int | None = 1,
     ``(station, view)`` -> array or file (default: the simulated shot's, or the shot file's
     image files). ``workers``: processes (1: in this process; None: every core).
     ``overlays``: draw each image's overlay (what ``cadra1`` writes in ``overlays/``).
+    ``formation``: the wires' image formation once per ``"view"`` of the shot (default), per
+    ``"image"``, or given (view name -> formation, e.g. another shot's ``formations``).
     """
     if isinstance(shot, SimulatedShot):
         if images is None:
@@ -74,7 +77,7 @@ def measure(shot, images=None, *, facility=None, workers: int | None = 1,
         facility = facility if facility is not None else shot.facility
         shot = shot.shot_file()
     return measure_shot(shot, images, facility=facility, workers=workers, progress=progress,
-                        overlays=overlays)
+                        overlays=overlays, formation=formation)
 
 
 def _shot_data(item) -> ShotData:

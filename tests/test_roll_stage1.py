@@ -25,7 +25,7 @@ from cadra.imaging.roll import (
 )
 from cadra.imaging.shot import with_roll_track
 from cadra.imaging.station import StationResult, measure_station
-from cadra.imaging.wires.fit import wire_mask
+from cadra.imaging.wires.mask import wire_mask
 from cadra.synthetic.crb_roll import roll_crb
 from cadra.synthetic.render_config import RenderConfig
 from cadra.synthetic.simulate import (

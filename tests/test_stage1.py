@@ -59,6 +59,29 @@ def test_short_shot_against_truth(m2_shot, tmp_path):
     assert (q["wires_found"] == 4).all() and (q["affine_rms_px"] < 0.05).all()
 
 
+def test_the_wires_formation_is_fitted_once_per_view(m2_shot):
+    """By default each view's wire formation is fitted over the shot's images of it and held
+    for every image (cadra.imaging.wires.formation); per image it is each one's own. The two
+    agree well within the sigmas, and a formation handed in (another shot's, same cameras)
+    gives the same measurement."""
+    view = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False)
+    own = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False,
+                       formation="image")
+    assert sorted(view.formations) == ["side", "top"]
+    assert all(f.n_images == 3 and f.sigma_d > 0.5 for f in view.formations.values())
+    assert all(v.wires.formation.shared for r in view.stations for v in r.views.values())
+    assert not own.formations
+    assert not any(v.wires.formation.shared for r in own.stations for v in r.views.values())
+    for c in ("x_m", "y_m", "z_m", "theta_deg", "psi_deg"):
+        d = (view.trajectory[c] - own.trajectory[c]).abs()
+        assert (d < 0.5 * view.trajectory[f"sigma_{c}"]).all(), c
+    again = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False,
+                         formation=view.formations)
+    pd.testing.assert_frame_equal(again.trajectory, view.trajectory)
+    with pytest.raises(ValueError, match="formation must be"):
+        measure_shot(m2_shot / "shot.toml", workers=1, progress=False, formation="shot")
+
+
 def test_bad_images_flag_their_station_only(m2_shot, tmp_path):
     shot = _copy(m2_shot, tmp_path)
     (shot / "images" / "st01_top.png").unlink()                       # missing

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from cadra.imaging.wires.fit import _centroids, measure_wires
-from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
+from cadra.imaging.wires.formation import fit_formation
+from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.synthetic.scene import wire_polygon
 from cadra.validation.wire_images import FAC, make_image, true_affine

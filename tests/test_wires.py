@@ -28,7 +28,8 @@ import pytest
 
 from cadra.facility.reference import fit_affine_to_wires
 from cadra.geometry import apply_affine
-from cadra.imaging.wires.fit import WireMeasurement, measure_wires, wire_mask
+from cadra.imaging.wires.fit import WireMeasurement, measure_wires
+from cadra.imaging.wires.mask import wire_mask
 from cadra.validation.wire_images import (
     FAC,
     QUIET,

@@ -55,6 +55,10 @@ def _main(argv: list[str] | None) -> int:
     parser.add_argument("--workers", type=int, default=None,
                         help="processes (default: all cores; 1 = no subprocesses)")
     parser.add_argument("--no-overlays", action="store_true", help="skip the overlay PNGs")
+    parser.add_argument("--formation", choices=("view", "image"), default="view",
+                        help="fit the wires' image formation once per view over the shot's "
+                             "images, each image then held to it unless its score test "
+                             "rejects it (view, the default), or from each image alone (image)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing output directory (atomically, at the end)")
     parser.add_argument("--truth", default=None,
@@ -83,7 +87,7 @@ def _main(argv: list[str] | None) -> int:
         check_model_size(load_shot(args.shot_file))  # a size in the wrong unit: no measuring
         truth = load_truth(args.truth) if args.truth else None  # errors name row, column
         res = measure_shot(args.shot_file, workers=args.workers, progress=not args.quiet,
-                           overlays=not args.no_overlays)
+                           overlays=not args.no_overlays, formation=args.formation)
         write_stage1(res, out, truth=truth, overwrite=args.overwrite)
     except (ValueError, OSError) as exc:
         print(f"cadra1: {exc}", file=sys.stderr)

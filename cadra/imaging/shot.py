@@ -44,6 +44,8 @@ class Stage1Result:
     inputs : the files the measurement read (shot, facility, images): an output folder must
         not be or hold any of them.
     seconds : wall time of the measurement.
+    formations : view name -> the wires' image formation shared by the view's images
+        (:class:`~cadra.imaging.wires.profile.Formation`, px; empty: each image its own).
     """
 
     trajectory: pd.DataFrame
@@ -54,6 +56,7 @@ class Stage1Result:
     inputs: tuple[Path, ...] = ()
     seconds: float = 0.0
     notes: tuple[str, ...] = field(default_factory=tuple)
+    formations: dict = field(default_factory=dict)
 
     @property
     def any_failed(self) -> bool:
@@ -85,8 +88,33 @@ class Stage1Result:
 
 
 def _task(args):
-    station, images, body_spec, overlays = args
-    return measure_station(station, images, body_spec, overlays=overlays)
+    station, images, body_spec, overlays, formations = args
+    return measure_station(station, images, body_spec, overlays=overlays,
+                           formations=formations)
+
+
+#: Images of each view the shot's wire formation is fitted from, spread along the shot.
+FORMATION_IMAGES = 3
+
+
+def shared_formations(tasks: list, body_spec: dict, n_images: int = FORMATION_IMAGES) -> dict:
+    """Each view's wire formation, fitted over ``n_images`` of the shot's images of it spread
+    along the range (:func:`cadra.imaging.station.view_formation`): view name -> formation
+    (a view none of whose images serves is left out; its images fit their own)."""
+    from cadra.imaging.station import view_formation
+
+    out = {}
+    for name in VIEWS:
+        have = [(st.views[name], views[name]) for st, views, *_ in tasks
+                if name in views and name in st.views]
+        if not have:
+            continue
+        pick = np.unique(np.linspace(0, len(have) - 1, min(n_images, len(have)))
+                         .round().astype(int))
+        f = view_formation([have[i] for i in pick], body_spec)
+        if f is not None:
+            out[name] = f
+    return out
 
 
 def quality_rows(results) -> pd.DataFrame:
@@ -214,7 +242,7 @@ def _worker_init(parent_pid: int) -> None:
 def measure_shot(shot: ShotFile | str | os.PathLike,
                  images: Mapping[tuple[int, str], np.ndarray | str | os.PathLike] | None = None,
                  *, facility=None, workers: int | None = None, progress: bool = True,
-                 overlays: bool = True) -> Stage1Result:
+                 overlays: bool = True, formation: str | Mapping = "view") -> Stage1Result:
     """Measure every station of a shot (module doc); nothing is written.
 
     ``shot``: the shot's record or its shot file. ``images``: ``(station, view)`` -> the image
@@ -222,6 +250,11 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
     ``facility``: a :class:`cadra.facility.reference.Facility`, or a facility file or name
     (default: the shot's). ``workers``: processes (default: the available cores; 1 = in this
     process). ``overlays``: draw each image's overlay (PNG bytes in the station results).
+    ``formation``: how the wires' image formation is fitted: ``"view"`` (default) once per
+    view, over :data:`FORMATION_IMAGES` of the shot's images, then held for every image of
+    the view that its score test accepts (:func:`shared_formations`); ``"image"`` from each
+    image alone; or a mapping view name -> formation (e.g. ``result.formations`` of another
+    shot through the same cameras). The result's ``formations`` holds the shared ones.
 
     Bad stations are flagged in the tables, never raised; a bad shot or facility raises
     ``ValueError``/``OSError``.
@@ -259,6 +292,16 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
             views = {v: images[(rec.station, v)] for v in VIEWS if (rec.station, v) in images}
         inputs += [Path(p) for p in views.values() if isinstance(p, str | os.PathLike)]
         tasks.append((facility.station(rec.station), views, dict(shot.model), overlays))
+    if isinstance(formation, Mapping):
+        formations = dict(formation)
+    elif formation == "view":
+        formations = shared_formations(tasks, dict(shot.model))
+    elif formation == "image":
+        formations = {}
+    else:
+        raise ValueError(f"formation must be 'view', 'image' or a mapping view -> formation, "
+                         f"not {formation!r}")
+    tasks = [(*t, formations) for t in tasks]
     results = _run(tasks, workers, f"cadra1 {shot.shot_id}" if progress else None)
     times = {rec.station: rec.time_s for rec in shot.stations}
     results = with_roll_track(results, times)
@@ -270,7 +313,8 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
             "producer": "cadra1 (silhouette least squares, docs/stage1.md)",
             "frame": "facility F: x downrange, y port, z up, origin station 1 (m)"}
     return Stage1Result(station_rows(results, times), quality_rows(results), tuple(results),
-                        shot, meta, tuple(inputs), time.perf_counter() - t0)
+                        shot, meta, tuple(inputs), time.perf_counter() - t0,
+                        formations=formations)
 
 
 def _run(tasks: list, workers: int | None, label: str | None) -> list[StationResult]:
@@ -310,4 +354,5 @@ def _run(tasks: list, workers: int | None, label: str | None) -> list[StationRes
     return results
 
 
-__all__ = ["Stage1Result", "measure_shot", "quality_rows", "with_roll_track"]
+__all__ = ["FORMATION_IMAGES", "Stage1Result", "measure_shot", "quality_rows",
+           "shared_formations", "with_roll_track"]

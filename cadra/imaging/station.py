@@ -176,15 +176,26 @@ class _Attempt:
     warnings: tuple[str, ...] = ()
 
 
+def _model_box(img: np.ndarray, coarse, margin: int = 12) -> np.ndarray:
+    """True on the model's rough bounding box (``coarse``, :func:`locate_model`) plus a
+    margin: the pixels the wires' profiles must not use."""
+    exclude = np.zeros(img.shape, bool)
+    u0, v0, u1, v1 = coarse.bbox
+    exclude[max(v0 - margin, 0):v1 + margin + 1, max(u0 - margin, 0):u1 + margin + 1] = True
+    return exclude
+
+
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
                   coarse=None, final: bool = True, masks: dict | None = None,
-                  roll: float = 0.0, restart: bool = False) -> _Attempt:
+                  roll: float = 0.0, restart: bool = False, formation=None) -> _Attempt:
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
     ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
-    so template, changed much since ``prev``: its edge profile was fitted to mismatched fins)."""
-    from cadra.imaging.wires.fit import measure_wires, wire_mask
+    so template, changed much since ``prev``: its edge profile was fitted to mismatched fins);
+    ``formation``: the view's wire formation shared over the shot (None: this image's own)."""
+    from cadra.imaging.wires.fit import measure_wires
+    from cadra.imaging.wires.mask import wire_mask
 
     masks = {} if masks is None else masks
 
@@ -194,12 +205,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
             coarse = locate_model(img, template, view.optics())
         if not coarse.ok:
             return _Attempt(None, coarse.reason)
-        H, W = img.shape
-        exclude = np.zeros((H, W), bool)
-        u0, v0, u1, v1 = coarse.bbox
-        m = 12
-        exclude[max(v0 - m, 0):v1 + m + 1, max(u0 - m, 0):u1 + m + 1] = True
-        wires = measure_wires(img, view, exclude=exclude)
+        wires = measure_wires(img, view, exclude=_model_box(img, coarse), formation=formation)
         if not wires.ok:
             return _Attempt(None, wires.reason, wires)
         affine = wires.affine
@@ -251,7 +257,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
 
 
 def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: float = 0.0,
-                 settings: FitSettings | None = None) -> ViewResult:
+                 settings: FitSettings | None = None, formation=None) -> ViewResult:
     """One view of one station from its image alone, in the manner of trackpy's ``locate``:
     find the model, fit the wires and the silhouette, and return the view's
     :class:`ViewResult` (pose in the view's plane with its covariance, the wires' affine).
@@ -260,7 +266,9 @@ def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: flo
     facility's :class:`cadra.facility.reference.View`; ``body_spec``: the shot's model table
     (or a body); ``tilt_rad``: the axis' tilt out of this view's plane, which only the other
     view sees (:func:`measure_station` alternates the two views to settle it; here it is
-    given, 0 by default); ``roll_rad``: a finned body's roll for its outline template.
+    given, 0 by default); ``roll_rad``: a finned body's roll for its outline template;
+    ``formation``: the view's wire formation fitted over several images
+    (:func:`view_formation`; None: this image's own).
     """
     import time
 
@@ -280,7 +288,7 @@ def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: flo
             return ViewResult(view.name, name, False, img.reason)
     coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
     att = _measure_view(img, view, body, float(tilt_rad), settings, coarse=coarse, final=True,
-                        roll=float(roll_rad))
+                        roll=float(roll_rad), formation=formation)
     ok = att.fit is not None and att.fit.ok
     return ViewResult(view.name, name, ok, att.reason, att.fit, att.wires, att.affine,
                       float(tilt_rad), att.warnings, time.perf_counter() - t0,
@@ -295,9 +303,53 @@ def _image_name(station_id: int, view: str, source) -> str:
     return f"station {station_id} {view} image (in memory)"
 
 
+def _view_image(view, src, name: str):
+    """A view's image as a float array (or the loader's failure, with its ``reason``)."""
+    if isinstance(src, str | os.PathLike):
+        return load_station_image(src, view.width_px, view.height_px, view.bit_depth)
+    return station_image(src, view.width_px, view.height_px, view.bit_depth, name)
+
+
+def view_formation(sources, body_spec):
+    """One view's wire image formation, fitted over a few of a shot's images of it.
+
+    ``sources``: ``(view, image)`` pairs, the facility's view of each station and its image
+    (an array or a file); ``body_spec``: the shot's model table. Each image's model is
+    located roughly, its wires' clean profiles are taken outside it
+    (:func:`cadra.imaging.wires.fit.wire_profiles`) and all are fitted together
+    (:func:`cadra.imaging.wires.formation.fit_formation`). Returns the
+    :class:`~cadra.imaging.wires.profile.Formation` (``n_images`` the images used), or None
+    when no image gives three wires' profiles or the fit fails: the images then fit their
+    own.
+    """
+    from cadra.imaging.wires.fit import wire_profiles
+    from cadra.imaging.wires.formation import fit_formation
+
+    body = body_spec if hasattr(body_spec, "kind") else _body(body_spec)
+    profiles, n = [], 0
+    for view, src in sources:
+        img = _view_image(view, src, f"station {view.station} {view.name} image")
+        if not isinstance(img, np.ndarray):
+            continue
+        coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
+        if not coarse.ok:
+            continue
+        got = wire_profiles(img, view, exclude=_model_box(img, coarse))
+        if len(got) >= 3:
+            profiles += got
+            n += 1
+    if not n:
+        return None
+    try:
+        formation, _ = fit_formation(profiles)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    return replace(formation, n_images=n)
+
+
 def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os.PathLike],
                     body_spec: dict, settings: FitSettings | None = None, max_rounds: int = 3,
-                    overlays: bool = True) -> StationResult:
+                    overlays: bool = True, formations: Mapping | None = None) -> StationResult:
     """Measure one station from its images (see the module docstring).
 
     ``station``: the station's geometry (:meth:`cadra.facility.reference.Facility.station`);
@@ -305,6 +357,8 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
     or a frame grabber gives it) or an image file's path; ``body_spec``: the shot's model
     table (:func:`cadra.body.spec.body_from_spec`). With ``overlays`` each image's overlay
     (fitted wires and silhouette) comes back as PNG bytes in ``views[name].overlay_png``.
+    ``formations``: view name -> the view's wire formation shared over the shot
+    (:func:`view_formation`); a view without one fits its image's own.
     """
     import time
 
@@ -324,11 +378,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
         if src is None:
             results[name] = ViewResult(name, "", False, "no image listed in the shot file")
             continue
-        if isinstance(src, str | os.PathLike):
-            img = load_station_image(src, view.width_px, view.height_px, view.bit_depth)
-        else:
-            img = station_image(src, view.width_px, view.height_px, view.bit_depth,
-                                image_names[name])
+        img = _view_image(view, src, image_names[name])
         if not isinstance(img, np.ndarray):
             results[name] = ViewResult(name, image_names[name], False, img.reason)
             continue
@@ -362,6 +412,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                     att = _measure_view(
                         img, station.views[name], body, tilts[name], settings, prev,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
+                        formation=(formations or {}).get(name),
                         restart=prev is not None and abs(_wrap_period(view_roll - prev.roll_rad))
                         > ROLL_RESTART_RAD)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot

@@ -40,6 +40,7 @@ class Figure:
 SECTIONS: dict[str, tuple[str, str]] = {
     "bench_cadra1": ("Stage one: accuracy, honesty and speed against the renderer's exact truth",
                      "stage1.md"),
+    "profile_cadra1": ("Stage one: where a shot's time goes", "stage1.md"),
     "validate_wire_sigma": ("Stage one: the wires' affine against its sigma", "stage1.md"),
     "bench_cadra2": ("Stage two: speed against a reference fitter, accuracy and pulls",
                      "fitting.md"),

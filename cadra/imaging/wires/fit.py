@@ -62,19 +62,22 @@ Method (all lengths in pixels unless a name ends in ``_m``):
    blurred-bar model is ~2.7x less noisy than the centroid, but biased by up to +-0.035 px
    with the sub-pixel phase unless the model forms the profile as the image did: blur before
    the pixel integration, the pixel, blur after it (:mod:`cadra.imaging.wires.profile`). The
-   image's formation and each wire's width are fitted from the clean profiles the centroid
-   lines kept; every clean profile's centre is then fitted with it and steps 5-6 run again on
-   those centres (the straightness test allowing the model's ~0.0015 px instead of the
-   centroid's 0.0075 px). The formation's covariance, through each wire's centre
-   sensitivity, is added to the affine's covariance; no phase term is. Sharp wires (fitted
-   total blur < :data:`MIN_MODEL_BLUR_PX`) keep the centroids, and so does an image whose
-   model lines disagree with its centroid lines beyond chance (:data:`MODEL_AGREEMENT_P`: a
-   formation the model cannot describe, e.g. a disk PSF; a warning says so).
+   image formation is fitted from the clean profiles the centroid lines kept: the view's,
+   fitted once over several images of the shot and held (only the wires' widths fitted here,
+   unless a score test says this image is formed otherwise), or this image's own
+   (:mod:`cadra.imaging.wires.formation`). Every clean profile's centre is then fitted with
+   it and steps 5-6 run again on those centres (the straightness test allowing the model's
+   ~0.0015 px instead of the centroid's 0.0075 px). The formation's covariance, through each
+   wire's centre sensitivity, is added to the affine's covariance; no phase term is. Sharp
+   wires (fitted total blur < :data:`MIN_MODEL_BLUR_PX`) keep the centroids, and so does an
+   image whose model lines disagree with its centroid lines beyond chance
+   (:data:`MODEL_AGREEMENT_P`: a formation the model cannot describe, e.g. a disk PSF; a
+   warning says so).
    ``WireMeasurement.formation`` says which (None: centroids).
 
 :func:`measure_wires` is a pure function of plain arrays; its results are frozen dataclasses of
-floats, tuples and numpy arrays (picklable, for a process pool). :func:`wire_mask` marks the
-pixels near the wires for later fits to ignore.
+floats, tuples and numpy arrays (picklable, for a process pool). :func:`wire_profiles` gives
+an image's clean profiles, for a formation fitted over several images.
 """
 
 from __future__ import annotations
@@ -82,14 +85,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 from scipy.stats import chi2
 
 from cadra.facility.reference import View
 from cadra.imaging.wires.affine import corner_sigma_px, formation_cov, solve_affine_gls
+from cadra.imaging.wires.formation import SHARED_P, fit_formation, fit_widths
 from cadra.imaging.wires.phase import line_phases, phase_gain, systematic_cov
-from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres, fit_formation
+from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres
 from cadra.imaging.wires.straightness import (
     BLOCK_SYS_PX,
     MODEL_BLOCK_SYS_PX,
@@ -98,7 +101,7 @@ from cadra.imaging.wires.straightness import (
 )
 from cadra.optics.projection import Projection
 
-__all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_mask"]
+__all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_profiles"]
 
 #: Below this total blur (px) of the wires' fitted formation the profile model is not used
 #: (the centroid and its phase term are): at 0.4 px optics blur a few per cent error in the
@@ -449,53 +452,16 @@ def _gauss_points(f: WireFit) -> np.ndarray:
     return np.array([m - spread * t, m + spread * t])
 
 
-def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
-                  search_px: float = 30.0, step_px: float = 4.0,
-                  half_window: int = 8, profile_model: bool = True) -> WireMeasurement:
-    """Find every wire of ``view`` in ``image`` and solve the image->plane affine.
-
-    Parameters
-    ----------
-    image : float (H, W) in [0, 1], indexed ``image[v, u]``.
-    view : the view (facility reference file) the image belongs to.
-    exclude : optional bool (H, W), True where pixels must not be used (the model's
-        silhouette plus margin).
-    search_px : half-width of the search about each wire's nominal prediction (px).
-    step_px : spacing of the profiles along each wire (px; an integer number of rows or
-        columns).
-    half_window : half-width (samples) of the window each profile's centre is fitted in.
-    profile_model : fit each profile's centre with a model of the image formation
-        (:mod:`cadra.imaging.wires.profile`, fitted per image) instead of the centroid (step 8;
-        False: the centroids and their phase term, ~3x faster, ~3x less accurate).
-
-    Returns
-    -------
-    WireMeasurement
-        Never raises for bad data: a wire not found carries its reason; fewer than three
-        wires found, or wires that cannot determine the map, give ``ok = False`` and a reason.
-
-    Notes
-    -----
-    See the module docstring for the method. About 9 ms for a 1600 x 1200 image (4 wires,
-    ~1300 profiles). Profiles touching ``exclude``, another wire's crossing or the reference
-    mark count in ``n_rejected``.
-    """
-    img = np.asarray(image)
-    if img.ndim != 2:
-        raise ValueError(f"image must be 2-D, got shape {img.shape}")
-    if img.dtype not in (np.float32, np.float64):
-        img = img.astype(np.float32)
-    H, W = img.shape
-    if exclude is not None:
-        exclude = np.asarray(exclude, bool)
-        if exclude.shape != img.shape:
-            raise ValueError(f"exclude has shape {exclude.shape}, image {img.shape}")
+def _centroid_pass(img: np.ndarray, view: View, exclude: np.ndarray | None, search_px: float,
+                   step_px: float, half_window: int, collect: bool):
+    """Steps 1-6 for every wire of ``view``: the centroid lines (``fits``, one per wire) and,
+    if ``collect``, each found wire's clean profiles (wire index -> :class:`_Profiles`)."""
     segs = view.wire_lines_px()
     mark = view.reference_mark
     mark_r = mark.arm_px + MARK_CLEARANCE_PX
 
     fits: list = [None] * len(view.wires)
-    jobs = []
+    collected = {}
     for i, (w, seg) in enumerate(zip(view.wires, segs, strict=True)):
         if seg is None:
             fits[i] = _not_found(w.name, "its predicted path misses the image")
@@ -518,43 +484,125 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
             out |= (d[:, ax] < mark_r + search) & (d[:, 1 - ax] < mark_r)
             return out
 
-        jobs.append((i, w.name, seg, 0.5 * w.diameter_m / view.scale_m_per_px, blocked))
-    collected = {}
-    for i, name, seg, half, blocked in jobs:
-        got = [] if profile_model else None
-        fits[i] = _measure_one(img, name, seg, half, blocked, exclude, search_px, step_px,
-                               half_window, collect=got)
+        got = [] if collect else None
+        fits[i] = _measure_one(img, w.name, seg, 0.5 * w.diameter_m / view.scale_m_per_px,
+                               blocked, exclude, search_px, step_px, half_window, collect=got)
         if got:
             collected[i] = got[0]
-    if profile_model and collected:
-        # the formation from the profiles the centroid lines kept; then every clean
-        # profile's centre with it, and the lines again from those
-        try:
-            formation, hs = fit_formation([WireProfiles(
-                g.wp.P[g.kept], g.wp.s0[g.kept], g.wp.c0[g.kept], g.wp.h, g.wp.t, g.wp.cos_t)
-                for g in collected.values()])
-        except (ValueError, np.linalg.LinAlgError):
-            formation = None
-        if formation is not None and math.hypot(formation.sigma_c,
-                                                formation.sigma_d) < MIN_MODEL_BLUR_PX:
-            formation = None   # sharp wires: the centres hang on the exact shape (below)
+    return fits, collected
+
+
+def _checked_image(image, exclude):
+    img = np.asarray(image)
+    if img.ndim != 2:
+        raise ValueError(f"image must be 2-D, got shape {img.shape}")
+    if img.dtype not in (np.float32, np.float64):
+        img = img.astype(np.float32)
+    if exclude is not None:
+        exclude = np.asarray(exclude, bool)
+        if exclude.shape != img.shape:
+            raise ValueError(f"exclude has shape {exclude.shape}, image {img.shape}")
+    return img, exclude
+
+
+def _kept(g: _Profiles) -> WireProfiles:
+    """The profiles of a wire its centroid line kept (the formation is fitted from these)."""
+    return WireProfiles(g.wp.P[g.kept], g.wp.s0[g.kept], g.wp.c0[g.kept], g.wp.h, g.wp.t,
+                        g.wp.cos_t)
+
+
+def wire_profiles(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
+                  search_px: float = 30.0, step_px: float = 4.0,
+                  half_window: int = 8) -> list[WireProfiles]:
+    """The clean profiles of each wire of ``view`` found in ``image`` (the centroid lines'
+    kept profiles; arguments as :func:`measure_wires`): what the image formation is fitted
+    from (:func:`cadra.imaging.wires.formation.fit_formation`, over one image or several)."""
+    img, exclude = _checked_image(image, exclude)
+    _, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window, True)
+    return [_kept(g) for g in collected.values()]
+
+
+def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
+                  search_px: float = 30.0, step_px: float = 4.0,
+                  half_window: int = 8, profile_model: bool = True,
+                  formation: Formation | None = None) -> WireMeasurement:
+    """Find every wire of ``view`` in ``image`` and solve the image->plane affine.
+
+    Parameters
+    ----------
+    image : float (H, W) in [0, 1], indexed ``image[v, u]``.
+    view : the view (facility reference file) the image belongs to.
+    exclude : optional bool (H, W), True where pixels must not be used (the model's
+        silhouette plus margin).
+    search_px : half-width of the search about each wire's nominal prediction (px).
+    step_px : spacing of the profiles along each wire (px; an integer number of rows or
+        columns).
+    half_window : half-width (samples) of the window each profile's centre is fitted in.
+    profile_model : fit each profile's centre with a model of the image formation
+        (:mod:`cadra.imaging.wires.profile`) instead of the centroid (step 8; False: the
+        centroids and their phase term, ~3x faster, ~3x less accurate).
+    formation : the view's image formation fitted over several of the shot's images
+        (:func:`cadra.imaging.wires.formation.fit_formation`); this image then fits only its
+        wires' widths with it held, unless its score test rejects it
+        (:func:`~cadra.imaging.wires.formation.fit_widths`; the reason says so). None: the
+        formation is fitted from this image alone.
+
+    Returns
+    -------
+    WireMeasurement
+        Never raises for bad data: a wire not found carries its reason; fewer than three
+        wires found, or wires that cannot determine the map, give ``ok = False`` and a reason.
+
+    Notes
+    -----
+    See the module docstring for the method. Profiles touching ``exclude``, another wire's
+    crossing or the reference mark count in ``n_rejected``.
+    """
+    img, exclude = _checked_image(image, exclude)
+    fits, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window,
+                                     profile_model)
+    if not (profile_model and collected):
+        return _solve_affine(view, fits)
+    # the formation from the profiles the centroid lines kept (or the view's, held); then
+    # every clean profile's centre with it, and the lines again from those
+    wps = [_kept(g) for g in collected.values()]
+    own, notes = formation is None, []
+    try:
         if formation is not None:
-            model = list(fits)
-            for k, (i, g) in enumerate(collected.items()):
-                c = fit_centres(g.wp, hs[k], formation)
-                model[i], _ = _line_from_centres(fits[i].name, c, g.fixed, g.ax,
-                                                 np.isfinite(c), step_px, g.n_inside,
-                                                 MODEL_BLOCK_SYS_PX)
-            sens = {i: formation.sens[k] for k, i in enumerate(collected)}
-            centroid = _solve_affine(view, fits)
-            t2, n_lines = _disagreement(model, centroid.wires)
-            if t2 <= chi2.ppf(1.0 - MODEL_AGREEMENT_P, max(n_lines, 1)):
-                return _solve_affine(view, model, formation, sens)
-            # the formation does not describe these wires (a PSF far from Gaussian?)
-            note = (f"wire profile model disagrees with the wires' centroids (chi2 {t2:.0f} "
-                    f"over {n_lines} lines): centroids used")
-            return replace(centroid, reason="; ".join(x for x in (centroid.reason, note) if x))
-    return _solve_affine(view, fits)
+            if _sharp(formation):
+                return _solve_affine(view, fits)
+            formation, hs, score, p = fit_widths(wps, formation)
+            if not p >= SHARED_P:
+                notes.append(f"the wires disagree with the view's shared image formation "
+                             f"(score {score:.0f}, p = {p:.1g}): this image's own fitted")
+                own = True
+        if own:
+            formation, hs = fit_formation(wps)
+    except (ValueError, np.linalg.LinAlgError):
+        return _solve_affine(view, fits)
+    if _sharp(formation):
+        return _solve_affine(view, fits)   # sharp wires: the centres hang on the exact shape
+    model = list(fits)
+    for k, (i, g) in enumerate(collected.items()):
+        c = fit_centres(g.wp, hs[k], formation)
+        model[i], _ = _line_from_centres(fits[i].name, c, g.fixed, g.ax, np.isfinite(c),
+                                         step_px, g.n_inside, MODEL_BLOCK_SYS_PX)
+    sens = {i: formation.sens[k] for k, i in enumerate(collected)}
+    centroid = _solve_affine(view, fits)
+    t2, n_lines = _disagreement(model, centroid.wires)
+    if t2 <= chi2.ppf(1.0 - MODEL_AGREEMENT_P, max(n_lines, 1)):
+        out = _solve_affine(view, model, formation, sens)
+    else:   # the formation does not describe these wires (a PSF far from Gaussian?)
+        notes.append(f"wire profile model disagrees with the wires' centroids (chi2 {t2:.0f} "
+                     f"over {n_lines} lines): centroids used")
+        out = centroid
+    reason = "; ".join(x for x in (out.reason, *notes) if x)
+    return replace(out, reason=reason) if reason != out.reason else out
+
+
+def _sharp(formation: Formation) -> bool:
+    """Sharp wires (total blur below :data:`MIN_MODEL_BLUR_PX`) are left to the centroid."""
+    return math.hypot(formation.sigma_c, formation.sigma_d) < MIN_MODEL_BLUR_PX
 
 
 #: The profile model's lines are used unless their offsets from the centroid lines, in the
@@ -643,32 +691,3 @@ def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None =
     rms_m = float(np.sqrt(np.mean(res ** 2)))
     return WireMeasurement(True, reason, np.array(M, float), cov, tuple(out), rms_m, rms_m / px,
                            n_found, view.optics(M), phase_gain=gain, formation=formation)
-
-
-def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
-              half_width_px: float = 4.0) -> np.ndarray:
-    """True on pixels within ``half_width_px`` of any wire's image edge.
-
-    Parameters
-    ----------
-    view : the view whose wires to draw.
-    affine : image->plane map (2x3) to place them with (e.g. ``WireMeasurement.affine``);
-        None for the nominal one.
-    shape : (H, W) of the mask.
-    half_width_px : distance (px) beyond each wire's edge (its half-diameter) to mark.
-    """
-    H, W = shape
-    mask = np.zeros((H, W), np.uint8)
-    for seg, w in zip(view.wire_lines_px(affine=affine, margin_px=10.0), view.wires,
-                      strict=True):
-        if seg is None:
-            continue
-        half = half_width_px + 0.5 * w.diameter_m / view.scale_m_per_px
-        p0, p1 = np.array(seg[0]), np.array(seg[1])
-        t = (p1 - p0) / math.hypot(*(p1 - p0))
-        n = np.array([-t[1], t[0]]) * half
-        poly = np.array([p0 + n, p1 + n, p1 - n, p0 - n])
-        # sub-pixel vertices (4 fractional bits); pixel centres inside are marked
-        cv2.fillConvexPoly(mask, np.rint(poly * 16).astype(np.int32), 1, cv2.LINE_8, 4)
-    return mask.astype(bool)
-

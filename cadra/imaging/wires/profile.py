@@ -25,12 +25,11 @@ formed, so the sampling is modelled rather than averaged:
 
 The order matters: the same total blur applied before or after the pixel integration gives
 profiles whose centres differ by up to ~0.035 px at some phases. The image formation
-(``sigma_c``, ``sigma_d``, ``fringe_w``) and each wire's half-width are fitted per image from
-:data:`FORMATION_PROFILES` profiles per found wire (:func:`fit_formation`: the best of a few
-starts in each order, refined by Levenberg-Marquardt on the blurs' variances), then every
-profile's centre is fitted with them (:func:`fit_centres`). The formation's covariance and
-each wire's centre shift per unit of each parameter come with it, so the caller can carry the
-formation's uncertainty into the lines (:func:`cadra.imaging.wires.affine.formation_cov`).
+(``sigma_c``, ``sigma_d``, ``fringe_w``) and each wire's half-width are fitted from the
+profiles (:mod:`cadra.imaging.wires.formation`: once per view of a shot, or per image), then
+every profile's centre is fitted with them (:func:`fit_centres`). The formation's covariance
+and each wire's centre shift per unit of each parameter come with it, so the caller can carry
+the formation's uncertainty into the lines (:func:`cadra.imaging.wires.affine.formation_cov`).
 
 Measured (``tests/test_wire_profile.py``): on the renderer's own wires (coverage, then a
 discrete PSF) and on wires formed in the physical order (PSF, then the pixel), noise-free,
@@ -48,15 +47,13 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-__all__ = ["Formation", "WireProfiles", "fit_centres", "fit_formation"]
+__all__ = ["Formation", "WireProfiles", "fit_centres"]
 
 _INV_SQRT2PI = 1.0 / math.sqrt(2.0 * math.pi)
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
 #: Bounds of the formation's blurs (px).
 SIGMA_MAX = 4.0
 FRINGE_W_MIN = 0.05
-#: Profiles per wire used to fit the formation (evenly picked; all are used for the centres).
-FORMATION_PROFILES = 30
 #: Most Gauss-Newton iterations of each profile's centre (from the centroid, ~0.05 px off;
 #: a sharp wire's profile needs up to ~5; each profile stops when its step is < 1e-7 px).
 CENTRE_ITERATIONS = 8
@@ -70,7 +67,10 @@ class Formation:
     after it (discrete, on the pixel grid), the fringe's width; the fit's rms residual
     (fraction of the background); the covariance ``cov`` of ``(sigma_c^2, sigma_d^2,
     fringe_w, h_1..h_m)`` and ``sens`` (m, 3 + m), each wire's mean centre shift (px along
-    its profiles) per unit of each (None for a formation not fitted)."""
+    its profiles) per unit of each (None for a formation not fitted); ``shared``: the three
+    formation values are the view's, fitted over several images of a shot
+    (:mod:`cadra.imaging.wires.formation`), not this image's own; ``n_images``: how many
+    images the three were fitted from."""
 
     sigma_c: float
     sigma_d: float
@@ -78,6 +78,8 @@ class Formation:
     rms: float = math.nan
     cov: np.ndarray | None = None
     sens: np.ndarray | None = None
+    shared: bool = False
+    n_images: int = 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -343,124 +345,6 @@ def _fit(rows: _Rows, h: np.ndarray, f: Formation, n_iter: int = CENTRE_ITERATIO
 def _linear_resid(rows: _Rows, c: np.ndarray, h: np.ndarray, f: Formation) -> np.ndarray:
     """Residuals (n, k) of each profile's linear least squares at fixed centres ``c``."""
     return _fit(replace(rows, c0=c), h, f, 0)[1]
-
-
-#: Starting formations tried (sigma_c, sigma_d, fringe_w), before and after the pixel; the
-#: best of each order is refined.
-_STARTS = [(s, 0.0, 0.5) for s in (0.4, 0.7, 1.0, 1.5, 2.2)] + \
-          [(0.0, s, 0.5) for s in (0.4, 0.7, 1.0, 1.5, 2.2)]
-#: Levenberg-Marquardt rounds of the formation (each: centres at the current formation,
-#: then one damped step of the formation and the half-widths with the centres held).
-FORMATION_ROUNDS = 5
-
-
-def fit_formation(wires: list[WireProfiles]) -> tuple[Formation, list[float]]:
-    """The image's formation and each wire's half-width along its profiles, by least squares
-    over up to :data:`FORMATION_PROFILES` profiles per wire.
-
-    The centres and the linear terms are profile-wise; the formation and half-widths are
-    shared. They are fitted in alternation: every profile's centre at the current formation,
-    then one Levenberg-Marquardt step of ``(sigma_c, sigma_d, fringe_w, h_1..h_m)`` with the
-    centres held (the centres are antisymmetric in the profile, the rest symmetric, so the
-    two hardly couple). The start is the best of :data:`_STARTS` in each order (before or
-    after the pixel), each refined; the better wins. Raises ``ValueError`` if the profiles
-    give no fit.
-    """
-    picks = [np.unique(np.linspace(0, len(w.P) - 1, min(FORMATION_PROFILES, len(w.P)))
-                       .astype(int)) for w in wires]
-    rows = _Rows.of(wires, picks)
-    scale = float(np.sum(rows.P) / max(np.sum(rows.m), 1.0))
-    if not np.isfinite(scale) or scale <= 0:
-        raise ValueError("wire profiles have no positive background")
-    hs0 = np.array([w.h for w in wires], float)
-    # parameters: the two blurs' variances (smooth at 0, where a sigma's derivative
-    # vanishes), the fringe width, the half-widths
-    lo = np.array([0.0, 0.0, FRINGE_W_MIN, *(0.5 * hs0)])
-    hi = np.array([SIGMA_MAX ** 2, SIGMA_MAX ** 2, SIGMA_MAX, *(2.0 * hs0)])
-
-    def form(q):
-        return Formation(math.sqrt(q[0]), math.sqrt(q[1]), q[2])
-
-    def centres(q, start=None):
-        """Every row's centre at ``q``, from the centroids or from ``start`` (converged
-        centres of a nearby formation: a few steps each)."""
-        rs = rows if start is None else replace(rows, c0=start)
-        return _fit(rs, q[3:][rows.wire], form(q), CENTRE_ITERATIONS, False)[0]
-
-    def resid(q, c):
-        return _linear_resid(rows, c, q[3:][rows.wire], form(q)).ravel() / scale
-
-    def refine(cost, q, c):
-        lam = 1e-3
-        for _ in range(FORMATION_ROUNDS):
-            r0 = resid(q, c)
-            J = np.empty((len(r0), len(q)))
-            for j in range(len(q)):
-                dq = q.copy()
-                dq[j] = q[j] + 1e-4 if q[j] + 1e-4 <= hi[j] else q[j] - 1e-4
-                J[:, j] = (resid(dq, c) - r0) / (dq[j] - q[j])
-            JtJ, Jtr = J.T @ J, J.T @ r0
-            improved = False
-            for _ in range(6):
-                step = np.linalg.solve(JtJ + lam * np.diag(np.diag(JtJ) + 1e-12), -Jtr)
-                qn = np.clip(q + step, lo, hi)
-                cn_ = centres(qn, c)
-                cn = float(np.sum(resid(qn, cn_) ** 2))
-                if np.isfinite(cn) and cn <= cost:
-                    gain = (cost - cn) / max(cost, 1e-300)
-                    q, c, cost, lam = qn, cn_, cn, max(lam / 10.0, 1e-6)
-                    improved = True
-                    break
-                lam *= 10.0
-            if not improved or gain < 1e-4 or np.max(np.abs(step)) < 1e-4:
-                break
-        return cost, q, c
-
-    with np.errstate(all="ignore"):
-        best = {}
-        sub = _Rows.of(wires, [p[::3] for p in picks])   # the starts on a third of the rows
-        for start in _STARTS:
-            before = start[0] > 0.0
-            q = np.array([start[0] ** 2, start[1] ** 2, start[2], *hs0])
-            c = _fit(sub, q[3:][sub.wire], form(q), CENTRE_ITERATIONS, False)[0]
-            cost = float(np.sum(_linear_resid(sub, c, q[3:][sub.wire], form(q)) ** 2))
-            if np.isfinite(cost) and (before not in best or cost < best[before][0]):
-                best[before] = (cost, q)
-        if not best:
-            raise ValueError("no wire formation fits the profiles")
-        # an order whose best start fits 1.2x worse than the other's is not refined
-        low = min(b[0] for b in best.values())
-        runs = []
-        for cost_sub, q in best.values():
-            if cost_sub <= 1.2 * low:
-                c = centres(q)
-                runs.append(refine(float(np.sum(resid(q, c) ** 2)), q, c))
-        cost, q, _ = min(runs, key=lambda t: t[0])
-        cov, sens = _uncertainty(q, cost, rows, len(wires), centres, resid, hi)
-    rms = math.sqrt(cost / max(float(np.sum(rows.m)), 1.0))
-    return (Formation(math.sqrt(q[0]), math.sqrt(q[1]), float(q[2]), rms, cov, sens),
-            [float(v) for v in q[3:]])
-
-
-def _uncertainty(q, cost, rows: _Rows, n_wires: int, centres, resid, hi):
-    """The formation's covariance (Gauss-Newton, the residuals' own variance) and each wire's
-    mean centre shift per unit of each parameter (the centres refitted)."""
-    c = centres(q)
-    r0 = resid(q, c)
-    p = len(q)
-    J = np.empty((len(r0), p))
-    S = np.zeros((n_wires, p))
-    for j in range(p):
-        dq = q.copy()
-        dq[j] = q[j] + 1e-3 if q[j] + 1e-3 <= hi[j] else q[j] - 1e-3
-        step = dq[j] - q[j]
-        J[:, j] = (resid(dq, c) - r0) / step
-        dc = (centres(dq, c) - c) / step
-        for w in range(n_wires):
-            S[w, j] = float(np.nanmean(dc[rows.wire == w]))
-    dof = max(float(np.sum(rows.m)) - 6.0 * len(rows.P) - p, 1.0)
-    cov = np.linalg.pinv(J.T @ J) * (cost / dof)
-    return cov, S
 
 
 def fit_centres(wp: WireProfiles, h: float, f: Formation) -> np.ndarray:
