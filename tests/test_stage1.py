@@ -71,6 +71,8 @@ def test_the_wires_formation_is_fitted_once_per_view(m2_shot):
     assert all(f.n_images == 3 and f.sigma_d > 0.5 for f in view.formations.values())
     assert all(v.wires.formation.shared for r in view.stations for v in r.views.values())
     assert not own.formations
+    assert (view.quality["wire_formation_from"] == "view (3 images)").all()
+    assert (own.quality["wire_formation_from"] == "image").all()
     assert not any(v.wires.formation.shared for r in own.stations for v in r.views.values())
     for c in ("x_m", "y_m", "z_m", "theta_deg", "psi_deg"):
         d = (view.trajectory[c] - own.trajectory[c]).abs()

@@ -142,6 +142,9 @@ def quality_rows(results) -> pd.DataFrame:
                 fm = w.formation   # the wires' image formation (profile model), or centroids
                 blur = (math.nan,) * 3 if fm is None else (fm.sigma_c, fm.sigma_d, fm.fringe_w)
                 row.update(wire_centres="centroid" if fm is None else "profile model",
+                           wire_formation_from=("" if fm is None else
+                                                f"view ({fm.n_images} images)" if fm.shared
+                                                else "image"),
                            **dict(zip(("wire_blur_before_px", "wire_blur_after_px",
                                        "wire_fringe_width_px"), blur, strict=True)))
             f = v.fit
