@@ -14,14 +14,20 @@ running process. ``<base>`` is, in order: ``$CADRA_CACHE_DIR``, ``$NUMBA_CACHE_D
 own setting, kept as the base), ``$XDG_CACHE_HOME/cadra/numba``, ``~/.cache/cadra/numba``;
 the first that can be written to is used, else a per-user folder in the temporary directory.
 Nothing is written inside the package, so a read-only install works; numba writes its cache
-files by rename, so concurrent processes are safe. Folders of other keys unused for
-:data:`PRUNE_AFTER_DAYS` are removed (best effort: a folder in use is touched at each start).
+files by rename, so concurrent processes are safe.
+
+CADRA deletes only what it provably made: each key folder it creates holds a marker file
+(:data:`MARKER`), and a folder of another key is removed only if it is named like a key, holds
+that marker and has been unused for :data:`PRUNE_AFTER_DAYS` (best effort: a folder in use is
+touched at each start). Anything else under the base -- numba's caches of other projects in a
+shared ``$NUMBA_CACHE_DIR``, a user's own folders -- is never touched.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -31,6 +37,10 @@ from pathlib import Path
 _ROOT = Path(__file__).resolve().parent
 #: other keys' folders untouched this long are pruned
 PRUNE_AFTER_DAYS = 30
+#: the file that marks a key folder as CADRA's (only marked folders are ever pruned)
+MARKER = ".cadra-numba-cache"
+#: a key folder's name: :func:`sources_key`'s 20 hex digits
+_KEY_NAME = re.compile(r"[0-9a-f]{20}")
 
 
 def sources_key(root: Path = _ROOT) -> str:
@@ -78,11 +88,17 @@ def _bases(environ, key: str) -> list[Path]:
     return out
 
 
+def _ours(folder: Path) -> bool:
+    """A key folder CADRA made: named like a key, a real folder, holding the marker."""
+    return (bool(_KEY_NAME.fullmatch(folder.name)) and folder.is_dir()
+            and not folder.is_symlink() and (folder / MARKER).is_file())
+
+
 def _prune(base: Path, keep: str) -> None:
     cutoff = time.time() - PRUNE_AFTER_DAYS * 86400.0
     try:
         for child in base.iterdir():
-            if child.name != keep and child.is_dir() and child.stat().st_mtime < cutoff:
+            if child.name != keep and _ours(child) and child.stat().st_mtime < cutoff:
                 shutil.rmtree(child, ignore_errors=True)
     except OSError:
         pass
@@ -97,7 +113,8 @@ def cache_folder(environ=None, root: Path = _ROOT) -> Path | None:
         folder = base / key
         if _writable(folder):
             try:
-                os.utime(folder)          # in use: not pruned by another build's start
+                (folder / MARKER).touch()   # CADRA's folder (the only kind ever pruned)
+                os.utime(folder)            # in use: not pruned by another build's start
             except OSError:
                 pass
             _prune(base, key)

@@ -8,7 +8,9 @@ system. Existing outputs are refused unless ``overwrite=True``.
 Inputs are never destroyed: :func:`check_output_dir` is the one guard every command runs
 before it writes; it refuses (:class:`UnsafeOutputError`) an output folder that is, or holds,
 one of the command's inputs, the current working folder or one of its parents, or an
-existing file — links and ``..`` resolved first.
+existing file — links and ``..`` resolved first. Whatever the inputs named, an existing
+folder holding a file CADRA keeps for good (:data:`NEVER_REPLACED`: a facility's station
+history) is never an output, so no call, from the command line or Python, replaces it.
 
 Temporary siblings are named ``.NAME.cadra-PID@HOST-XXXXXXXX.tmp`` (and ``.old`` for the
 previous output while it is swapped out), so a run killed before its cleanup (SIGKILL, power
@@ -33,6 +35,21 @@ from pathlib import Path
 
 class UnsafeOutputError(ValueError):
     """An output path that would destroy an input, the working folder or a file."""
+
+
+#: names of files CADRA keeps for good (a facility's station history, appended to under a
+#: lock and never rewritten): a folder holding one, at any depth, is never an output
+NEVER_REPLACED = frozenset({"bias_history.jsonl"})
+
+
+def _kept_file_in(folder: Path) -> Path | None:
+    """The first :data:`NEVER_REPLACED` file at any depth of ``folder`` (links not
+    followed), or None."""
+    for here, _dirs, files in os.walk(folder):
+        for name in files:
+            if name in NEVER_REPLACED:
+                return Path(here) / name
+    return None
 
 
 def _read_umask() -> int:
@@ -144,6 +161,8 @@ def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]
     file. Links and ``..`` are resolved first (:meth:`pathlib.Path.resolve`), so another
     spelling of the same folder is caught; an input reached through a link counts under both
     the link's folder and the target's. A new output folder *inside* an input folder is fine.
+    An existing folder that holds a :data:`NEVER_REPLACED` file (a station history) at any
+    depth is refused whatever the inputs.
 
     Parameters
     ----------
@@ -175,6 +194,10 @@ def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]
     if out_r.exists() and not out_r.is_dir():
         raise UnsafeOutputError(f"output {shown} is an existing file, not a folder; choose "
                                 "a new folder")
+    kept = _kept_file_in(out_r) if out_r.is_dir() else None
+    if kept is not None:
+        raise UnsafeOutputError(f"output {shown} holds {kept}, a station history CADRA never "
+                                "replaces; choose a new folder")
     return out_r
 
 
@@ -274,5 +297,5 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
         raise
 
 
-__all__ = ["UnsafeOutputError", "atomic_output_dir", "atomic_write_bytes", "atomic_write_text",
-           "check_output_dir", "clean_stale_temps", "stale_temps"]
+__all__ = ["NEVER_REPLACED", "UnsafeOutputError", "atomic_output_dir", "atomic_write_bytes",
+           "atomic_write_text", "check_output_dir", "clean_stale_temps", "stale_temps"]

@@ -473,3 +473,55 @@ def test_outputs_get_the_mode_of_a_plain_open(tmp_path, monkeypatch):
         os.umask(mask)
     assert written.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777 == 0o640
     assert (tmp_path / "d").stat().st_mode & 0o777 == 0o750
+
+
+# -- the station history: never replaced by an output, whatever root it comes from ---------
+
+def test_an_output_never_replaces_the_station_history(work, capsys, monkeypatch, tmp_path):
+    """Calibrate once (entry 1 recorded), then aim outputs at the history's folder and its
+    parents, with the root given, from the environment and not yet created: every one is
+    refused before anything is written, and the history is byte for byte what it was."""
+    from cadra.calibration.history import history_path
+
+    root = tmp_path / "root"
+    sphere = str(work / "sphere_stage1")
+    assert cadra2(["calibrate", sphere, "-o", str(tmp_path / "cal1"), "--stations-root",
+                   str(root), "-q"]) == 0
+    hist = history_path(root, "hffaf")
+    kept = hist.read_bytes()
+    assert kept.count(b"\n") == 1
+    capsys.readouterr()
+    for out in (hist.parent, root / "stations"):
+        for extra in (["--stations-root", str(root)], []):
+            monkeypatch.setenv("CADRA_STATIONS_ROOT", str(root))
+            _refused(cadra2, ["calibrate", sphere, "-o", str(out), *extra, "--overwrite"],
+                     "output", capsys, work, 1)
+            assert hist.read_bytes() == kept
+        _refused(cadra2, ["fit", str(work / "m2_stage1"), "--model", "m2_m070",
+                          "--bias-table", "current", "-o", str(out), "--overwrite"],
+                 "output", capsys, work, 1)
+        assert hist.read_bytes() == kept
+    # a first calibration aimed at the folder its history is about to be created in
+    fresh = tmp_path / "fresh"
+    _refused(cadra2, ["calibrate", sphere, "-o", str(fresh / "stations" / "hffaf"),
+                      "--stations-root", str(fresh)], "holds the input", capsys, work, 1)
+    assert not (fresh / "stations").exists()
+
+
+def test_no_library_call_replaces_a_station_history(tmp_path):
+    """The guard is in the writer itself: a folder holding a station history at any depth
+    is never an output, with or without overwrite, whatever inputs were named."""
+    from cadra.atomic import NEVER_REPLACED
+    from cadra.calibration.history import HISTORY_FILENAME
+
+    assert HISTORY_FILENAME in NEVER_REPLACED
+    deep = tmp_path / "mine" / "stations" / "hffaf"
+    deep.mkdir(parents=True)
+    (deep / HISTORY_FILENAME).write_text("{}\n")
+    for folder in (tmp_path / "mine", deep):
+        with pytest.raises(UnsafeOutputError, match="station history"):
+            check_output_dir(folder)
+        with pytest.raises(UnsafeOutputError, match="station history"):
+            with atomic_output_dir(folder, overwrite=True) as tmp:
+                (tmp / "report.md").write_text("x")
+    assert (deep / HISTORY_FILENAME).read_text() == "{}\n"

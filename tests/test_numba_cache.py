@@ -53,16 +53,27 @@ def test_base_order_fallback_and_inherited_folder(tmp_path):
     assert nc.cache_folder(env, root) == first / key
 
 
-def test_other_keys_pruned_only_when_stale(tmp_path):
+def test_other_keys_pruned_only_when_stale_and_cadra_s(tmp_path):
+    """Only a stale folder CADRA provably made (named like a key, holding the marker) is
+    removed; a user's folder, another project's numba cache or an unmarked key-named folder
+    under the same base stays, however old."""
     root = _tree(tmp_path)
     base = tmp_path / "base"
-    old, recent = base / "old_key", base / "recent_key"
-    old.mkdir(parents=True)
-    recent.mkdir()
+    old, recent = base / ("a" * 20), base / ("b" * 20)
+    unmarked = base / ("c" * 20)
+    thesis = base / "thesis"
+    for d in (old, recent, unmarked, thesis):
+        d.mkdir(parents=True)
+    for d in (old, recent):
+        (d / nc.MARKER).touch()
+    (thesis / "chapter1.tex").write_text("precious")
     t_old = 1e9                                                    # 2001
-    os.utime(old, (t_old, t_old))
-    nc.cache_folder({"CADRA_CACHE_DIR": str(base)}, root)
+    for d in (old, unmarked, thesis):
+        os.utime(d, (t_old, t_old))
+    folder = nc.cache_folder({"CADRA_CACHE_DIR": str(base)}, root)
+    assert (folder / nc.MARKER).is_file()
     assert not old.exists() and recent.exists()
+    assert unmarked.exists() and (thesis / "chapter1.tex").read_text() == "precious"
 
 
 def test_fresh_process_caches_outside_the_package(tmp_path):

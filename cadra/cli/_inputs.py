@@ -113,8 +113,10 @@ def input_paths(args) -> list[Path]:
 
     paths: list[Path] = []
     readable = (ValueError, KeyError, OSError)
+    facilities: list[str] = []
 
     def facility(name: str) -> None:
+        facilities.append(name)
         with suppress(*readable):
             paths.append(Path(resolve_facility_path(name)))
 
@@ -144,12 +146,30 @@ def input_paths(args) -> list[Path]:
         value = getattr(args, name, None)
         if value and Path(value).exists():
             paths.append(Path(value))
-    if args.command == "calibrate" or getattr(args, "stations_root", None):
-        from cadra.calibration.history import stations_root
+    from cadra.calibration.bias_table import CURRENT
 
-        with suppress(*readable):  # the station history (calibrate, fit --bias-table)
-            paths.append(stations_root(getattr(args, "stations_root", None)) / "stations")
+    if (args.command == "calibrate" or getattr(args, "bias_table", None) == CURRENT
+            or getattr(args, "stations_root", None)):
+        paths += _history_paths(getattr(args, "stations_root", None), facilities)
     return paths
+
+
+def _history_paths(root, facilities) -> list[Path]:
+    """The station history a command may read or append to, wherever its root comes from
+    (``--stations-root``, ``$CADRA_STATIONS_ROOT`` or the default): the ``stations/`` folder,
+    every facility's history file in it, and the history file of each facility the shots
+    name, existing or not (a first calibration creates it, so no output may be its folder)."""
+    from cadra.calibration.history import history_path, stations_root
+
+    out: list[Path] = []
+    with suppress(ValueError, KeyError, OSError):
+        base = stations_root(root) / "stations"
+        out.append(base)
+        out += sorted(base.glob("*/bias_history.jsonl"))
+        for name in facilities:
+            with suppress(ValueError):
+                out.append(history_path(root, name))
+    return out
 
 
 __all__ = ["REFUSED", "Command", "add_data_options", "add_start_option", "input_paths", "model_of",
