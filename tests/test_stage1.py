@@ -192,3 +192,52 @@ def test_truth_comparison_in_the_report(m2_shot, tmp_path):
         assert (np.abs(cmp[f"{name}_error_sigma"]) < 6).all()
     report = (out / "report.md").read_text(encoding="utf-8")
     assert "## Measured minus truth" in report and "| theta | 3 |" in report
+
+
+def _png_header_only(width: int, height: int, rows: int = 4) -> bytes:
+    """A small grey 8-bit PNG whose header claims ``width`` x ``height`` px (a few rows of
+    data follow: decoding it would allocate the whole claimed image first)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    idat = zlib.compress(b"\x00" * (rows * (width + 1)))
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat)
+            + chunk(b"IEND", b""))
+
+
+def test_an_image_whose_header_lies_is_refused_undecoded(m2_shot, tmp_path):
+    """Headers claiming 100000 x 100000 px (a decoder bomb) and 4000 x 3000 px: refused from
+    the header, the station flagged, the shot measured on two workers to the end (a worker
+    that raised used to leave the pool deadlocked while terminating), --check names both."""
+    import subprocess
+    import sys
+
+    from cadra.io.images import load_station_image
+
+    shot = _copy(m2_shot, tmp_path)
+    (shot / "images" / "st01_top.png").write_bytes(_png_header_only(100_000, 100_000))
+    (shot / "images" / "st02_side.png").write_bytes(_png_header_only(4000, 3000))
+    bomb = load_station_image(shot / "images" / "st01_top.png", 1600, 1200, 8)
+    assert not bomb and "header claims more than" in bomb.reason
+    big = load_station_image(shot / "images" / "st02_side.png", 1600, 1200, 8)
+    assert not big and "4000x3000 px" in big.reason and "not decoded" in big.reason
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "cadra.cli.cadra1", str(shot / "shot.toml"),
+                          "-o", str(out), "-q", "--workers", "2", "--no-overlays"],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 1, run.stderr
+    assert "Traceback" not in run.stderr
+    t = load_trajectory(out / "trajectory.csv").table.set_index("station")
+    assert "header claims" in t.loc[1, "reason"] and "4000x3000" in t.loc[2, "reason"]
+    assert t.loc[3, "status"] == "ok"
+    check = subprocess.run([sys.executable, "-m", "cadra.cli.cadra1", "--check",
+                            str(shot / "shot.toml")], capture_output=True, text=True,
+                           timeout=120)
+    assert check.returncode != 0 and "Traceback" not in check.stderr
+    assert "header claims" in check.stdout + check.stderr
+    assert "4000x3000" in check.stdout + check.stderr

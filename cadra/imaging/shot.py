@@ -88,9 +88,16 @@ class Stage1Result:
 
 
 def _task(args):
+    """One station, in a worker or here: never raises (a worker that raised would leave the
+    pool to terminate its siblings mid-task, which can deadlock); a failure is the
+    station's, with its reason."""
     station, images, body_spec, overlays, formations = args
-    return measure_station(station, images, body_spec, overlays=overlays,
-                           formations=formations)
+    try:
+        return measure_station(station, images, body_spec, overlays=overlays,
+                               formations=formations)
+    except Exception as exc:  # noqa: BLE001 - one station's failure must not stop the shot
+        return StationResult(station.id, "failed",
+                             f"measurement error ({type(exc).__name__}: {exc})", None, {}, ())
 
 
 #: Images of each view the shot's wire formation is fitted from, spread along the shot.

@@ -5,8 +5,8 @@ its images as arrays or paths, the body's spec dict, settings) returning a
 :class:`StationResult`, so a process pool or a Dask scheduler can ship it. Per view
 (docs/stage1.md):
 
-1. take the image (an array, :func:`cadra.imaging.loading.station_image`, or a file,
-   :func:`cadra.imaging.loading.load_station_image`; a bad one fails that view with its
+1. take the image (an array, :func:`cadra.io.images.station_image`, or a file,
+   :func:`cadra.io.images.load_station_image`; a bad one fails that view with its
    reason);
 2. locate the model roughly (:func:`cadra.imaging.silhouette.locate.locate_model`) with the view's
    nominal projection;
@@ -44,10 +44,10 @@ from cadra.body import FinnedBody
 from cadra.conventions import axis_from_projected_angles
 from cadra.facility.reference import Station
 from cadra.imaging.combine import StationPose, ViewPose, combine_views
-from cadra.imaging.loading import load_station_image, station_image
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 from cadra.imaging.silhouette.template import make_template, outline_px
+from cadra.io.images import load_station_image, station_image
 from cadra.optics.projection import Projection
 
 VIEWS = ("top", "side")
@@ -328,13 +328,16 @@ def view_formation(sources, body_spec):
     body = body_spec if hasattr(body_spec, "kind") else _body(body_spec)
     profiles, n = [], 0
     for view, src in sources:
-        img = _view_image(view, src, f"station {view.station} {view.name} image")
-        if not isinstance(img, np.ndarray):
+        try:
+            img = _view_image(view, src, f"station {view.station} {view.name} image")
+            if not isinstance(img, np.ndarray):
+                continue
+            coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
+            if not coarse.ok:
+                continue
+            got = wire_profiles(img, view, exclude=_model_box(img, coarse))
+        except Exception:  # noqa: BLE001 - that image's station reports it; others serve
             continue
-        coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
-        if not coarse.ok:
-            continue
-        got = wire_profiles(img, view, exclude=_model_box(img, coarse))
         if len(got) >= 3:
             profiles += got
             n += 1

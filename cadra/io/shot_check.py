@@ -19,9 +19,10 @@ def check_shot(path: str | os.PathLike) -> list[str]:
     model larger than half a view's field of view (:data:`MAX_FIELD_FRACTION`: a diameter in
     the wrong unit).
     """
-    import cv2
+    import numpy as np
 
     from cadra.io.facility_file import load_facility
+    from cadra.io.images import load_station_image
     from cadra.io.shotfile import load_shot
 
     try:
@@ -48,23 +49,9 @@ def check_shot(path: str | os.PathLike) -> list[str]:
                 problems.append(f"station {rec.station} {view_name}: no image listed")
                 continue
             p = shot.image_path(rec.station, view_name)
-            if not p.is_file():
-                problems.append(f"station {rec.station} {view_name}: missing image {p}")
-                continue
-            img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-            if img is None:
-                problems.append(f"station {rec.station} {view_name}: unreadable image {p}")
-                continue
-            if img.ndim != 2:
-                problems.append(f"station {rec.station} {view_name}: {p} is not greyscale")
-            elif img.shape != (view.height_px, view.width_px):
-                problems.append(f"station {rec.station} {view_name}: {p} is "
-                                f"{img.shape[1]}x{img.shape[0]} px, the view declares "
-                                f"{view.width_px}x{view.height_px}")
-            bits = {"uint8": 8, "uint16": 16}.get(str(img.dtype))
-            if bits != view.bit_depth:
-                problems.append(f"station {rec.station} {view_name}: {p} has dtype {img.dtype}"
-                                f", the view declares {view.bit_depth}-bit")
+            img = load_station_image(p, view.width_px, view.height_px, view.bit_depth)
+            if not isinstance(img, np.ndarray):
+                problems.append(f"station {rec.station} {view_name}: {img.reason}: {p}")
     return problems
 
 

@@ -5,7 +5,7 @@ warm the caches, then measured on one core under :mod:`cProfile`. The time is sp
 stages a range engineer would name, each the cumulative time of the functions that do it
 (they do not nest in one another):
 
-- ``read``: decoding the image files (:func:`cadra.imaging.loading.load_station_image`);
+- ``read``: decoding the image files (:func:`cadra.io.images.load_station_image`);
 - ``locate``: finding the model roughly (:func:`~cadra.imaging.silhouette.locate.locate_model`);
 - ``templates``: the outline templates (:func:`~cadra.imaging.silhouette.template.make_template`);
 - ``wire_lines``: the wires' centroid lines (finding, profiles, centroids, lines);
@@ -29,7 +29,7 @@ from pathlib import Path
 
 #: stage -> the functions (module path suffix, name) whose cumulative time it is
 STAGES = {
-    "read": [("imaging/loading.py", "load_station_image")],
+    "read": [("io/images.py", "load_station_image")],
     "locate": [("silhouette/locate.py", "locate_model")],
     "templates": [("silhouette/template.py", "make_template")],
     "wire_lines": [("wires/fit.py", "_centroid_pass")],

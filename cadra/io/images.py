@@ -6,6 +6,11 @@ missing, unreadable or truncated, not greyscale, of another size or bit depth th
 declares, or holds non-finite values. A file (:func:`load_station_image`) and an array in
 memory (:func:`station_image`: what the renderer or a frame grabber hands over) pass the same
 checks and become the same float32 image.
+
+A file's size is read from its header before it is decoded (Pillow reads the header only), so
+a file whose header claims a huge image (a 1 MB PNG claiming 32000 x 32000 px decodes to
+2 GB) is refused without decoding it; a decoder's own error is a refusal too, never an
+exception.
 """
 
 from __future__ import annotations
@@ -35,15 +40,45 @@ def load_station_image(path: str | Path, width_px: int, height_px: int,
     PNG truncation is detected by decoding: OpenCV returns nothing for a damaged file.
     """
     path = Path(path)
-    if not path.is_file():
-        return ImageProblem(str(path), "missing image file")
-    data = np.fromfile(path, dtype=np.uint8)
-    if data.size == 0:
-        return ImageProblem(str(path), "empty image file")
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    try:
+        if not path.is_file():
+            return ImageProblem(str(path), "missing image file")
+        if path.stat().st_size == 0:
+            return ImageProblem(str(path), "empty image file")
+        size = header_size(path)
+        if isinstance(size, ImageProblem):
+            return size
+        if size is not None and size != (width_px, height_px):
+            return ImageProblem(str(path), f"{size[0]}x{size[1]} px, the view declares "
+                                           f"{width_px}x{height_px} (from its header; not "
+                                           f"decoded)")
+        img = cv2.imdecode(np.fromfile(path, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    except (OSError, RuntimeError, cv2.error) as exc:  # a link loop, a decoder's refusal
+        return ImageProblem(str(path), f"unreadable image file ({type(exc).__name__}: "
+                                       f"{' '.join(str(exc).split())[:200]})")
     if img is None:
         return ImageProblem(str(path), "unreadable or truncated image file")
     return station_image(img, width_px, height_px, bit_depth, str(path))
+
+
+def header_size(path: str | Path) -> tuple[int, int] | ImageProblem | None:
+    """``(width, height)`` px from an image file's header, without decoding it; an
+    :class:`ImageProblem` if the header claims more pixels than Pillow will open; None if
+    Pillow does not know the format (OpenCV may still read it)."""
+    import warnings
+
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                return tuple(int(v) for v in im.size)
+    except Image.DecompressionBombError:
+        return ImageProblem(str(path), f"its header claims more than "
+                                       f"{2 * Image.MAX_IMAGE_PIXELS:,} px; not decoded")
+    except (UnidentifiedImageError, ValueError, SyntaxError):
+        return None
 
 
 def station_image(img: np.ndarray, width_px: int, height_px: int, bit_depth: int,
