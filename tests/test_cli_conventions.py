@@ -389,3 +389,20 @@ def test_calibrate_warnings_survive_quiet(tmp_path, capsys):
     assert cap.out.splitlines() == [
         f"recorded in {tmp_path / 'stations' / 'hffaf' / 'bias_history.jsonl'} as entry 1 "
         "(compared with the 0 before it)"]
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "latin-1"])
+def test_a_terminal_that_cannot_show_a_character_gets_plain_text(encoding):
+    """``±``, ``α`` and ``—`` on a terminal that cannot encode them (PYTHONIOENCODING, an
+    ISO-8859-1 locale): plain-text stand-ins, never a traceback."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, PYTHONIOENCODING=encoding)
+    run = subprocess.run([sys.executable, "-m", "cadra.cli.cadra2", "models"], env=env,
+                         capture_output=True, timeout=120)
+    assert run.returncode == 0, run.stderr.decode(encoding, "replace")
+    assert b"Traceback" not in run.stderr
+    out = run.stdout.decode(encoding)
+    assert "sphere" in out and "--" in out and "—" not in out

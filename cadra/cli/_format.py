@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import argparse
+import codecs
 import os
 import re
 import sys
@@ -118,11 +119,45 @@ def take_ctrl_c() -> None:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
+#: what a terminal that cannot show a character gets instead (the rest: ``?``)
+PLAIN_TEXT = {"±": "+-", "—": "--", "–": "-", "−": "-", "→": "->", "←": "<-", "×": "x",
+              "≤": "<=", "≥": ">=", "≈": "~", "…": "...", "°": " deg", "µ": "u", "²": "^2",
+              "³": "^3", "√": "sqrt", "α": "alpha", "β": "beta", "γ": "gamma", "δ": "delta",
+              "Δ": "Delta", "θ": "theta", "φ": "phi", "ψ": "psi", "σ": "sigma", "χ": "chi",
+              "ν": "nu", "λ": "lambda", "ω": "omega", "π": "pi", "·": "*", "’": "'",
+              "“": '"', "”": '"', "─": "-", "┐": "+", "┘": "+", "┼": "+", "├": "+",
+              "►": ">", "é": "e", "ö": "o", "ü": "u"}
+
+
+def _plain_text(err: UnicodeEncodeError):
+    return "".join(PLAIN_TEXT.get(ch, "?") for ch in err.object[err.start:err.end]), err.end
+
+
+codecs.register_error("cadra-plain-text", _plain_text)
+
+
+def plain_text_streams() -> None:
+    """A terminal whose encoding cannot show ``±``, ``α`` or ``—`` (``PYTHONIOENCODING=ascii``,
+    an ISO-8859-1 locale) gets ``+-``, ``alpha`` and ``--`` (:data:`PLAIN_TEXT`) instead of a
+    traceback: stdout and stderr are reconfigured to replace what they cannot encode."""
+    for stream in (sys.stdout, sys.stderr):
+        if stream is None or not hasattr(stream, "reconfigure"):
+            continue
+        try:
+            "±αχ²—µ°".encode(stream.encoding or "ascii")
+        except (UnicodeEncodeError, LookupError):
+            with suppress(ValueError, OSError):
+                stream.reconfigure(errors="cadra-plain-text")
+
+
 def console_main(prog: str, body, argv) -> int:
     """Run a console script's ``body(argv)`` to the conventions of docs/cli.md: Ctrl-C ends
     it with one line and status 130 (and is never lost: :func:`take_ctrl_c`), a closed
-    stdout (``| head``) quietly with :data:`EXIT_STDOUT_CLOSED`; returns the exit status."""
+    stdout (``| head``) quietly with :data:`EXIT_STDOUT_CLOSED`, a terminal that cannot show
+    a character with a plain-text stand-in (:func:`plain_text_streams`); returns the exit
+    status."""
     take_ctrl_c()
+    plain_text_streams()
     try:
         status = body(argv)
         sys.stdout.flush()   # a closed stdout shows here, inside the handler below
@@ -134,5 +169,6 @@ def console_main(prog: str, body, argv) -> int:
         return stdout_closed()
 
 
-__all__ = ["EXIT_STDOUT_CLOSED", "HelpFormatter", "add_verbosity", "add_version",
-           "console_main", "join_number_lists", "stdout_closed", "take_ctrl_c", "warn"]
+__all__ = ["EXIT_STDOUT_CLOSED", "PLAIN_TEXT", "HelpFormatter", "add_verbosity", "add_version",
+           "console_main", "join_number_lists", "plain_text_streams", "stdout_closed",
+           "take_ctrl_c", "warn"]
