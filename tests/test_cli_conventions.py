@@ -406,3 +406,33 @@ def test_a_terminal_that_cannot_show_a_character_gets_plain_text(encoding):
     assert b"Traceback" not in run.stderr
     out = run.stdout.decode(encoding)
     assert "sphere" in out and "--" in out and "—" not in out
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["fit", "t", "-o", "o", "--model", "m", "--max-iterations", "-5"], "--max-iterations"),
+    (["fit", "t", "-o", "o", "--model", "m", "--sigma-time-s", "-1"], "--sigma-time-s"),
+    (["fit", "t", "-o", "o", "--model", "m", "--min-sigma-angle-deg", "nan"],
+     "--min-sigma-angle-deg"),
+    (["fit", "t", "-o", "o", "--model", "m", "--min-sigma-position-m", "1e300"],
+     "--min-sigma-position-m"),
+    (["diagnose", "t", "-o", "o", "--model", "m", "--alpha", "2"], "--alpha"),
+    (["calibrate", "t", "-o", "o", "--threshold-sigma", "0"], "--threshold-sigma"),
+    (["motion", "t", "-o", "o", "--window", "1"], "--window"),
+    (["motion", "t", "-o", "o", "--spin", "inf"], "--spin"),
+    (["roll", "t", "-o", "o", "--alpha-deg", "120"], "--alpha-deg"),
+])
+def test_a_numeric_option_out_of_range_is_a_usage_error(argv, option, capsys):
+    """Negative, non-finite or absurd numbers are refused at once (status 2), naming the
+    option and what it must be, before anything is read."""
+    with pytest.raises(SystemExit) as exc:
+        cadra2_main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}: must be" in err, err
+
+
+def test_cadra1_workers_must_be_positive(capsys):
+    with pytest.raises(SystemExit) as exc:
+        cadra1_main(["shot.toml", "--workers", "0"])
+    assert exc.value.code == 2 and "argument --workers: must be a whole number >= 1" in \
+        capsys.readouterr().err

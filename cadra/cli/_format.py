@@ -15,6 +15,35 @@ from contextlib import suppress
 import cadra
 
 
+def number(kind=float, low=None, high=None, *, above=False):
+    """An argparse ``type`` for a numeric option: a finite ``kind`` (``int``: a whole number)
+    in ``[low, high]`` (``above``: strictly above ``low``); anything else is a usage error
+    naming the option, e.g. ``argument --max-iterations: must be a whole number >= 1, not
+    -5``."""
+    import math
+
+    what = "a whole number" if kind is int else "a finite number"
+    bounds = []
+    if low is not None:
+        bounds.append(f"{'>' if above else '>='} {low:g}")
+    if high is not None:
+        bounds.append(f"<= {high:g}")
+    wanted = f"{what} {' and '.join(bounds)}".strip()
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {wanted}, not {text!r}") from None
+        ok = math.isfinite(value) and (low is None or (value > low if above else value >= low))
+        if not ok or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"must be {wanted}, not {text}")
+        return value
+
+    parse.__name__ = kind.__name__   # argparse names the type in some messages
+    return parse
+
+
 def warn(prog: str, text: str) -> None:
     """A warning on a result (a chi^2/nu far above 1, one shot given to the quasi-linear step,
     a parameter at a bound): one line on stderr, ``PROG: warning: TEXT``, never hidden by
@@ -170,5 +199,5 @@ def console_main(prog: str, body, argv) -> int:
 
 
 __all__ = ["EXIT_STDOUT_CLOSED", "PLAIN_TEXT", "HelpFormatter", "add_verbosity", "add_version",
-           "console_main", "join_number_lists", "plain_text_streams", "stdout_closed",
+           "console_main", "join_number_lists", "number", "plain_text_streams", "stdout_closed",
            "take_ctrl_c", "warn"]

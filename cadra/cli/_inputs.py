@@ -9,6 +9,8 @@ from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 
+from cadra.cli._format import number
+
 #: what a refused input raises (FitDataError, SpecError, CalibrationError and a missing model
 #: are ValueErrors; unknown parameter names KeyErrors)
 REFUSED = (ValueError, KeyError, FileNotFoundError)
@@ -64,14 +66,14 @@ def add_data_options(p, *, model: bool = True) -> None:
                        help="free a held parameter")
         p.add_argument("--bound", action="append", metavar="NAME=LO:HI",
                        help="bounds of a parameter (file unit; either side may be empty)")
-        p.add_argument("--max-iterations", type=int, default=60,
+        p.add_argument("--max-iterations", type=number(int, 1), default=60,
                        help="most Levenberg-Marquardt iterations per fit phase (a fit whose "
                             "data are finer than film level runs two phases: docs/cli.md)")
-    p.add_argument("--sigma-time-s", type=float, default=0.0,
+    p.add_argument("--sigma-time-s", type=number(float, 0.0, 1.0), default=0.0,
                    help="spark-time sigma, s (adds V sigma_t to the x sigma)")
-    p.add_argument("--min-sigma-position-m", type=float, default=0.0,
+    p.add_argument("--min-sigma-position-m", type=number(float, 0.0, 1.0), default=0.0,
                    help="floor of the stage-one position sigmas, m")
-    p.add_argument("--min-sigma-angle-deg", type=float, default=0.0,
+    p.add_argument("--min-sigma-angle-deg", type=number(float, 0.0, 90.0), default=0.0,
                    help="floor of the stage-one angle sigmas, deg")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 

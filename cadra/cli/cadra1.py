@@ -24,7 +24,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cadra.cli._format import HelpFormatter, add_verbosity, add_version, console_main
+from cadra.cli._format import HelpFormatter, add_verbosity, add_version, console_main, number
 from cadra.io.shot_check import check_shot
 
 #: ``--check`` lists this many missing images (``-v``: all of them)
@@ -52,7 +52,7 @@ def _main(argv: list[str] | None) -> int:
                         help="output directory (default: <shot file's directory>/cadra1)")
     parser.add_argument("--check", action="store_true",
                         help="only validate the shot, its facility and images; write nothing")
-    parser.add_argument("--workers", type=int, default=None,
+    parser.add_argument("--workers", type=number(int, 1), default=None,
                         help="processes (default: all cores; 1 = no subprocesses)")
     parser.add_argument("--no-overlays", action="store_true", help="skip the overlay PNGs")
     parser.add_argument("--formation", choices=("view", "image"), default="view",

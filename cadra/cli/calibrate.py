@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from cadra.cli import _inputs as cli
-from cadra.cli._format import warn
+from cadra.cli._format import number, warn
 from cadra.cli._inputs import Command
 
 
@@ -25,7 +25,7 @@ def _calibrate_arguments(p) -> None:
                         "'.' for the working folder)")
     p.add_argument("--no-history", action="store_true",
                    help="do not append the estimate to the station history")
-    p.add_argument("--threshold-sigma", type=float, default=3.0,
+    p.add_argument("--threshold-sigma", type=number(float, 0.0, above=True), default=3.0,
                    help="a station is flagged when its bias moved by more than this many "
                         "sigma")
     p.add_argument("--note", default="", help="a note stored with the history entry")

@@ -9,13 +9,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from cadra.cli import _inputs as cli
+from cadra.cli._format import number
 from cadra.cli._inputs import Command
 
 
 def _diagnose_arguments(p) -> None:
     cli.add_data_options(p)
     p.add_argument("--model", required=True, help="aero model (bundled name or file)")
-    p.add_argument("--alpha", type=float, default=0.01,
+    p.add_argument("--alpha", type=number(float, 0.0, 0.5, above=True), default=0.01,
                    help="family-wise significance of adding an effect")
     cli.add_start_option(p)
 

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from cadra.cli import _inputs as cli
-from cadra.cli._format import warn
+from cadra.cli._format import number, warn
 from cadra.cli._inputs import Command
 
 PROG = "cadra2 motion"
@@ -20,7 +20,7 @@ def _motion_arguments(p) -> None:
     cli.add_data_options(p, model=False)
     p.add_argument("--variable", choices=("distance", "time"), default="distance",
                    help="the fit's independent variable")
-    p.add_argument("--spin", action="append", type=float, metavar="RAD_S",
+    p.add_argument("--spin", action="append", type=number(float), metavar="RAD_S",
                    help="the model's roll rate p, rad/s, right-handed about the nose (stage "
                         "one does not see roll): one value for every shot or one per "
                         "trajectory; gives the tricyclic fit (trim arm at p) and C_mp_alpha "
@@ -29,13 +29,13 @@ def _motion_arguments(p) -> None:
                    help="fit a constant angle too (a fixed trim)")
     p.add_argument("--nonrolling", action="store_true",
                    help="seed 002's nonrolling-axis correction (docs/motion.md)")
-    p.add_argument("--path-degree", type=int, default=2,
+    p.add_argument("--path-degree", type=number(int, 0, 6), default=2,
                    help="degree of the polynomials in time fitted to the cg positions for "
                         "the mean flight path")
-    p.add_argument("--window", type=int, default=None,
+    p.add_argument("--window", type=number(int, 3), default=None,
                    help="points per sectional fit (default: 1.2 cycles of the slower arm, at "
                         "least 12)")
-    p.add_argument("--step", type=int, default=None,
+    p.add_argument("--step", type=number(int, 1), default=None,
                    help="points between sections (default: a tenth of the window)")
 
 

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from cadra.cli import _inputs as cli
+from cadra.cli._format import number
 from cadra.cli._inputs import Command
 
 PROG = "cadra2 roll"
@@ -24,10 +25,10 @@ def _roll_arguments(p) -> None:
     p.add_argument("--model", default="seed003_romof",
                    help="aero model (bundled name or file) whose Cl is linear in the "
                         "stepped coefficients")
-    p.add_argument("--alpha-deg", type=float, default=None,
+    p.add_argument("--alpha-deg", type=number(float, -90.0, 90.0), default=None,
                    help="the bearing's angle of attack, deg (default: from the measured "
                         "theta and psi)")
-    p.add_argument("--window", type=int, default=11,
+    p.add_argument("--window", type=number(int, 3), default=11,
                    help="frames of the smoothing filter that finds the zero-rate peaks")
 
 
