@@ -142,12 +142,21 @@ def _spelled(given: str | os.PathLike, resolved: Path) -> str:
     return f"{given}" if Path(os.path.abspath(given)) == resolved else f"{given} (= {resolved})"
 
 
+def _resolved(p: Path) -> Path:
+    """``p`` with links and ``..`` resolved; a link loop (which cannot be resolved) as its
+    absolute spelling, so the guard still compares it."""
+    try:
+        return p.resolve()
+    except (RuntimeError, OSError):   # a symbolic link loop
+        return Path(os.path.abspath(p))
+
+
 def _input_forms(p: Path) -> set[Path]:
     """Where an input lives: its target and, for a link, the link itself."""
-    forms = {p.resolve()}
+    forms = {_resolved(p)}
     absolute = Path(os.path.abspath(p))
     if absolute.name:
-        forms.add(absolute.parent.resolve() / absolute.name)
+        forms.add(_resolved(absolute.parent) / absolute.name)
     return forms
 
 

@@ -29,6 +29,7 @@ from cadra.atomic import (
 from cadra.cli.cadra1 import main as cadra1
 from cadra.cli.cadra2 import main as cadra2
 from cadra.imaging.shot import measure_shot
+from cadra.io.trajectory import load_trajectory
 from cadra.report.stage1 import write_stage1
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
@@ -525,3 +526,35 @@ def test_no_library_call_replaces_a_station_history(tmp_path):
             with atomic_output_dir(folder, overwrite=True) as tmp:
                 (tmp / "report.md").write_text("x")
     assert (deep / HISTORY_FILENAME).read_text() == "{}\n"
+
+
+def test_a_looping_link_among_the_images_fails_its_station_only(work, tmp_path, capsys):
+    """An image that is a symbolic link to itself: its station fails with that reason, the
+    other is measured, no traceback (the output guard resolving it used to raise)."""
+    import shutil
+
+    shot = tmp_path / "shot"
+    shutil.copytree(work / "shot", shot)
+    loop = shot / "images" / "st01_top.png"
+    loop.unlink()
+    loop.symlink_to(loop.name)
+    assert cadra1([str(shot / "shot.toml"), "-o", str(tmp_path / "out"), "-q",
+                   "--workers", "1", "--no-overlays"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "symbolic link" in err
+    t = load_trajectory(tmp_path / "out" / "trajectory.csv").table.set_index("station")
+    assert t.loc[1, "status"] == "failed" and "symbolic link" in t.loc[1, "reason"]
+    assert t.loc[2, "status"] != "failed"
+
+
+def test_a_station_history_that_is_a_folder_is_refused_in_one_line(work, tmp_path, capsys):
+    root = tmp_path / "root"
+    (root / "stations" / "hffaf" / "bias_history.jsonl").mkdir(parents=True)
+    for argv in (["calibrate", str(work / "sphere_stage1")],
+                 ["fit", str(work / "m2_stage1"), "--model", "m2_m070", "--bias-table",
+                  "current"]):
+        code = cadra2([*argv, "-o", str(tmp_path / "out"), "--stations-root", str(root)])
+        err = capsys.readouterr().err.strip()
+        assert code == 1 and len(err.splitlines()) == 1, err
+        assert "cannot be read" in err and "it must be a file" in err
+        assert not (tmp_path / "out").exists()

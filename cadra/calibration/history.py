@@ -179,6 +179,10 @@ def _scan(path: Path, facility: str) -> _Scan:
         data = path.read_bytes()
     except FileNotFoundError:
         return _Scan([], [], [], 0, True, None)
+    except (IsADirectoryError, PermissionError, OSError) as exc:   # a folder, a link loop
+        raise StationHistoryError(f"{path}: the station history cannot be read "
+                                  f"({exc.strerror or type(exc).__name__}); it must be a "
+                                  f"file") from None
     terminated = data == b"" or data.endswith(b"\n")
     pieces = data.split(b"\n")
     if terminated:

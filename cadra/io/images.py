@@ -42,6 +42,9 @@ def load_station_image(path: str | Path, width_px: int, height_px: int,
     path = Path(path)
     try:
         if not path.is_file():
+            if path.is_symlink():
+                return ImageProblem(str(path), "a symbolic link to nothing (broken, or a "
+                                               "loop), not an image file")
             return ImageProblem(str(path), "missing image file")
         if path.stat().st_size == 0:
             return ImageProblem(str(path), "empty image file")
