@@ -54,3 +54,22 @@ def test_refusals(tmp_path):
     bad.write_text(text.replace("sigma_z_m", "sigma_z"))
     with pytest.raises(TrajectoryFileError, match="sigma_z_m"):
         load_trajectory(bad)
+
+
+def test_a_measured_value_without_its_sigma_is_refused(tmp_path):
+    """A measured value whose sigma cell is blank or NaN is not dropped silently: the file is
+    refused, naming the station and the column (both empty is 'not measured')."""
+    table = _table()
+    for blank in (np.nan, ""):
+        t = table.copy()
+        t["sigma_y_m"] = t["sigma_y_m"].astype(object)
+        t.loc[0, "sigma_y_m"] = blank
+        path = tmp_path / "t.csv"
+        path.write_text(trajectory_to_csv(t, {}))
+        with pytest.raises(TrajectoryFileError,
+                           match="station 1, column sigma_y_m: is empty: a measured y_m"):
+            load_trajectory(path)
+    t = table.copy()
+    t.loc[0, ["y_m", "sigma_y_m"]] = np.nan        # both empty: not measured, accepted
+    path.write_text(trajectory_to_csv(t, {}))
+    assert np.isnan(load_trajectory(path).table.loc[0, "y_m"])

@@ -272,11 +272,12 @@ def _numeric(table: pd.DataFrame, path: Path) -> pd.DataFrame:
     for ch in OBSERVED:
         v, s = table[ch.value_column].to_numpy(), table[ch.sigma_column].to_numpy()
         with np.errstate(invalid="ignore"):
-            bad = measured & np.isfinite(v) & ~(s > 0) & ~np.isnan(s)
+            bad = measured & np.isfinite(v) & ~(s > 0)
         if bad.any():
             i = int(bad.argmax())
-            fail(i, ch.sigma_column, f"{s[i]:g} is not a sigma (must be > 0; leave the value "
-                                     "and its sigma empty for 'not measured')")
+            what = "is empty" if np.isnan(s[i]) else f"{s[i]:g} is not a sigma (must be > 0)"
+            fail(i, ch.sigma_column, f"{what}: a measured {ch.value_column} needs its sigma "
+                                     "(leave the value and its sigma empty for 'not measured')")
     return table
 
 
