@@ -241,3 +241,29 @@ def test_an_image_whose_header_lies_is_refused_undecoded(m2_shot, tmp_path):
     assert check.returncode != 0 and "Traceback" not in check.stderr
     assert "header claims" in check.stdout + check.stderr
     assert "4000x3000" in check.stdout + check.stderr
+
+
+def test_views_that_are_not_the_station_s_fail_it(m2_shot, tmp_path):
+    """A station's top and side images swapped, and another station's image in a view: the
+    wires miss their surveyed lines (or the views disagree on x far beyond chance), so the
+    station fails with that reason and the exit status says so; the station left alone is
+    measured as before."""
+    from cadra.imaging.station import WIRE_RMS_MAX_PX, X_CONSISTENCY_MAX
+
+    shot = _copy(m2_shot, tmp_path)
+    img = shot / "images"
+    top, side = (img / "st01_top.png").read_bytes(), (img / "st01_side.png").read_bytes()
+    (img / "st01_top.png").write_bytes(side)
+    (img / "st01_side.png").write_bytes(top)
+    (img / "st03_top.png").write_bytes((img / "st02_top.png").read_bytes())
+    out = tmp_path / "out"
+    assert cadra1_main([str(shot / "shot.toml"), "-o", str(out), "-q", "--workers", "1",
+                        "--no-overlays"]) == 1
+    t = load_trajectory(out / "trajectory.csv").table.set_index("station")
+    q = pd.read_csv(out / "quality.csv")
+    for st in (1, 3):
+        assert t.loc[st, "status"] == "failed", t.loc[st, "reason"]
+        assert "surveyed lines" in t.loc[st, "reason"] or "disagree on x" in t.loc[st, "reason"]
+        worst = q[q["station"] == st]["affine_rms_px"].max()
+        assert worst > WIRE_RMS_MAX_PX or t.loc[st, "x_consistency"] > X_CONSISTENCY_MAX
+    assert t.loc[2, "status"] == "ok" and abs(t.loc[2, "x_consistency"]) < 4

@@ -67,6 +67,14 @@ ROLL_TOL_RAD = math.radians(0.002)
 #: tilt step (rad) of the outline template that gives a view's pose sensitivity to the tilt
 #: (ViewFit.tilt_sensitivity; linear within 3 % up to 1 deg)
 TILT_STEP_RAD = math.radians(0.3)
+#: a station whose two views disagree on x by more than this many of their combined sigmas
+#: (the disagreement is ~N(0, 1): docs/stage1.md, "The two views' x errors") is failed: a
+#: swapped, foreign or repeated image, not a measurement
+X_CONSISTENCY_MAX = 6.0
+#: a view whose found wires miss their surveyed lines by more than this rms (px; ~0.0006 px
+#: on the renderer's views, 0.0012 at most over a shot) fails its station: the image is not
+#: this view's
+WIRE_RMS_MAX_PX = 0.05
 
 
 @dataclass(frozen=True)
@@ -474,8 +482,29 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
     if sphere:
         pose = StationPose(**{**pose.__dict__, "theta_rad": math.nan, "psi_rad": math.nan,
                               "sigma_theta_rad": math.nan, "sigma_psi_rad": math.nan})
+    wrong = _views_disagree(pose, results)
+    if wrong:
+        return StationResult(station_id, "failed", wrong, pose, results, warnings,
+                             roll=station_roll)
     status = "warning" if warnings else "ok"
     return StationResult(station_id, status, "", pose, results, warnings, roll=station_roll)
+
+
+def _views_disagree(pose: StationPose, results: dict) -> str:
+    """Why a station's views cannot both be its own ("" if they can): their x beyond
+    :data:`X_CONSISTENCY_MAX` sigmas apart, or a view's wires off their surveyed lines beyond
+    :data:`WIRE_RMS_MAX_PX` (a swapped, foreign or repeated image; flagged, never used)."""
+    why = []
+    for name in VIEWS:
+        rms = results[name].wires.affine_rms_px
+        if rms > WIRE_RMS_MAX_PX:
+            why.append(f"{name} view: its wires miss their surveyed lines by {rms:.3g} px rms "
+                       f"(> {WIRE_RMS_MAX_PX:g}): another station's or view's image?")
+    xc = pose.x_consistency_sigma
+    if xc > X_CONSISTENCY_MAX:
+        why.append(f"the two views disagree on x by {xc:.3g} sigma (> {X_CONSISTENCY_MAX:g}): "
+                   f"swapped, foreign or repeated images?")
+    return "; ".join(why)
 
 
 def _wrap_period(x: float) -> float:
