@@ -558,3 +558,24 @@ def test_a_station_history_that_is_a_folder_is_refused_in_one_line(work, tmp_pat
         assert code == 1 and len(err.splitlines()) == 1, err
         assert "cannot be read" in err and "it must be a file" in err
         assert not (tmp_path / "out").exists()
+
+
+def test_fit_with_the_current_bias_table_passes_on_the_history_s_warnings(work, tmp_path,
+                                                                         capsys):
+    """A torn last line (an interrupted append) is skipped by the history's reader with a
+    warning: the fit applying the latest complete entry says so on the console and in its
+    report, instead of calling it the latest."""
+    from cadra.calibration.history import history_path
+
+    root = tmp_path / "root"
+    assert cadra2(["calibrate", str(work / "sphere_stage1"), "-o", str(tmp_path / "cal"),
+                   "--stations-root", str(root), "-q"]) == 0
+    with open(history_path(root, "hffaf"), "ab") as fh:
+        fh.write(b'{"format": "cadra-bias-table-1", "facil')         # torn mid-append
+    capsys.readouterr()
+    out = tmp_path / "fit"
+    cadra2(["fit", str(work / "m2_stage1"), "--model", "m2_m070", "--bias-table", "current",
+            "--stations-root", str(root), "--max-iterations", "3", "-o", str(out), "-q"])
+    err = capsys.readouterr().err
+    assert "the history warns" in err and "interrupted write" in err, err
+    assert "latest complete entry (1" in (out / "report.md").read_text()

@@ -47,25 +47,30 @@ def correct_by_bias_table(shots: Sequence[ShotData], table: str | os.PathLike,
                           ) -> tuple[list[ShotData], str]:
     """The shots corrected by a station bias table, and a note for the report.
 
-    ``table`` is :data:`CURRENT` (the latest entry of ``<stations_root>/stations/<facility>/``;
-    ``stations_root`` resolved as ``cadra2 calibrate`` resolves it,
-    :func:`cadra.calibration.history.stations_root`, so the fit reads the history the
+    ``table`` is :data:`CURRENT` (the latest complete entry of
+    ``<stations_root>/stations/<facility>/``; ``stations_root`` resolved as ``cadra2
+    calibrate`` resolves it, :func:`cadra.calibration.history.stations_root`, so the fit
+    reads the history the
     calibration wrote, whatever the working folder)
     or a bias-table CSV, which must be of the shots' facility
     (:func:`cadra.calibration.sphere.apply_bias_table` applies it). Raises ``ValueError``
-    saying what does not fit.
+    saying what does not fit. The history's warnings (a torn last line of an interrupted
+    append, skipped) are in the note, which the fit's report and console carry.
     """
     facility = shots_facility(shots)
     from cadra.calibration.history import stations_root as resolve_stations_root
 
     root = resolve_stations_root(stations_root)
+    warnings: list[str] = []
     if str(table) == CURRENT:
-        history, _ = load_history(root, facility)
+        history, warnings = load_history(root, facility)
         bias = current_table(history)
         if bias is None:
             raise ValueError(f"--bias-table current: no station history for facility "
                              f"{facility!r} under {root / 'stations'}")
-        source = f"{root / 'stations' / facility / 'bias_history.jsonl'}, latest entry"
+        source = (f"{root / 'stations' / facility / 'bias_history.jsonl'}, "
+                  + (f"latest complete entry ({len(history)}; the history warns: "
+                     f"{'; '.join(warnings)})" if warnings else "latest entry"))
     else:
         bias = load_bias_table(table)
         source = str(table)

@@ -62,6 +62,8 @@ def run(args) -> int:
         if args.bias_table:
             shots, note = correct_by_bias_table(shots, args.bias_table, args.stations_root)
             notes.append(note)
+            if "the history warns" in note:
+                warn("cadra2 fit", note)
         options = FitOptions(max_iterations=args.max_iterations, progress=not cli.quiet(args))
         reference = None
         if args.reference:
