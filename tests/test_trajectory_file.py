@@ -73,3 +73,17 @@ def test_a_measured_value_without_its_sigma_is_refused(tmp_path):
     t.loc[0, ["y_m", "sigma_y_m"]] = np.nan        # both empty: not measured, accepted
     path.write_text(trajectory_to_csv(t, {}))
     assert np.isnan(load_trajectory(path).table.loc[0, "y_m"])
+
+
+def test_a_line_break_in_a_path_does_not_break_the_header(tmp_path):
+    """A shot file's path holding a newline, a carriage return or a Unicode line separator
+    (legal on POSIX) reads back exactly, and the rows are intact; plain values are written
+    as they were."""
+    odd = {"shot_file": "/data/run 7\nshot.toml", "facility_file": "a\rb\u2028c.toml",
+           "note": ' "quoted" ', "plain": "/data/shot.toml"}
+    path = tmp_path / "t.csv"
+    write_trajectory(path, _table(), odd)
+    back = load_trajectory(path)
+    assert {k: back.meta[k] for k in odd} == odd
+    assert len(back.table) == 3
+    assert "# plain: /data/shot.toml\n" in path.read_text()

@@ -31,6 +31,7 @@ naming the station and the column: text where a number belongs, ``inf``, a sigma
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from dataclasses import dataclass
@@ -88,6 +89,28 @@ class Trajectory:
         return self.table[self.table["status"] != "failed"]
 
 
+def header_value(text: str) -> str:
+    """A metadata value as its ``# key: value`` line holds it: as it is, unless it would break
+    the line or not read back the same (a line break of any kind in a path, surrounding
+    blanks, a leading quote): then as a JSON string (:func:`read_header_value`)."""
+    if (text != text.strip() or text.startswith('"') or len(text.splitlines()) > 1
+            or (text and text.splitlines()[0] != text)):
+        return json.dumps(text)
+    return text
+
+
+def read_header_value(text: str) -> str:
+    """The value of a ``# key: value`` line (:func:`header_value`'s inverse)."""
+    if text.startswith('"'):
+        try:
+            value = json.loads(text)
+        except ValueError:
+            return text
+        if isinstance(value, str):
+            return value
+    return text
+
+
 def trajectory_to_csv(table: pd.DataFrame, meta: dict) -> str:
     """CSV text (with the ``#`` metadata header) of a table with :data:`COLUMNS`, and an
     optional channel's two columns (:data:`OPTIONAL_COLUMNS`) where the table has a value in
@@ -105,8 +128,7 @@ def trajectory_to_csv(table: pd.DataFrame, meta: dict) -> str:
     columns = [c for c in ALL_COLUMNS if c in COLUMNS or c in written]
     head = [f"# format: {FORMAT}"]
     for k, v in meta.items():
-        text = str(v).replace("\n", " ")
-        head.append(f"# {k}: {text}")
+        head.append(f"# {k}: {header_value(str(v))}")
     body = table.loc[:, columns].to_csv(index=False, float_format="%.10g",
                                              lineterminator="\n")
     return "\n".join(head) + "\n" + body
@@ -133,7 +155,7 @@ def load_trajectory(path: str | os.PathLike) -> Trajectory:
         if not line.startswith("#"):
             break
         key, _, value = line[1:].partition(":")
-        meta[key.strip()] = value.strip()
+        meta[key.strip()] = read_header_value(value.strip())
     if meta.get("format") != FORMAT:
         raise TrajectoryFileError(f"{path}: not a CADRA trajectory file (format "
                                   f"{meta.get('format')!r}, expected {FORMAT!r})")
