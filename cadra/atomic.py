@@ -15,9 +15,14 @@ history) is never an output, so no call, from the command line or Python, replac
 Temporary siblings are named ``.NAME.cadra-PID@HOST-XXXXXXXX.tmp`` (and ``.old`` for the
 previous output while it is swapped out), so a run killed before its cleanup (SIGKILL, power
 loss) leaves something recognisable: the next run that writes the same output removes the
-siblings whose creating process is gone (same host, PID no longer running) —
-:func:`clean_stale_temps` — and leaves every other file alone. A ``.old`` folder whose output
-is missing (killed in the middle of the swap) is moved back into place, not deleted.
+siblings whose writer is gone — :func:`clean_stale_temps` — and leaves every other file
+alone. Whether the writer is gone is asked of a lock, not of its process id: the writer holds
+an exclusive lock on ``<temporary>.lock`` while it writes (POSIX ``flock``, which the kernel
+drops when the process dies), so a live writer in another PID namespace (a container) keeps
+its temporary. A temporary without a lock file (a writer killed in the instant between
+creating it and locking it, or another platform) falls back to the process id on this host.
+A ``.old`` folder whose output is missing (killed in the middle of the swap) is moved back
+into place, not deleted.
 """
 
 from __future__ import annotations
@@ -31,6 +36,11 @@ import sys
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:   # Windows: the process id decides (never guessed there: kept)
+    fcntl = None
 
 
 class UnsafeOutputError(ValueError):
@@ -96,6 +106,47 @@ def _alive(pid: int) -> bool:
         return True
 
 
+def _lock_of(temp: Path) -> Path:
+    return temp.with_name(temp.name + ".lock")
+
+
+@contextlib.contextmanager
+def _locked(temp: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``temp``'s lock file while the block writes ``temp`` (the
+    kernel drops it if this process dies); the lock file is removed at the end."""
+    if fcntl is None:
+        yield
+        return
+    lock = _lock_of(temp)
+    fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o600)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(lock)
+
+
+def _writer_alive(temp: Path, pid: int) -> bool:
+    """Whether the writer of ``temp`` still runs: its lock is held (any PID namespace), or,
+    without a lock file, process ``pid`` of this host runs."""
+    lock = _lock_of(temp)
+    if fcntl is None or not lock.exists():
+        return _alive(pid)
+    try:
+        fd = os.open(lock, os.O_RDWR)
+    except OSError:
+        return _alive(pid)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True            # held: its writer is alive
+    finally:
+        os.close(fd)
+    return False
+
+
 def stale_temps(path: str | os.PathLike) -> list[Path]:
     """CADRA's temporary siblings of ``path`` left by a process of this host that is gone."""
     path = Path(path)
@@ -109,9 +160,26 @@ def stale_temps(path: str | os.PathLike) -> list[Path]:
         if not entry.name.startswith(f".{path.name}.cadra-"):
             continue
         m = pattern.fullmatch(entry.name)
-        if m and m["host"] == host and not _alive(int(m["pid"])):
+        if m and m["host"] == host and not _writer_alive(path.parent / entry.name,
+                                                           int(m["pid"])):
             found.append(path.parent / entry.name)
     return sorted(found)
+
+
+def _orphan_locks(path: Path) -> list[Path]:
+    """Lock files of CADRA's temporaries of ``path`` whose temporary is gone and whose
+    writer is too (killed between its rename and the lock's removal)."""
+    pattern, host, out = _stale_pattern(path), _host(), []
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(path.parent):
+            if not entry.name.endswith(".lock"):
+                continue
+            m = pattern.fullmatch(entry.name[:-len(".lock")])
+            temp = path.parent / entry.name[:-len(".lock")]
+            if (m and m["host"] == host and not os.path.lexists(temp)
+                    and not _writer_alive(temp, int(m["pid"]))):
+                out.append(path.parent / entry.name)
+    return out
 
 
 def clean_stale_temps(path: str | os.PathLike) -> list[Path]:
@@ -133,7 +201,12 @@ def clean_stale_temps(path: str | os.PathLike) -> list[Path]:
                 stale.unlink()
         except FileNotFoundError:  # another run cleaned it first
             pass
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(_lock_of(stale))
         removed.append(stale)
+    for lock in _orphan_locks(path):
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(lock)
     return removed
 
 
@@ -232,15 +305,16 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = F
     clean_stale_temps(path)
     fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "wb") as fh:
+        with _locked(Path(tmp)), os.fdopen(fd, "wb") as fh:
             if hasattr(os, "fchmod"):
                 os.fchmod(fh.fileno(), 0o666 & ~_UMASK)
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        if not overwrite and path.exists():  # appeared while we were writing
-            raise FileExistsError(f"{path} exists; refusing to overwrite (pass overwrite=True)")
-        os.replace(tmp, path)
+            if not overwrite and path.exists():  # appeared while we were writing
+                raise FileExistsError(f"{path} exists; refusing to overwrite (pass "
+                                      "overwrite=True)")
+            os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
@@ -285,22 +359,24 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
     clean_stale_temps(path)
     tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
     try:
-        os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp's folder is private (0700)
-        yield tmp
-        if path.exists():
-            if not overwrite:
-                raise FileExistsError(f"{given} exists; refusing to overwrite")
-            old = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".old",
-                                        dir=path.parent))
-            os.replace(path, old / "d")  # move aside, then swap in, then delete the old one
-            try:
+        with _locked(tmp):
+            os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp's folder is private (0700)
+            yield tmp
+            if path.exists():
+                if not overwrite:
+                    raise FileExistsError(f"{given} exists; refusing to overwrite")
+                old = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".old",
+                                            dir=path.parent))
+                with _locked(old):
+                    os.replace(path, old / "d")  # move aside, swap in, delete the old one
+                    try:
+                        os.replace(tmp, path)
+                    except BaseException:
+                        os.replace(old / "d", path)
+                        raise
+                    shutil.rmtree(old, ignore_errors=True)
+            else:
                 os.replace(tmp, path)
-            except BaseException:
-                os.replace(old / "d", path)
-                raise
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -579,3 +579,39 @@ def test_fit_with_the_current_bias_table_passes_on_the_history_s_warnings(work, 
     err = capsys.readouterr().err
     assert "the history warns" in err and "interrupted write" in err, err
     assert "latest complete entry (1" in (out / "report.md").read_text()
+
+
+@POSIX
+def test_a_live_writer_keeps_its_temporary_whatever_its_process_id(tmp_path):
+    """A writer in another PID namespace (a container) has a process id this one cannot see:
+    its temporary is kept while it holds its lock, and cleaned, lock file too, once the lock
+    is free (the kernel frees it when the writer dies). A lock file left by a writer killed
+    after its rename goes too."""
+    import fcntl
+
+    from cadra.atomic import _host
+
+    out = tmp_path / "out"
+    dead, host = _dead_pid(), _host()
+    temp = tmp_path / f".out.cadra-{dead}@{host}-live1234.tmp"
+    temp.mkdir()
+    lock = tmp_path / (temp.name + ".lock")
+    fd = os.open(lock, os.O_CREAT | os.O_RDWR)
+    fcntl.flock(fd, fcntl.LOCK_EX)                  # the live writer, elsewhere
+    try:
+        assert stale_temps(out) == []
+        assert clean_stale_temps(out) == [] and temp.exists() and lock.exists()
+    finally:
+        os.close(fd)                                # the writer dies
+    assert stale_temps(out) == [temp]
+    assert clean_stale_temps(out) == [temp]
+    assert not temp.exists() and not lock.exists()
+    orphan = tmp_path / f".out.cadra-{dead}@{host}-gone5678.tmp.lock"
+    orphan.write_text("")
+    clean_stale_temps(out)
+    assert not orphan.exists()
+    # a write holds its lock while it runs and leaves no lock file behind
+    with atomic_output_dir(out) as tmp:
+        assert (tmp_path / (tmp.name + ".lock")).exists()
+        assert stale_temps(out) == []
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
