@@ -148,6 +148,28 @@ def take_ctrl_c() -> None:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is, so that its clean-up runs as for a Ctrl-C
+    (a write in progress removes its temporary; a recorded history entry is reported)."""
+
+
+#: exit status after SIGTERM: 128 + 15
+EXIT_TERMINATED = 143
+
+
+def take_sigterm() -> None:
+    """Turn SIGTERM (a scheduler's or ``kill``'s polite stop) into :class:`Terminated`, so a
+    command stops as it does on a Ctrl-C (nothing half-written left, one line, status
+    :data:`EXIT_TERMINATED`) instead of dying on the spot."""
+    import signal
+
+    def terminated(signum, frame):
+        raise Terminated()
+
+    with suppress(ValueError, OSError):     # not the main thread: leave it
+        signal.signal(signal.SIGTERM, terminated)
+
+
 #: what a terminal that cannot show a character gets instead (the rest: ``?``)
 PLAIN_TEXT = {"±": "+-", "—": "--", "–": "-", "−": "-", "→": "->", "←": "<-", "×": "x",
               "≤": "<=", "≥": ">=", "≈": "~", "…": "...", "°": " deg", "µ": "u", "²": "^2",
@@ -182,15 +204,20 @@ def plain_text_streams() -> None:
 def console_main(prog: str, body, argv) -> int:
     """Run a console script's ``body(argv)`` to the conventions of docs/cli.md: Ctrl-C ends
     it with one line and status 130 (and is never lost: :func:`take_ctrl_c`), a closed
-    stdout (``| head``) quietly with :data:`EXIT_STDOUT_CLOSED`, a terminal that cannot show
+    stdout (``| head``) quietly with :data:`EXIT_STDOUT_CLOSED`, SIGTERM as Ctrl-C with
+    :data:`EXIT_TERMINATED` (:func:`take_sigterm`), a terminal that cannot show
     a character with a plain-text stand-in (:func:`plain_text_streams`); returns the exit
     status."""
     take_ctrl_c()
+    take_sigterm()
     plain_text_streams()
     try:
         status = body(argv)
         sys.stdout.flush()   # a closed stdout shows here, inside the handler below
         return status
+    except Terminated:
+        print(f"{prog}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
@@ -198,6 +225,6 @@ def console_main(prog: str, body, argv) -> int:
         return stdout_closed()
 
 
-__all__ = ["EXIT_STDOUT_CLOSED", "PLAIN_TEXT", "HelpFormatter", "add_verbosity", "add_version",
-           "console_main", "join_number_lists", "number", "plain_text_streams", "stdout_closed",
-           "take_ctrl_c", "warn"]
+__all__ = ["EXIT_STDOUT_CLOSED", "EXIT_TERMINATED", "PLAIN_TEXT", "HelpFormatter", "Terminated",
+           "add_verbosity", "add_version", "console_main", "join_number_lists", "number",
+           "plain_text_streams", "stdout_closed", "take_ctrl_c", "take_sigterm", "warn"]

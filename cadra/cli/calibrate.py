@@ -72,6 +72,11 @@ def run(args) -> int:
         write_calibration(est, table, comparison, history, out, warnings=hist_warnings,
                           history_file=hfile, entry=entry, append_error=failed,
                           overwrite=args.overwrite)
+    except KeyboardInterrupt:      # Ctrl-C or SIGTERM after the append: say what stands
+        if entry is not None:
+            print(f"cadra2 calibrate: the estimate IS recorded in {hfile} as entry {entry}; "
+                  f"its report ({out}) was not written", file=sys.stderr)
+        raise
     except OSError as exc:
         done = f" (the estimate IS recorded: {hfile}, entry {entry})" if entry else ""
         print(f"cadra2 calibrate: writing {out} failed: {' '.join(str(exc).split())}{done}",

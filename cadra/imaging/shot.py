@@ -225,13 +225,16 @@ def _worker_init(parent_pid: int) -> None:
     (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread polls :func:`os.getppid`. So a
     killed ``cadra1`` (SIGKILL included) leaves no orphan blocked on the pool's pipe. SIGINT is
     ignored here: a terminal's Ctrl-C reaches the whole process group, and the parent alone
-    handles it (it terminates the pool and exits with status 130).
+    handles it (it terminates the pool and exits with status 130). SIGTERM gets its default
+    action back (a command line turns it into an exception, which a worker must not inherit:
+    the pool ends its workers with it).
     """
     import signal
     import sys
     import threading
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)   # the pool ends its workers by SIGTERM
     armed = False
     if sys.platform.startswith("linux"):
         try:
