@@ -626,3 +626,36 @@ def test_a_live_writer_keeps_its_temporary_whatever_its_process_id(tmp_path):
         assert (tmp_path / (tmp.name + ".lock")).exists()
         assert stale_temps(out) == []
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def _disk_full(*args, **kwargs):
+    import errno
+
+    raise OSError(errno.ENOSPC, "No space left on device",
+                  "/somewhere/.out.cadra-1@host-abcd1234.tmp/plots/residuals.png")
+
+
+def test_a_full_disk_loses_no_fit_and_names_the_output(work, tmp_path, capsys, monkeypatch):
+    """The disk fills while the fit's outputs are written: the finished result is printed
+    (even under -q), one line names the output the user gave (not the hidden temporary),
+    status 1; simulate alike. (A read-only folder cannot be tested as root; the same
+    OSError path.)"""
+    import cadra.report.fit
+    import cadra.synthetic.simulate
+
+    monkeypatch.setattr(cadra.report.fit, "write_fit_outputs", _disk_full)
+    out = tmp_path / "fit"
+    code = cadra2(["fit", str(work / "m2_stage1"), "--model", "m2_m070", "--max-iterations",
+                   "3", "-o", str(out), "-q"])
+    cap = capsys.readouterr()
+    assert code == 1
+    assert f"could not write {out}: No space left on device" in cap.err
+    assert ".cadra-" not in cap.err and "Traceback" not in cap.err
+    assert "Cm_A1" in cap.out                         # the result, not lost
+    monkeypatch.setattr(cadra.synthetic.simulate, "write_shot", _disk_full)
+    out = tmp_path / "sim"
+    assert cadra2(["simulate", str(work / "specs" / "small.toml"), "-o", str(out),
+                   "--no-images", "-q"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"cadra2 simulate: could not write {out}: No space left on device " \
+                  "(nothing written)", err

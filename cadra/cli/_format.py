@@ -44,6 +44,12 @@ def number(kind=float, low=None, high=None, *, above=False):
     return parse
 
 
+def write_error(exc: OSError) -> str:
+    """Why a write failed, without the hidden temporary's path the error names (the message
+    names the output the user gave): ``No space left on device``, ``Permission denied``."""
+    return exc.strerror or type(exc).__name__
+
+
 def warn(prog: str, text: str) -> None:
     """A warning on a result (a chi^2/nu far above 1, one shot given to the quasi-linear step,
     a parameter at a bound): one line on stderr, ``PROG: warning: TEXT``, never hidden by
@@ -227,4 +233,5 @@ def console_main(prog: str, body, argv) -> int:
 
 __all__ = ["EXIT_STDOUT_CLOSED", "EXIT_TERMINATED", "PLAIN_TEXT", "HelpFormatter", "Terminated",
            "add_verbosity", "add_version", "console_main", "join_number_lists", "number",
-           "plain_text_streams", "stdout_closed", "take_ctrl_c", "take_sigterm", "warn"]
+           "plain_text_streams", "stdout_closed", "take_ctrl_c", "take_sigterm", "warn",
+           "write_error"]

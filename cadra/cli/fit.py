@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from cadra.cli import _inputs as cli
-from cadra.cli._format import warn
+from cadra.cli._format import warn, write_error
 from cadra.cli._inputs import Command
 
 #: chi^2/nu above which a converged fit is said not to describe the data
@@ -84,16 +84,24 @@ def run(args) -> int:
                                             "(docs/aero_models.md): the fitted values, written "
                                             "by cadra2 fit"),
              "config.toml": toml_text(config, "cadra2 fit: the command's settings")}
-    write_fit_outputs(result, shots, out, overwrite=args.overwrite, plots=not args.no_plots,
-                      start_model=start, extra_files=extra, notes=notes, reference=reference)
+    try:
+        write_fit_outputs(result, shots, out, overwrite=args.overwrite,
+                          plots=not args.no_plots, start_model=start, extra_files=extra,
+                          notes=notes, reference=reference)
+    except OSError as exc:   # a read-only folder, a full disk: the result is not lost
+        print_result(result, args, full=True)
+        print(f"cadra2 fit: could not write {out}: {write_error(exc)}; the result is printed "
+              "above, nothing was written", file=sys.stderr)
+        return 1
     print_result(result, args)
     cli.say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
     return 0 if result.converged else 1
 
 
-def print_result(result, args) -> None:
+def print_result(result, args, full: bool = False) -> None:
     """The status line (stdout when converged, stderr otherwise) and the warnings (stderr,
-    also under -q), then unless -q the result's report (:meth:`FitResult.report`)."""
+    also under -q), then unless -q (or if ``full``) the result's report
+    (:meth:`FitResult.report`)."""
     line = result.status_line()
     if result.converged:
         print(line)
@@ -106,8 +114,8 @@ def print_result(result, args) -> None:
              "(report.md)")
     for w in result.warnings:
         warn("cadra2 fit", w)
-    if not cli.quiet(args):
-        print(result.report(verbose=cli.verbose(args), status=False, warnings=False))
+    if full or not cli.quiet(args):
+        print(result.report(verbose=full or cli.verbose(args), status=False, warnings=False))
 
 
 #: the subcommands this module runs

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from cadra.cli import _inputs as cli
+from cadra.cli._format import write_error
 from cadra.cli._inputs import Command
 
 
@@ -34,6 +35,10 @@ def run_simulate(args) -> int:
         msg = str(exc)  # errors of the spec file name it already
         where = "" if msg.startswith(str(args.spec)) else f"{args.spec}: "
         print(f"cadra2 simulate: {where}{msg}", file=sys.stderr)
+        return 1
+    except OSError as exc:   # a read-only folder, a full disk: the output as the user named it
+        print(f"cadra2 simulate: could not write {out}: {write_error(exc)} (nothing written)",
+              file=sys.stderr)
         return 1
     if cli.verbose(args):
         print(truth_text(shot))
