@@ -230,6 +230,12 @@ BAD_FILES = [
      "mass.inertia_g_cm2: principal moments"),
     (_set("mass", "inertia_g_cm2", [[100.0, 0, "x"], [0, 80.0, 0], [0, 0, 80.0]]),
      "mass.inertia_g_cm2[0][2]: expected a number"),
+    # M2's inertia in kg m^2 under the g cm^2 key (1.07e-5 kg m^2 = 106.9 g cm^2), and one
+    # whose radius of gyration is larger than the model (g mm^2 read as g cm^2, x100)
+    (_set("mass", "inertia_g_cm2", [[1.06852e-5, 0, 0], [0, 8.3709e-6, 0], [0, 0, 8.2135e-6]]),
+     "is a radius of gyration of 0.000285 cm for 101.02 g, outside [0.01, 1]"),
+    (_set("mass", "inertia_g_cm2", [[10685.2, 0, 0], [0, 8370.9, 0], [0, 0, 8213.5]]),
+     "mass.inertia_g_cm2: a principal moment of 8214 g cm^2 is a radius of gyration"),
     (_set("model", "d_cm", 0.0), "model.d_cm"),
     (_set("model", "kind", "brick"), "model.kind"),
     # a known kind with another kind's keys: the body spec names the key

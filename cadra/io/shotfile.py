@@ -53,6 +53,12 @@ INERTIA_MAX_G_CM2 = 1e9
 #: models ~0.1, plastics ~1, steel ~8, tungsten ~19 (osmium, the densest metal, 22.6). A mass
 #: in kg written as grams, or a diameter 10x too large, lands below 0.1 (docs/shot_file.md)
 DENSITY_G_CM3_RANGE = (0.1, 25.0)
+#: plausible radius of gyration sqrt(I / m) of a model about a principal axis, as a fraction
+#: of its largest dimension: a solid body's lies at ~0.05-0.6 of it (a cylinder about its
+#: axis 0.35 d, a sphere 0.32 d, a long rod about a transverse axis 0.29 L); no mass lies
+#: beyond the body, and a value 1e-3 of it is an inertia in kg m^2 written under the g cm^2
+#: key (1 kg m^2 = 1e7 g cm^2)
+GYRATION_FRACTION_RANGE = (0.01, 1.0)
 #: Model-spec keys that are a size (must be > 0); other length keys need only |x| < 1 m.
 MODEL_SIZE_KEYS = ("d", "diameter", "h", "length", "l")
 
@@ -380,6 +386,24 @@ def _check_density(model: dict, mass: MassProperties) -> None:
             f"mass.mass_g: {m_g:g} g in the model's {volume_cm3:.4g} "
             f"cm^3 is a density of {rho:.3g} g/cm^3, outside [{lo:g}, {hi:g}] -- a mass in kg "
             f"written as grams, or a model dimension in the wrong unit (model.*_cm)?")
+    _check_gyration(body, mass)
+
+
+def _check_gyration(body, mass: MassProperties) -> None:
+    """Each principal radius of gyration within :data:`GYRATION_FRACTION_RANGE` of the body's
+    largest dimension: catches an inertia in kg m^2 (or in g mm^2) under the g cm^2 keys."""
+    size_cm = 100.0 * max(body.diameter_m, body.length_m)
+    eig_g_cm2 = units.from_si(np.linalg.eigvalsh(mass.inertia_model_kg_m2), "g_cm2")
+    m_g = units.from_si(mass.mass_kg, "g")
+    lo, hi = GYRATION_FRACTION_RANGE
+    for moment in (eig_g_cm2[0], eig_g_cm2[-1]):
+        k_cm = float(np.sqrt(max(moment, 0.0) / m_g))
+        if not lo * size_cm <= k_cm <= hi * size_cm:
+            raise ShotFileError(
+                f"mass.inertia_g_cm2: a principal moment of {moment:.4g} g cm^2 is a radius "
+                f"of gyration of {k_cm:.3g} cm for {m_g:g} g, outside [{lo:g}, {hi:g}] x the "
+                f"model's {size_cm:.3g} cm -- an inertia in kg m^2 (x 1e7 g cm^2) or another "
+                f"unit under the g cm^2 keys?")
 
 
 def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) -> ShotFile:
