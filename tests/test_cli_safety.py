@@ -659,3 +659,13 @@ def test_a_full_disk_loses_no_fit_and_names_the_output(work, tmp_path, capsys, m
     err = capsys.readouterr().err.strip()
     assert err == f"cadra2 simulate: could not write {out}: No space left on device " \
                   "(nothing written)", err
+
+
+def test_a_multi_fit_of_different_bodies_is_refused_at_once(work, capsys):
+    """A capsule and a sphere under one model: refused before any fitting, naming both
+    (it ran ~30 s to "not converged")."""
+    code = cadra2(["fit", str(work / "m2_stage1"), str(work / "sphere_stage1"), "--model",
+                   "m2_m070", "-o", str(work / "never"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 1 and "different bodies" in err and "capsule" in err and "sphere" in err
+    assert not (work / "never").exists()

@@ -18,7 +18,7 @@ import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.channels import ANGLE, POSITION
-from cadra.fitting.problem import FitProblem, result_problem
+from cadra.fitting.problem import FitProblem, check_one_body, result_problem
 from cadra.fitting.result import FitResult
 from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
 from cadra.fitting.solver import FitOptions, fit
@@ -79,6 +79,7 @@ def _fit_shots(shots, model, *, options, auto_start, initial, continuation, loca
     """:func:`fit_shots` without the variance components."""
     options = options or FitOptions()
     shots = list(shots)
+    check_one_body(shots)          # at once, not after the starting values
     staged = continuation is not None and any(
         np.nanmin(s.sigma[:, POSITION]) < continuation["position_m"]
         or (s.has_angles and np.nanmin(s.sigma[:, ANGLE]) < continuation["angle_rad"])

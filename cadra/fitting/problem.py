@@ -100,6 +100,17 @@ def _axisymmetric(data: ShotData, model: AeroModel | None) -> bool:
     return bool(abs(I[1, 1] - I[2, 2]) <= 1e-3 * I[1, 1] and off <= 1e-3 * I[1, 1])
 
 
+
+def check_one_body(shots: Sequence[ShotData]) -> None:
+    """Refuse (``ValueError``) shots of different kinds of body in one fit: they share one
+    aerodynamic model, which only the same body has (a capsule and a sphere fitted together
+    ran to "not converged" instead)."""
+    kinds = {s.body_kind for s in shots}
+    if len(kinds) > 1:
+        listed = ", ".join(f"{s.shot_id}: {s.body_kind}" for s in shots)
+        raise ValueError(f"fit: the shots are of different bodies ({listed}); one "
+                         "aerodynamic model describes one body: fit them separately")
+
 @dataclass(frozen=True, eq=False)
 class FitProblem:
     """The forward model of a fit (module doc).
@@ -133,6 +144,7 @@ class FitProblem:
             raise ValueError("fit: one initial state per shot is needed")
         if len({s.shot_id for s in shots}) != len(shots):
             raise ValueError("fit: a shot is listed twice")
+        check_one_body(shots)
         extras = tuple(self.extras)
         if len({e.name for e in extras}) != len(extras) or any(e.name in self.model.names
                                                                 for e in extras):
@@ -451,4 +463,4 @@ def result_problem(result, shots: Sequence[ShotData] | None = None) -> FitProble
                       Integration(**integ) if integ else Integration())
 
 
-__all__ = ["FitProblem", "default_local_free", "result_problem"]
+__all__ = ["FitProblem", "check_one_body", "default_local_free", "result_problem"]
