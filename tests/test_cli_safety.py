@@ -669,3 +669,18 @@ def test_a_multi_fit_of_different_bodies_is_refused_at_once(work, capsys):
     err = capsys.readouterr().err
     assert code == 1 and "different bodies" in err and "capsule" in err and "sphere" in err
     assert not (work / "never").exists()
+
+
+def test_a_shot_file_naming_a_missing_facility_is_warned_about(work, tmp_path, capsys):
+    import shutil
+
+    shot = tmp_path / "m2"
+    shutil.copytree(work / "m2", shot, ignore=shutil.ignore_patterns("images"))
+    text = (shot / "shot.toml").read_text()
+    (shot / "shot.toml").write_text(text.replace('facility = "hffaf"', 'facility = "hfaff"'))
+    stage1 = tmp_path / "m2_stage1"
+    shutil.copytree(work / "m2_stage1", stage1)
+    cadra2(["fit", str(stage1), "--shot", str(shot / "shot.toml"), "--model", "m2_m070",
+            "--max-iterations", "2", "-o", str(tmp_path / "fit"), "-q", "--no-plots"])
+    err = capsys.readouterr().err
+    assert "the facility 'hfaff' the shot file names is not found" in err, err

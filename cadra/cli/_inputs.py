@@ -9,7 +9,7 @@ from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 
-from cadra.cli._format import number
+from cadra.cli._format import number, warn
 
 #: what a refused input raises (FitDataError, SpecError, CalibrationError and a missing model
 #: are ValueErrors; unknown parameter names KeyErrors)
@@ -98,12 +98,24 @@ def model_of(args):
 
 
 def shots_of(args):
-    """The shots named on the command line and their trajectory files."""
+    """The shots named on the command line and their trajectory files; a facility a shot
+    file names that cannot be found is warned about (a typo: the fit itself does not need
+    the facility, a bias table and the report's provenance do)."""
     from cadra.flight.load import load_shots
+    from cadra.io.facility_file import resolve_facility_path
 
-    return load_shots(args.trajectories, args.shot, sigma_time_s=args.sigma_time_s,
-                      min_sigma_position_m=args.min_sigma_position_m,
-                      min_sigma_angle_deg=args.min_sigma_angle_deg)
+    out = load_shots(args.trajectories, args.shot, sigma_time_s=args.sigma_time_s,
+                     min_sigma_position_m=args.min_sigma_position_m,
+                     min_sigma_angle_deg=args.min_sigma_angle_deg)
+    for name in sorted({s.facility for s in out[0] if s.facility}):
+        try:
+            found = resolve_facility_path(name).is_file()
+        except (ValueError, OSError, KeyError):
+            found = False
+        if not found:
+            warn(f"cadra2 {args.command}", f"the facility {name!r} the shot file names is not "
+                 "found (a typo?); the fit goes on without it")
+    return out
 
 
 def input_paths(args) -> list[Path]:
