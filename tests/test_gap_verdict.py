@@ -159,3 +159,18 @@ def test_a_held_blank_cell_that_is_a_library_term_is_offered_once():
     # and the test can tell a different term: Cmq_A2 is not the Mach term
     lib = {c.name: c for c in library(m1, [1], 1.08)}
     assert not same_term(m1, lib["held Cmq_A2"], lib["Mach dependence of Cm"], 1.10)
+
+
+def test_an_underdetermined_fit_is_not_diagnosed():
+    """No degrees of freedom (more unknowns than measurements; chi^2/dof NaN): refused with
+    the counts, where a verdict was given on nothing."""
+    from types import SimpleNamespace
+
+    from cadra.gap.score import diagnose_gap
+
+    fit = SimpleNamespace(dof=-17, chi2=0.0, n_observations=10, n_free=27)
+    with pytest.raises(ValueError, match="10 measurements for 27 unknowns"):
+        diagnose_gap(fit, [])
+    fit = SimpleNamespace(dof=40, chi2=float("nan"), n_observations=67, n_free=27)
+    with pytest.raises(ValueError, match="underdetermined"):
+        diagnose_gap(fit, [])

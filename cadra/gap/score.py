@@ -477,7 +477,14 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     unexplained offset there and the ranking is redone with it: an effect that left it
     standing and is not found again is not the explanation (``dropped``).
     ``model``: the model as given to the fit (default ``result.model``): the library is built
-    for it, and fits from scratch start from its values (:func:`fresh_fit`)."""
+    for it, and fits from scratch start from its values (:func:`fresh_fit`).
+
+    Raises ``ValueError`` for a fit with no degrees of freedom or no finite chi^2 (an
+    underdetermined fit has no gap to diagnose: every test would be on nothing)."""
+    if result.dof <= 0 or not math.isfinite(result.chi2):
+        raise ValueError(f"the fit has {result.n_observations} measurements for "
+                         f"{result.n_free} unknowns (chi^2 {result.chi2:.4g}): underdetermined, "
+                         "there is no gap to diagnose; hold parameters or add shots")
     integ = integ or Integration()
     model = model or result.model
     shots = list(shots)
