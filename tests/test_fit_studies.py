@@ -309,3 +309,16 @@ def test_hold_one_fig15_m1_peak_width_trade():
     assert np.all(np.diff(table["Cmq_A1"].to_numpy()) > 0)
     rms = table["sigma_rms_deg"].to_numpy()
     assert int(np.argmin(rms)) == i0 and rms[i0] < 1e-3
+
+
+def test_the_lowest_chi2_of_a_hold_one_study_is_a_converged_one():
+    """A failed refit reports chi^2 0 (or its start's): it is never the study's best."""
+    import pandas as pd
+
+    from cadra.studies.holdone import lowest_converged
+
+    table = pd.DataFrame({"value": [1.0, 2.0, 3.0], "converged": [True, False, True],
+                          "chi2": [120.0, 0.0, 95.0]})
+    assert lowest_converged(table) == 3.0
+    table["converged"] = False
+    assert lowest_converged(table) is None

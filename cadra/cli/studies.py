@@ -65,7 +65,7 @@ def run_holdone(args) -> int:
     from cadra.fitting import FitOptions, fit_shots
     from cadra.fitting.inputs import values_to_si
     from cadra.report.studies import write_hold_one
-    from cadra.studies.holdone import hold_one_study
+    from cadra.studies.holdone import hold_one_study, lowest_converged
 
     out = Path(args.output)
     try:
@@ -91,10 +91,10 @@ def run_holdone(args) -> int:
         print(table.to_string(index=False))
     elif not cli.quiet(args):
         print(table[[c for c in cols if c in table]].to_string(index=False))
-    best = table.loc[table["chi2"].idxmin(), "value"] if table["chi2"].notna().any() else None
+    best = lowest_converged(table)
     print(f"holdone: {args.param} held at {len(table)} values, "
           f"{int(table['converged'].sum())} converged"
-          + (f"; chi^2 lowest at {best:g}" if best is not None else ""))
+          + (f"; chi^2 lowest at {best:g} (of the converged)" if best is not None else ""))
     cli.say(args, f"wrote {out}/ (hold_one.csv, hold_one.png)")
     return 0 if table["converged"].all() else 1
 

@@ -8,6 +8,7 @@ scheduler can ship.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -39,10 +40,12 @@ def hold_one_refit(shots: Sequence[ShotData], model: AeroModel, initial_states, 
     m = model.with_vary({name: False}).with_values({name: float(value)})
     res = fit(list(shots), m, [np.asarray(y, dtype=float) for y in initial_states],
               options=options)
+    failed = res.status == "failed"   # its chi^2 (0 or a start's) belongs to no fit
     row = {"held": name, "value": float(value), "status": res.status,
-           "converged": bool(res), "iterations": res.iterations, "chi2": res.chi2,
+           "converged": bool(res), "iterations": res.iterations,
+           "chi2": math.nan if failed else res.chi2,
            "n_observations": res.n_observations, "dof": res.dof,
-           "reduced_chi2": res.reduced_chi2}
+           "reduced_chi2": math.nan if failed else res.reduced_chi2}
     row.update(rms_columns(res.rms()))
     row["sigma_rms_deg"] = sigma_residual_rms_deg(res, shots, options.integration)
     row.update(parameter_columns(res, exclude=name))
@@ -99,4 +102,11 @@ def hold_one_study(shots: Sequence[ShotData], model: AeroModel, initial_states: 
     return pd.DataFrame(rows).reset_index(drop=True)
 
 
-__all__ = ["hold_one_refit", "hold_one_study"]
+def lowest_converged(table: pd.DataFrame) -> float | None:
+    """The held value whose refit converged with the lowest chi^2 (None if none converged):
+    a failed refit's chi^2 belongs to no fit, however low."""
+    ok = table[table["converged"].astype(bool) & table["chi2"].notna()]
+    return float(ok.loc[ok["chi2"].idxmin(), "value"]) if len(ok) else None
+
+
+__all__ = ["hold_one_refit", "hold_one_study", "lowest_converged"]
