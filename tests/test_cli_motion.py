@@ -240,3 +240,27 @@ def test_a_long_record_gets_sectional_fits_and_the_kb_reduction(traj, tmp_path):
     assert "sectional.png" in files and (tmp_path / "out" / "sectional.png").is_file()
     table = pd.read_csv(tmp_path / "out" / "coefficients.csv")
     assert list(table["method"]) == ["linear theory (time)", "Kryloff-Bogoliuboff (time)"]
+
+
+def test_constant_angles_hold_no_motion_to_reduce(tmp_path, capsys):
+    """The angles held at their mean (noise alone): refused in one line, where coefficients
+    with tiny sigmas came out of the noise."""
+    t = pd.read_csv(SAMPLE / "truth.csv")
+    rng = np.random.default_rng(3)
+    n = len(t)
+    table = pd.DataFrame({
+        "station": t["station"].to_numpy(), "t_s": t["t_s"].to_numpy(), "status": "ok",
+        **{f"{c}_m": t[f"{c}_m"] + rng.normal(0, SIGMA_POS, n) for c in "xyz"},
+        **{f"{c}_deg": t[f"{c}_deg"].mean() + rng.normal(0, SIGMA_DEG, n)
+           for c in ("theta", "psi")},
+        **{f"sigma_{c}_m": SIGMA_POS for c in "xyz"},
+        **{f"sigma_{c}_deg": SIGMA_DEG for c in ("theta", "psi")},
+        "x_top_minus_side_m": 0.0, "x_consistency": 0.0, "reason": "", "warnings": ""})
+    path = tmp_path / "flat.csv"
+    write_trajectory(path, table.loc[:, list(COLUMNS)],
+                     {"shot_id": "CONE-1", "shot_file": str(SAMPLE / "shot.toml")})
+    out = tmp_path / "out"
+    assert cadra2_main(["motion", str(path), "-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no angular motion above the noise" in err, err
+    assert not out.exists()

@@ -191,6 +191,23 @@ def min_points(trim: bool, offset: bool) -> int:
     return max(n_const // 2 + 2, 6)
 
 
+#: a record whose angles scatter about their mean by less than this many of their own sigmas
+#: holds no angular motion above its noise: nothing to reduce (constant angles gave
+#: coefficients with tiny sigmas from the noise alone)
+MIN_MOTION_SIGMAS = 3.0
+
+
+def _check_motion(shot: ShotData, fp) -> None:
+    """Refuse (``ValueError``) a record with no angular motion above its noise."""
+    rms = math.hypot(float(np.std(fp.alpha)), float(np.std(fp.beta))) / math.sqrt(2.0)
+    sigma = float(np.median(np.hypot(fp.sigma_alpha, fp.sigma_beta))) / math.sqrt(2.0)
+    if not rms > MIN_MOTION_SIGMAS * sigma:
+        raise ValueError(f"{_name(shot)}: the angles scatter {math.degrees(rms):.3g} deg rms "
+                         f"about their mean, {rms / max(sigma, 1e-300):.2g} of their sigma "
+                         f"({math.degrees(sigma):.3g} deg): no angular motion above the noise, "
+                         "nothing to reduce")
+
+
 def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | None = None,
                  offset: bool = False, nonrolling: bool = False, degree: int = 2,
                  window: int | None = None, step: int | None = None) -> ShotMotion:
@@ -214,6 +231,7 @@ def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | No
     if t.size < need:
         raise ValueError(f"{_name(shot)}: {t.size} station(s) with position and both angles "
                          f"(theta, psi) measured; the {form} fit needs at least {need}")
+    _check_motion(shot, fp)
     cond, _ = conditions_of(shot, spin or 0.0, variable)
     s = fp.x_m if variable == "distance" else t
     per_s = cond.speed_m_s if variable == "distance" else 1.0
