@@ -93,8 +93,27 @@ def test_cadra2_roll_refusals(tmp_path, capsys):
     traj, _ = _files(tmp_path, axis=False, duration_s=2.0)
     assert main(["roll", str(traj), "-o", str(tmp_path / "a")]) == 1
     assert "give --alpha-deg" in capsys.readouterr().err
-    assert main(["roll", str(traj), "-o", str(tmp_path / "b"), "--alpha-deg", "95"]) == 1
-    assert "not an angle of attack" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:       # a usage error, before anything is read
+        main(["roll", str(traj), "-o", str(tmp_path / "b"), "--alpha-deg", "95"])
+    assert exc.value.code == 2
+    assert "argument --alpha-deg: must be a finite number >= -90 and <= 90" in \
+        capsys.readouterr().err
     assert main(["roll", str(traj), "-o", str(tmp_path / "c"), "--window", "4"]) == 1
     assert "--window" in capsys.readouterr().err
     assert not any((tmp_path / d).exists() for d in "abc")
+
+
+def test_a_constant_roll_angle_holds_nothing_to_fit(tmp_path, capsys):
+    """The roll held at one angle (noise alone): refused in one line, where it printed
+    "converged" with a steady spin of -5e16 and infinite sigmas."""
+    traj, _ = _files(tmp_path, duration_s=2.0)
+    text = traj.read_text().splitlines()
+    head = [line for line in text if line.startswith("#")]
+    table = pd.read_csv(traj, comment="#")
+    rng = np.random.default_rng(9)
+    table["phi_deg"] = 41.16 + rng.normal(0, case.SIGMA_DEG, len(table))
+    traj.write_text("\n".join(head) + "\n" + table.to_csv(index=False))
+    assert main(["roll", str(traj), "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no roll motion above the noise" in err, err
+    assert not (tmp_path / "out").exists()

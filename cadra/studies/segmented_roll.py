@@ -544,8 +544,12 @@ def records_of(shots):
         if ok.sum() < 8:
             raise ValueError(f"{name}: {int(ok.sum())} frame(s) with a measured roll (phi); "
                              "a roll record needs at least 8")
-        out.append(RollRecord(s.shot_id, s.t_s[ok], np.unwrap(s.meas[ok, k]),
-                              float(np.median(s.sigma[ok, k]))))
+        phi, sigma = np.unwrap(s.meas[ok, k]), float(np.median(s.sigma[ok, k]))
+        if not float(np.std(phi)) > 3.0 * sigma:
+            raise ValueError(f"{name}: the roll angle scatters {np.degrees(np.std(phi)):.3g} "
+                             f"deg rms about its mean, {np.std(phi) / max(sigma, 1e-300):.2g} "
+                             "of its sigma: no roll motion above the noise, nothing to fit")
+        out.append(RollRecord(s.shot_id, s.t_s[ok], phi, sigma))
     r0 = shots[0].rigid
     for s in shots[1:]:
         if (s.rigid.mode != r0.mode or not np.allclose(s.rigid.phys(), r0.phys())):
