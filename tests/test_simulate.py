@@ -464,3 +464,28 @@ def test_a_spec_model_path_never_falls_back_to_the_bundled_model(tmp_path):
     save_model(load_bundled_model("m2_m070").with_values({"Cnr_A1": 0.5}),
                tmp_path / "no_such_dir" / "m2_m070.toml")
     assert simulate_shot(load_shot_spec(spec_path)).model.parameter("Cnr_A1").value == 0.5
+
+
+def test_a_form_undefined_where_the_flight_goes_is_named(tmp_path, capsys):
+    """sin(sigma)/sigma is NaN at sigma = 0, where a shot launched straight flies: the
+    simulation names the coefficient and the term, not the stations (it ended in a
+    traceback about light-sheet crossings)."""
+    from cadra.cli.cadra2 import main
+
+    root = Path(__file__).resolve().parents[1]
+    model = (root / "cadra" / "aero" / "models" / "cone_linear.toml").read_text()
+    (tmp_path / "cone_bad.toml").write_text(
+        model.replace('CL = "CL_a*sin(sigma)"', 'CL = "CL_a*sin(sigma)/sigma"'))
+    spec = (root / "sample_shots" / "specs" / "cone_1.toml").read_text()
+    spec = "\n".join(f'aero_model = "{tmp_path / "cone_bad.toml"}"'
+                     if line.startswith("aero_model") else
+                     "theta_deg = 0.0" if line.startswith("theta_deg") else
+                     "psi_deg = 0.0" if line.startswith("psi_deg") else line
+                     for line in spec.splitlines())
+    (tmp_path / "spec.toml").write_text(spec)
+    assert main(["simulate", str(tmp_path / "spec.toml"), "-o", str(tmp_path / "out"),
+                 "--no-images", "-q"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err
+    assert "coefficient CL is not finite" in err and "sin(sigma) / sigma" in err, err
+    assert not (tmp_path / "out").exists()

@@ -374,12 +374,14 @@ class AeroModel:
                     f"{max(CHECK_MACH)}, the parameters' values): the term "
                     f"{to_text(bad[0])} is {v}")
 
-    def nonfinite_note(self, params=None) -> str:
-        """``""`` when every coefficient is finite at :meth:`check_points` with ``params``
-        (default :meth:`values`), else ``"; coefficient CD is not finite at alpha=..,
-        mach=..: the term exp(1000.0 * mach) is inf"`` (for a fit's failure message)."""
+    def nonfinite_note(self, params=None, points: dict | None = None) -> str:
+        """``""`` when every coefficient is finite at ``points`` (variable name -> (n,) array;
+        default :meth:`check_points`) with ``params`` (default :meth:`values`), else ``";
+        coefficient CD is not finite at alpha=.., mach=..: the term exp(1000.0 * mach) is
+        inf"`` (for a fit's or a simulation's failure message)."""
         p = self.values() if params is None else np.asarray(params, dtype=float)
-        pts = self.check_points()
+        pts = self.check_points() if points is None else {
+            k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in points.items()}
         pmap = dict(zip(self.names, p.tolist(), strict=True))
         for k, tree in self._trees.items():
             bad = nonfinite_origin(tree, pts, pmap, everywhere=False)

@@ -56,8 +56,40 @@ EXPOSURE_S = 35e-9
 _NO_BIAS = (0.0, 0.0, 0.0, 0.0)
 
 
+def _crossings(y0, rigid: RigidBody, program, params, x_planes, dt_max: float, model=None):
+    """:func:`crossing_times`, or a :class:`SpecError` saying why the model never gets
+    there: the first coefficient that is not finite where the flight went (a form undefined
+    at a reachable point, e.g. ``sin(beta)/beta`` at 0), else the integrator's message."""
+    try:
+        return crossing_times(y0, rigid, program, params, x_planes, dt_max=dt_max)
+    except RuntimeError as exc:
+        note = "" if model is None else _nonfinite_on_the_way(y0, rigid, program, params,
+                                                              x_planes, dt_max, model)
+        raise SpecError(f"the flight cannot be simulated{note or f': {exc}'}") from None
+
+
+def _nonfinite_on_the_way(y0, rigid, program, params, x_planes, dt_max, model) -> str:
+    """Where the propagated flight first turns non-finite, the aero model's first non-finite
+    coefficient at the last finite state (:meth:`AeroModel.nonfinite_note`), or ""."""
+    from cadra.dynamics.observe import air_angles
+
+    span = float(np.max(x_planes) - y0[0]) / max(float(np.linalg.norm(y0[3:6])), 1e-9)
+    times = np.linspace(0.0, max(span, 1e-6), 200)
+    states = propagate_states(y0, 0.0, times, rigid.phys(), program, params, dt_max)
+    finite = np.all(np.isfinite(states), axis=1)
+    k = int(np.argmin(finite)) if not finite.all() else len(times)
+    at = states[max(k - 1, 0)] if k > 0 else y0
+    a = air_angles(at[None, :], rigid)
+    pts = {"alpha": a["alpha_rad"], "beta": a["beta_rad"], "sigma": a["sigma_rad"],
+           "mach": a["mach"], "reynolds": np.array([1e6]), "p_hat": a["p_hat"],
+           "q_hat": a["q_hat"], "r_hat": a["r_hat"], "phi": a["phi_rad"]}
+    with np.errstate(all="ignore"):
+        note = model.nonfinite_note(params, pts)
+    return f" (t = {times[max(k - 1, 0)]:.4g} s){note}" if note else ""
+
+
 def aim_launch(launch: Launch, rigid: RigidBody, program, params, x_first: float,
-               x_last: float, dt_max: float = DT_MAX_DEFAULT) -> Launch:
+               x_last: float, dt_max: float = DT_MAX_DEFAULT, model=None) -> Launch:
     """Slant the gun (seed 004 Fig. 5) so the path's vertical and lateral excursions are centred.
 
     The reference point's z(t) and y(t) between the first and last station are fitted by
@@ -67,7 +99,7 @@ def aim_launch(launch: Launch, rigid: RigidBody, program, params, x_first: float
     """
     for _ in range(3):
         y0 = launch.state(rigid)
-        t = crossing_times(y0, rigid, program, params, [x_first, x_last], dt_max=dt_max)
+        t = _crossings(y0, rigid, program, params, [x_first, x_last], dt_max, model)
         tt = np.linspace(0.0, t[1], 41)
         obs_t = propagate_states(y0, 0.0, tt, rigid.phys(), program, params, dt_max)
         from cadra.dynamics.observe import observe
@@ -203,11 +235,11 @@ def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> Simulated
     launch = spec.launch
     if spec.aim == "centre":
         launch = aim_launch(launch, rigid, program, params, x_planes[0], x_planes[-1],
-                            spec.dt_max_s)
+                            spec.dt_max_s, model)
     y0 = launch.state(rigid)
     if not launch.x_m < x_planes[0]:
         raise SpecError("launch.x_m: the launch point must be upstream of the first station")
-    t_abs = crossing_times(y0, rigid, program, params, x_planes, dt_max=spec.dt_max_s)
+    t_abs = _crossings(y0, rigid, program, params, x_planes, spec.dt_max_s, model)
     states = propagate_states(y0, 0.0, t_abs, rigid.phys(), program, params, spec.dt_max_s)
     if not np.all(np.isfinite(states)):
         raise SpecError("launch: the trajectory diverged (non-finite state)")
