@@ -117,3 +117,25 @@ def test_a_constant_roll_angle_holds_nothing_to_fit(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "no roll motion above the noise" in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_each_frame_keeps_its_own_roll_sigma(tmp_path):
+    """A record whose frames carry different sigmas (a blurred stretch): each frame is
+    weighted by its own, where the record's median replaced them all without a word."""
+    from cadra import channels
+    from cadra.flight.load import load_shots
+    from cadra.studies.segmented_roll import choose_segments, records_of, segment_shots
+
+    traj, _ = _files(tmp_path, duration_s=2.0)
+    head = [line for line in traj.read_text().splitlines() if line.startswith("#")]
+    table = pd.read_csv(traj, comment="#")
+    sig = np.where(np.arange(len(table)) < len(table) // 2, 0.25, 1.0)
+    table["sigma_phi_deg"] = sig
+    traj.write_text("\n".join(head) + "\n" + table.to_csv(index=False))
+    shots, _ = load_shots([traj])
+    (record,) = records_of(shots)
+    np.testing.assert_allclose(np.degrees(record.sigmas), sig)
+    seg = choose_segments(record)[0]
+    (data,) = segment_shots(record, [seg], shots[0].rigid)
+    k = channels.NAMES.index("phi")
+    np.testing.assert_allclose(np.degrees(data.sigma[:, k]), sig[seg.start:seg.stop])

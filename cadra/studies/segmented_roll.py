@@ -84,13 +84,13 @@ class RollRecord:
     t_s : (n,) frame times, s, increasing (a constant frame rate is not required).
     phi_rad : (n,) measured roll angle, rad, on any branch (0-2 pi as the paper plots it, or
         continuous): consecutive frames must turn by less than pi.
-    sigma_rad : the measurement's 1-sigma, rad.
+    sigma_rad : the measurement's 1-sigma, rad: one for every frame, or (n,), each frame's.
     """
 
     name: str
     t_s: np.ndarray
     phi_rad: np.ndarray
-    sigma_rad: float
+    sigma_rad: float | np.ndarray
 
     def __post_init__(self):
         t = np.asarray(self.t_s, dtype=float)
@@ -99,10 +99,18 @@ class RollRecord:
             raise ValueError(f"{self.name}: t_s and phi_rad must be 1-D of one length >= 8")
         if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0) and np.all(np.isfinite(phi))):
             raise ValueError(f"{self.name}: times must increase and every value be finite")
-        if not self.sigma_rad > 0:
-            raise ValueError(f"{self.name}: sigma_rad must be positive")
+        sig = np.asarray(self.sigma_rad, dtype=float)
+        if sig.shape not in ((), t.shape) or not np.all(np.isfinite(sig) & (sig > 0)):
+            raise ValueError(f"{self.name}: sigma_rad must be positive and finite, one value "
+                             "or one per frame")
         object.__setattr__(self, "t_s", t)
         object.__setattr__(self, "phi_rad", phi)
+        object.__setattr__(self, "sigma_rad", float(sig) if sig.ndim == 0 else sig)
+
+    @property
+    def sigmas(self) -> np.ndarray:
+        """(n,) each frame's sigma, rad."""
+        return np.broadcast_to(np.asarray(self.sigma_rad, dtype=float), self.t_s.shape)
 
 
 def smoothed_roll(record: RollRecord, window: int = 11, order: int = 3):
@@ -240,7 +248,7 @@ def segment_shots(record: RollRecord, segments: Sequence[Segment], rigid: RigidB
         meas = np.full((n, channels.N_CHANNELS), np.nan)
         sigma = np.full((n, channels.N_CHANNELS), np.nan)
         meas[:, k] = record.phi_rad[sl]
-        sigma[:, k] = record.sigma_rad
+        sigma[:, k] = record.sigmas[sl]
         out.append(ShotData(shot_id=seg.shot_id, rigid=rigid, body_kind="finner",
                             stations=np.arange(seg.start, seg.stop), t_s=record.t_s[sl].copy(),
                             meas=meas, sigma=sigma,
@@ -544,12 +552,13 @@ def records_of(shots):
         if ok.sum() < 8:
             raise ValueError(f"{name}: {int(ok.sum())} frame(s) with a measured roll (phi); "
                              "a roll record needs at least 8")
-        phi, sigma = np.unwrap(s.meas[ok, k]), float(np.median(s.sigma[ok, k]))
+        phi, sigmas = np.unwrap(s.meas[ok, k]), s.sigma[ok, k]   # each frame's own sigma
+        sigma = float(np.median(sigmas))
         if not float(np.std(phi)) > 3.0 * sigma:
             raise ValueError(f"{name}: the roll angle scatters {np.degrees(np.std(phi)):.3g} "
                              f"deg rms about its mean, {np.std(phi) / max(sigma, 1e-300):.2g} "
                              "of its sigma: no roll motion above the noise, nothing to fit")
-        out.append(RollRecord(s.shot_id, s.t_s[ok], phi, sigma))
+        out.append(RollRecord(s.shot_id, s.t_s[ok], phi, sigmas))
     r0 = shots[0].rigid
     for s in shots[1:]:
         if (s.rigid.mode != r0.mode or not np.allclose(s.rigid.phys(), r0.phys())):
