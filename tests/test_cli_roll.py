@@ -139,3 +139,15 @@ def test_each_frame_keeps_its_own_roll_sigma(tmp_path):
     (data,) = segment_shots(record, [seg], shots[0].rigid)
     k = channels.NAMES.index("phi")
     np.testing.assert_allclose(np.degrees(data.sigma[:, k]), sig[seg.start:seg.stop])
+
+
+def test_a_roll_fit_far_above_the_noise_is_warned_about(tmp_path, capsys):
+    """Sigmas written 5x too small: chi^2/nu ~25; the fit's warning, as cadra2 fit gives."""
+    traj, _ = _files(tmp_path, duration_s=4.0)
+    head = [line for line in traj.read_text().splitlines() if line.startswith("#")]
+    table = pd.read_csv(traj, comment="#")
+    table["sigma_phi_deg"] = table["sigma_phi_deg"] / 5.0
+    traj.write_text("\n".join(head) + "\n" + table.to_csv(index=False))
+    main(["roll", str(traj), "-o", str(tmp_path / "out"), "-q"])
+    err = capsys.readouterr().err
+    assert "warning: chi^2/nu = " in err and "> 2" in err, err

@@ -16,6 +16,7 @@ from pathlib import Path
 from cadra.cli import _inputs as cli
 from cadra.cli._format import number
 from cadra.cli._inputs import Command
+from cadra.cli.fit import CHI2_WARN
 
 PROG = "cadra2 roll"
 
@@ -60,6 +61,10 @@ def run(args) -> int:
     write_roll(fit, tables, records, alpha, out, overwrite=args.overwrite)
     for note in fit.notes:
         print(f"{PROG}: warning: {note}", file=sys.stderr)
+    if res.converged and res.reduced_chi2 > CHI2_WARN:
+        print(f"{PROG}: warning: chi^2/nu = {res.reduced_chi2:.3g} > {CHI2_WARN:g}: the roll "
+              "sigmas or the model do not describe the record (sigmas too small?); the "
+              "coefficients' sigmas are not to be trusted as they stand", file=sys.stderr)
     spins = steady_spins(res.model)
     spun = ", ".join(f"{v:+.4f}" + ("" if st else " (unstable)")
                      for v, st in zip(spins["p_hat"], spins["stable"], strict=True))
