@@ -151,3 +151,18 @@ def test_a_roll_fit_far_above_the_noise_is_warned_about(tmp_path, capsys):
     main(["roll", str(traj), "-o", str(tmp_path / "out"), "-q"])
     err = capsys.readouterr().err
     assert "warning: chi^2/nu = " in err and "> 2" in err, err
+
+
+def test_a_relative_shot_file_is_found_beside_the_trajectory(tmp_path, monkeypatch):
+    """``# shot_file: shot.toml`` in a trajectory file carried with its shot file: read from
+    the trajectory's folder, whatever the working folder."""
+    from cadra.flight.load import trajectory_and_shot
+
+    traj, _ = _files(tmp_path, duration_s=1.0)
+    text = traj.read_text().replace(f"# shot_file: {tmp_path / 'shot.toml'}",
+                                    "# shot_file: shot.toml")
+    traj.write_text(text)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert trajectory_and_shot(traj)[1] == tmp_path / "shot.toml"

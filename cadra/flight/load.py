@@ -25,7 +25,8 @@ def trajectory_and_shot(item: str | os.PathLike, shot: str | os.PathLike | None 
     """The trajectory file and shot file of one shot.
 
     ``item`` is stage one's ``trajectory.csv`` or its output folder; ``shot`` the shot file,
-    by default the one the trajectory file names (its ``shot_file`` metadata). Raises
+    by default the one the trajectory file names (its ``shot_file`` metadata; a relative one
+    from the trajectory file's folder first, then the working folder's). Raises
     :class:`FitDataError` saying what is missing.
     """
     from cadra.io.trajectory import TrajectoryFileError, load_trajectory
@@ -44,7 +45,11 @@ def trajectory_and_shot(item: str | os.PathLike, shot: str | os.PathLike | None 
         raise FitDataError(str(exc)) from None
     if not meta.get("shot_file"):
         raise FitDataError(f"{traj}: names no shot file; pass it with --shot")
-    return traj, Path(meta["shot_file"])
+    named = Path(meta["shot_file"])
+    beside = traj.parent / named
+    # a relative name is the trajectory file's folder's (a record carried with its shot
+    # file), then the working folder's (as earlier CADRA read it)
+    return traj, (beside if not named.is_absolute() and beside.is_file() else named)
 
 
 def load_shots(trajectories: Sequence[str | os.PathLike],
