@@ -5,6 +5,9 @@ temporary file (or directory) beside the target, are flushed to disk, and are mo
 with :func:`os.replace`, which is atomic on POSIX and Windows for a path on the same file
 system. Existing outputs are refused unless ``overwrite=True``.
 
+Every output folder holds :data:`OUTPUT_MARKER`, and ``--overwrite`` replaces only such a
+folder: a folder of the user's is never replaced, whatever the option says.
+
 Inputs are never destroyed: :func:`check_output_dir` is the one guard every command runs
 before it writes; it refuses (:class:`UnsafeOutputError`) an output folder that is, or holds,
 one of the command's inputs, the current working folder or one of its parents, or an
@@ -46,6 +49,10 @@ except ImportError:   # Windows: the process id decides (never guessed there: ke
 class UnsafeOutputError(ValueError):
     """An output path that would destroy an input, the working folder or a file."""
 
+
+#: the file every output folder holds (written last, with the folder): ``--overwrite``
+#: replaces only a folder that holds it (or an empty one), never a folder of the user's
+OUTPUT_MARKER = ".cadra-output"
 
 #: names of files CADRA keeps for good (a facility's station history, appended to under a
 #: lock and never rewritten): a folder holding one, at any depth, is never an output
@@ -244,7 +251,9 @@ def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]
     spelling of the same folder is caught; an input reached through a link counts under both
     the link's folder and the target's. A new output folder *inside* an input folder is fine.
     An existing folder that holds a :data:`NEVER_REPLACED` file (a station history) at any
-    depth is refused whatever the inputs.
+    depth is refused whatever the inputs, and so is an existing folder, not empty, that CADRA
+    did not write (no :data:`OUTPUT_MARKER`): ``--overwrite`` replaces CADRA's own outputs,
+    never a folder of the user's.
 
     Parameters
     ----------
@@ -280,6 +289,10 @@ def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]
     if kept is not None:
         raise UnsafeOutputError(f"output {shown} holds {kept}, a station history CADRA never "
                                 "replaces; choose a new folder")
+    if out_r.is_dir() and not (out_r / OUTPUT_MARKER).is_file() and any(out_r.iterdir()):
+        raise UnsafeOutputError(f"output {shown} is a folder CADRA did not write (no "
+                                f"{OUTPUT_MARKER} in it); CADRA replaces only its own output "
+                                "folders, even with --overwrite: choose a new folder")
     return out_r
 
 
@@ -362,6 +375,8 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
         with _locked(tmp):
             os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp's folder is private (0700)
             yield tmp
+            (tmp / OUTPUT_MARKER).write_text("written by CADRA: --overwrite may replace this "
+                                             "folder\n", encoding="utf-8")
             if path.exists():
                 if not overwrite:
                     raise FileExistsError(f"{given} exists; refusing to overwrite")
@@ -382,5 +397,6 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
         raise
 
 
-__all__ = ["NEVER_REPLACED", "UnsafeOutputError", "atomic_output_dir", "atomic_write_bytes",
-           "atomic_write_text", "check_output_dir", "clean_stale_temps", "stale_temps"]
+__all__ = ["NEVER_REPLACED", "OUTPUT_MARKER", "UnsafeOutputError", "atomic_output_dir",
+           "atomic_write_bytes", "atomic_write_text", "check_output_dir", "clean_stale_temps",
+           "stale_temps"]

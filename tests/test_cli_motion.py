@@ -154,7 +154,9 @@ def test_an_existing_output_is_refused_and_left_alone(traj, capsys):
     (out / "keep.txt").write_text("mine")
     assert cadra2_main(["motion", str(path), "-o", str(out)]) == 1
     err = capsys.readouterr().err
-    assert "cadra2 motion:" in err and "refusing to overwrite" in err
+    assert "cadra2 motion:" in err and "a folder CADRA did not write" in err
+    assert cadra2_main(["motion", str(path), "-o", str(out), "--overwrite"]) == 1
+    assert "a folder CADRA did not write" in capsys.readouterr().err   # not even when told
     assert [f.name for f in out.iterdir()] == ["keep.txt"]
     assert (out / "keep.txt").read_text() == "mine"
     # an output over an input is refused even with --overwrite

@@ -307,11 +307,19 @@ def test_atomic_output_dir(tmp_path):
     with pytest.raises(RuntimeError), atomic_output_dir(out, overwrite=True) as tmp:
         (tmp / "y.txt").write_text("y")
         raise RuntimeError("failed half way")
-    assert _dir_listing(out) == ["x.txt"]  # the old output is untouched
+    assert _dir_listing(out) == [".cadra-output", "x.txt"]  # the old output is untouched
     with atomic_output_dir(out, overwrite=True) as tmp:
         (tmp / "y.txt").write_text("y")
-    assert _dir_listing(out) == ["y.txt"]
+    assert _dir_listing(out) == [".cadra-output", "y.txt"]
     assert _dir_listing(tmp_path) == ["run"]  # no temporaries left
+    # a folder CADRA did not write is never replaced, even when told to
+    mine = tmp_path / "thesis"
+    mine.mkdir()
+    (mine / "chapter1.tex").write_text("precious")
+    with pytest.raises(ValueError, match="a folder CADRA did not write"):
+        with atomic_output_dir(mine, overwrite=True) as tmp:
+            (tmp / "report.md").write_text("x")
+    assert _dir_listing(mine) == ["chapter1.tex"]
 
 
 @pytest.mark.parametrize(("table", "message"), [

@@ -96,7 +96,7 @@ def test_write_shot_files_and_check(tmp_path):
     shot = simulate_shot(spec)
     out = write_shot(shot, tmp_path / "m2", images=True, progress=False)
     assert sorted(p.name for p in out.iterdir()) == [
-        "images", "shot.toml", "truth.csv", "truth_images.csv"]
+        ".cadra-output", "images", "shot.toml", "truth.csv", "truth_images.csv"]
     assert len(list((out / "images").glob("*.png"))) == 4
     img = read_image(out / "images" / "st01_side.png")
     assert img.dtype == np.uint8 and img.shape == (1200, 1600)
@@ -335,8 +335,8 @@ def test_biased_shot_files(tmp_path):
     biased = simulate_shot(sphere_spec({"2": {"y_m": 4e-4, "time_s": -2e-6}}, n_stations=3))
     a = write_shot(plain, tmp_path / "plain", images=False, progress=False)
     b = write_shot(biased, tmp_path / "biased", images=False, progress=False)
-    assert sorted(p.name for p in b.iterdir()) == ["shot.toml", "station_biases.csv",
-                                                   "truth.csv"]
+    assert sorted(p.name for p in b.iterdir()) == [".cadra-output", "shot.toml",
+                                                   "station_biases.csv", "truth.csv"]
     assert (b / "truth.csv").read_bytes() == (a / "truth.csv").read_bytes()
     shot_a, shot_b = (tomllib.loads((d / "shot.toml").read_text()) for d in (a, b))
     assert "station biases injected" in shot_b.pop("notes")
@@ -360,7 +360,8 @@ def test_unbiased_specs_reproduce_the_committed_sample_shots(tmp_path, name):
     sample = ROOT / "sample_shots" / name
     out = write_shot(simulate_shot(load_shot_spec(SPECS / f"{name}.toml")), tmp_path / name,
                      images=False, progress=False)
-    assert sorted(p.name for p in out.iterdir()) == ["shot.toml", "spec.toml", "truth.csv"]
+    assert sorted(p.name for p in out.iterdir()) == [".cadra-output", "shot.toml", "spec.toml",
+                                                     "truth.csv"]
     assert _normalised((out / "shot.toml").read_text()) == \
         _normalised((sample / "shot.toml").read_text())
     if name != "sphere_1":

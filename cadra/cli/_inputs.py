@@ -143,7 +143,7 @@ def input_paths(args) -> list[Path]:
             facility(spec.facility)
             if Path(spec.aero_model).exists():
                 paths.append(Path(spec.aero_model))
-        return paths
+        return paths + cache_paths()
     from cadra.flight.load import trajectory_and_shot
 
     given = args.shot or []
@@ -160,12 +160,27 @@ def input_paths(args) -> list[Path]:
         value = getattr(args, name, None)
         if value and Path(value).exists():
             paths.append(Path(value))
+    if getattr(args, "model", None):       # a bundled model by name: its file in the package
+        from cadra.aero.model import resolve_model_path
+
+        with suppress(*readable):
+            paths.append(Path(resolve_model_path(args.model)))
+    paths += cache_paths()
     from cadra.calibration.bias_table import CURRENT
 
     if (args.command == "calibrate" or getattr(args, "bias_table", None) == CURRENT
             or getattr(args, "stations_root", None)):
         paths += _history_paths(getattr(args, "stations_root", None), facilities)
     return paths
+
+
+def cache_paths() -> list[Path]:
+    """CADRA's compiled-code cache folder (:mod:`cadra._numba_cache`), an input of every
+    command: no output may be it or hold it."""
+    import os
+
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    return [Path(folder)] if folder else []
 
 
 def _history_paths(root, facilities) -> list[Path]:
@@ -186,5 +201,5 @@ def _history_paths(root, facilities) -> list[Path]:
     return out
 
 
-__all__ = ["REFUSED", "Command", "add_data_options", "add_start_option", "input_paths", "model_of",
-           "quiet", "refused", "say", "shots_of", "verbose"]
+__all__ = ["REFUSED", "Command", "add_data_options", "add_start_option", "cache_paths",
+           "input_paths", "model_of", "quiet", "refused", "say", "shots_of", "verbose"]

@@ -154,7 +154,9 @@ def _input_paths(args) -> list:
         paths += [shot.image_path(rec.station, view)
                   for rec in shot.stations for view in rec.images]
         paths.append(Path(resolve_facility_path(shot.facility)))
-    return paths
+    from cadra.cli._inputs import cache_paths
+
+    return paths + cache_paths()
 
 
 __all__ = ["check_shot", "main"]

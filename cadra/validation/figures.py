@@ -61,6 +61,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "bench_motion": ("Classic motion methods: speed and accuracy", "motion.md"),
     "bench_simulator": ("The 6-DOF simulator's speed", "dynamics.md"),
     "bench_aero": ("The aerodynamic model's evaluation speed", "aero_models.md"),
+    "hostile": ("Hostile inputs: image headers, option values, outputs over inputs", "cli.md"),
     "time_suite": ("The test suite from a fresh clone", "install.md"),
 }
 
