@@ -166,3 +166,26 @@ def test_a_relative_shot_file_is_found_beside_the_trajectory(tmp_path, monkeypat
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
     assert trajectory_and_shot(traj)[1] == tmp_path / "shot.toml"
+
+
+def test_lost_frames_split_the_record_and_say_so(tmp_path):
+    """16 frames lost mid-spin (the roll across them unknown, more than pi at this rate):
+    the record is split at the gap into two pieces, each unwrapped alone, and the note says
+    where, instead of an unwrap across the gap that broke the fit."""
+    from cadra.flight.load import load_shots
+    from cadra.studies.segmented_roll import records_of
+
+    traj, _ = _files(tmp_path, duration_s=4.0)
+    head = [line for line in traj.read_text().splitlines() if line.startswith("#")]
+    table = pd.read_csv(traj, comment="#")
+    n = len(table)
+    lost = table.index[(table.index >= n // 2) & (table.index < n // 2 + 16)]
+    table.loc[lost, ["phi_deg", "sigma_phi_deg"]] = np.nan
+    traj.write_text("\n".join(head) + "\n" + table.to_csv(index=False))
+    shots, _ = load_shots([traj])
+    records = records_of(shots)
+    assert [r.name for r in records] == ["ROLL-1.1", "ROLL-1.2"]
+    assert "16 frame(s) lost at t = " in records[0].note and "split there" in records[0].note
+    assert sum(len(r.t_s) for r in records) == n - 16
+    for r in records:     # each piece continuous: consecutive frames turn by less than pi
+        assert np.all(np.abs(np.diff(r.phi_rad)) < np.pi)

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -85,12 +85,15 @@ class RollRecord:
     phi_rad : (n,) measured roll angle, rad, on any branch (0-2 pi as the paper plots it, or
         continuous): consecutive frames must turn by less than pi.
     sigma_rad : the measurement's 1-sigma, rad: one for every frame, or (n,), each frame's.
+    note : what was done to the record on its way here (a gap it was split at), for the
+        report.
     """
 
     name: str
     t_s: np.ndarray
     phi_rad: np.ndarray
     sigma_rad: float | np.ndarray
+    note: str = ""
 
     def __post_init__(self):
         t = np.asarray(self.t_s, dtype=float)
@@ -395,7 +398,9 @@ def segmented_fit(records: Sequence[RollRecord], model: AeroModel, rigid: RigidB
                                      alpha_rad=alpha_rad, window=window)
     held = start.with_vary({n: False for n in start.names})
     local = fit_segments(shots, held, states, options=options)
-    notes = [] if local.converged else [f"local fit: {local.status}"]
+    notes = [r.note for r in records if r.note]
+    if not local.converged:
+        notes.append(f"local fit: {local.status}")
     results, current = [], start
     prev = local
     free: list[str] = []
@@ -539,6 +544,36 @@ def bearing_alpha(shots, alpha_deg: float | None) -> float:
     return math.acos(float(np.clip(a[0], -1.0, 1.0)))
 
 
+#: frames further apart than this many times the record's typical interval are a gap: the
+#: roll across it is unknown (it may have turned by more than pi), so the record is split
+GAP_FRAMES = 1.5
+
+
+def _split_at_gaps(shot_id: str, name, t, phi, sigmas) -> list:
+    """The record as one :class:`RollRecord`, or as pieces split where frames are lost (each
+    unwrapped on its own, named ``ID.1``, ``ID.2``, ...; a piece under 8 frames dropped),
+    each piece's ``note`` saying why."""
+    dt = np.diff(t)
+    typical = float(np.median(dt))
+    cuts = np.flatnonzero(dt > GAP_FRAMES * typical) + 1
+    if cuts.size == 0:
+        return [RollRecord(shot_id, t, np.unwrap(phi), sigmas)]
+    said = "; ".join(f"{int(round(dt[c - 1] / typical)) - 1} frame(s) lost at t = "
+                     f"{t[c - 1]:.4g}-{t[c]:.4g} s" for c in cuts)
+    note = (f"{name}: {said}: the roll across a gap is unknown (it may turn by more than "
+            f"pi), so the record is split there into {cuts.size + 1} pieces fitted apart")
+    out, dropped = [], 0
+    for k, (a, b) in enumerate(zip([0, *cuts], [*cuts, len(t)], strict=True)):
+        if b - a < 8:
+            dropped += 1
+            continue
+        out.append(RollRecord(f"{shot_id}.{k + 1}", t[a:b], np.unwrap(phi[a:b]),
+                              sigmas[a:b], note=note if not out else ""))
+    if dropped and out:
+        out[0] = replace(out[0], note=f"{note} ({dropped} piece(s) under 8 frames left out)")
+    return out
+
+
 def records_of(shots):
     """A :class:`~cadra.studies.segmented_roll.RollRecord` of each roll-bearing shot."""
     k = channels.NAMES.index("phi")
@@ -552,13 +587,16 @@ def records_of(shots):
         if ok.sum() < 8:
             raise ValueError(f"{name}: {int(ok.sum())} frame(s) with a measured roll (phi); "
                              "a roll record needs at least 8")
-        phi, sigmas = np.unwrap(s.meas[ok, k]), s.sigma[ok, k]   # each frame's own sigma
+        t, phi, sigmas = s.t_s[ok], s.meas[ok, k], s.sigma[ok, k]   # each frame's own sigma
         sigma = float(np.median(sigmas))
-        if not float(np.std(phi)) > 3.0 * sigma:
-            raise ValueError(f"{name}: the roll angle scatters {np.degrees(np.std(phi)):.3g} "
-                             f"deg rms about its mean, {np.std(phi) / max(sigma, 1e-300):.2g} "
-                             "of its sigma: no roll motion above the noise, nothing to fit")
-        out.append(RollRecord(s.shot_id, s.t_s[ok], phi, sigmas))
+        whole = np.unwrap(phi)
+        if not float(np.std(whole)) > 3.0 * sigma:
+            raise ValueError(f"{name}: the roll angle scatters {np.degrees(np.std(whole)):.3g} "
+                             f"deg rms about its mean, {np.std(whole) / max(sigma, 1e-300):.2g}"
+                             " of its sigma: no roll motion above the noise, nothing to fit")
+        out += _split_at_gaps(s.shot_id, name, t, phi, sigmas)
+    if not out:
+        raise ValueError("no piece of any record is long enough to fit (8 frames)")
     r0 = shots[0].rigid
     for s in shots[1:]:
         if (s.rigid.mode != r0.mode or not np.allclose(s.rigid.phys(), r0.phys())):
