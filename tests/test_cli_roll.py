@@ -189,3 +189,17 @@ def test_lost_frames_split_the_record_and_say_so(tmp_path):
     assert sum(len(r.t_s) for r in records) == n - 16
     for r in records:     # each piece continuous: consecutive frames turn by less than pi
         assert np.all(np.abs(np.diff(r.phi_rad)) < np.pi)
+
+
+def test_a_free_flight_shot_is_not_a_roll_bearing(tmp_path, capsys):
+    """A shot file without [test_mode]: refused as not a roll bearing, not with a message
+    about measured positions."""
+    traj, _ = _files(tmp_path, duration_s=1.0)
+    shot = tmp_path / "shot.toml"
+    text = shot.read_text()
+    start = text.index("[test_mode]")
+    end = text.find("\n[", start + 1)
+    shot.write_text(text[:start] + (text[end + 1:] if end > 0 else ""))
+    assert main(["roll", str(traj), "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "a free flight, not a roll bearing" in err and "position" not in err, err

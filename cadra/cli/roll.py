@@ -33,6 +33,22 @@ def _roll_arguments(p) -> None:
                    help="frames of the smoothing filter that finds the zero-rate peaks")
 
 
+def _roll_bearings_only(args) -> None:
+    """Refuse, naming the shot file, a record whose shot file is not a roll bearing's."""
+    from cadra.flight.load import trajectory_and_shot
+    from cadra.io.shotfile import load_shot
+
+    given = args.shot or []
+    for k, item in enumerate(args.trajectories):
+        _, shot_path = trajectory_and_shot(item, given[k] if k < len(given) else None)
+        mode = load_shot(shot_path).test_mode
+        if mode is None or mode.kind != "roll_bearing":
+            kind = ("a free flight" if mode is None or mode.kind == "range"
+                    else f"a {mode.kind!r} record")
+            raise ValueError(f"{shot_path}: {kind}, not a roll bearing; cadra2 roll fits roll "
+                             "bearings (the shot file's [test_mode] kind = 'roll_bearing')")
+
+
 def run(args) -> int:
     """``cadra2 roll`` (module doc); returns the exit status."""
     from cadra.aero import resolve_model
@@ -49,6 +65,7 @@ def run(args) -> int:
         if args.window < 5 or args.window % 2 == 0:
             raise ValueError(f"--window: an odd number of frames >= 5, got {args.window}")
         model = resolve_model(args.model)
+        _roll_bearings_only(args)       # before the trajectories' own checks speak of positions
         shots, _ = cli.shots_of(args)
         alpha = bearing_alpha(shots, args.alpha_deg)
         records = records_of(shots)
