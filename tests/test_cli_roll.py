@@ -203,3 +203,14 @@ def test_a_free_flight_shot_is_not_a_roll_bearing(tmp_path, capsys):
     assert main(["roll", str(traj), "-o", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err.strip()
     assert "a free flight, not a roll bearing" in err and "position" not in err, err
+
+
+def test_a_shot_file_found_nowhere_is_named_once_with_where_it_was_looked_for(tmp_path,
+                                                                            capsys):
+    traj, _ = _files(tmp_path, duration_s=1.0)
+    traj.write_text(traj.read_text().replace(f"# shot_file: {tmp_path / 'shot.toml'}",
+                                             "# shot_file: gone.toml"))
+    assert main(["roll", str(traj), "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("gone.toml") == 2 and str(tmp_path / "gone.toml") in err, err
+    assert "pass it with --shot" in err

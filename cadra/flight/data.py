@@ -182,7 +182,9 @@ def load_shot_data(shot_path: str | os.PathLike, trajectory_path: str | os.PathL
     try:
         shot = load_shot(shot_path)
     except (ShotFileError, OSError) as exc:
-        raise FitDataError(f"{shot_path}: {exc}") from None
+        msg = str(exc)   # the shot file's errors name it already: not twice
+        raise FitDataError(msg if msg.startswith(str(shot_path)) else f"{shot_path}: {msg}"
+                           ) from None
     try:
         traj = load_trajectory(trajectory_path)
     except (TrajectoryFileError, FileNotFoundError) as exc:

@@ -46,10 +46,15 @@ def trajectory_and_shot(item: str | os.PathLike, shot: str | os.PathLike | None 
     if not meta.get("shot_file"):
         raise FitDataError(f"{traj}: names no shot file; pass it with --shot")
     named = Path(meta["shot_file"])
-    beside = traj.parent / named
+    if named.is_absolute():
+        return traj, named
     # a relative name is the trajectory file's folder's (a record carried with its shot
     # file), then the working folder's (as earlier CADRA read it)
-    return traj, (beside if not named.is_absolute() and beside.is_file() else named)
+    beside = traj.parent / named
+    if beside.is_file() or named.is_file():
+        return traj, beside if beside.is_file() else named
+    raise FitDataError(f"{traj}: its shot file {named} is neither beside it ({beside}) nor in "
+                       f"the working folder ({Path.cwd()}); pass it with --shot")
 
 
 def load_shots(trajectories: Sequence[str | os.PathLike],
