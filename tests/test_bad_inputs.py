@@ -173,16 +173,23 @@ def test_all_sigmas_zero_is_refused_naming_the_first(tmp_path):
 
 
 def test_nan_still_means_not_measured(tmp_path):
-    from cadra.flight.data import load_shot_data
+    """A value and its sigma both empty: not measured. A measured value whose sigma alone is
+    empty is refused, naming the station and column (it was dropped without a word)."""
+    from cadra.flight.data import FitDataError, load_shot_data
 
     def lose(t):
         t.loc[1, "theta_deg"] = np.nan
         t.loc[1, "sigma_theta_deg"] = np.nan
-        t.loc[2, "sigma_psi_deg"] = np.nan
 
     sd = load_shot_data(SHOT, _trajectory(tmp_path, edit=lose))
-    assert np.isnan(sd.meas[1, 3]) and np.isnan(sd.meas[2, 4])
-    assert sd.n_observations == 6 * 5 - 2
+    assert np.isnan(sd.meas[1, 3])
+    assert sd.n_observations == 6 * 5 - 1
+
+    def half(t):
+        t.loc[2, "sigma_psi_deg"] = np.nan
+
+    with pytest.raises(FitDataError, match="column sigma_psi_deg: is empty: a measured psi_deg"):
+        load_shot_data(SHOT, _trajectory(tmp_path / "half", edit=half))
 
 
 @pytest.mark.parametrize(("n", "what"), [(0, "no stations"),

@@ -199,7 +199,7 @@ def test_other_spellings_of_an_input_folder(work, capsys, tmp_path, monkeypatch)
     _refused(cadra2, ["simulate", str(work / "specs" / "small.toml"), "-o", "..",
                       "--overwrite", "--no-images"], "holds the current working folder",
              capsys, work, 1)
-    assert not [p for p in work.rglob(".*") if ".cadra-" in p.name]
+    assert not [p for p in work.rglob(".*") if ".cadra-" in p.name and p.name != ".cadra-output"]
 
 
 def test_guard_library_function(tmp_path):
@@ -249,6 +249,7 @@ def test_stale_temps_cleaned_only_when_ours_and_dead(tmp_path):
     for p in (stale_tmp, stale_old / "d", alive, other_host, *foreign):
         p.mkdir(parents=True)
     (stale_old / "d" / "report.md").write_text("the previous output")
+    (stale_old / "d" / ".cadra-output").write_text("")       # a CADRA output folder
     assert stale_temps(out) == sorted([stale_tmp, stale_old])
     # the run was killed between its two renames: the previous output is moved back
     assert sorted(clean_stale_temps(out)) == sorted([stale_tmp, stale_old])

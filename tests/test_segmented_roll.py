@@ -224,7 +224,8 @@ def test_global_fit_recovers_the_start_set_within_its_sigmas(body, run1, tmp_pat
     out = write_roll(sf, {"table2": tab, "segments": seg}, [run1], case.ALPHA,
                      tmp_path / "roll")
     assert sorted(p.name for p in out.iterdir()) == [
-        ".cadra-output", "report.md", "roll_fit.png", "segments.csv", "segments.md", "table2.csv", "table2.md"]
+        ".cadra-output", "report.md", "roll_fit.png", "segments.csv", "segments.md",
+        "table2.csv", "table2.md"]
     back = pd.read_csv(out / "table2.csv", index_col=0)
     np.testing.assert_allclose(back["value"], tab["value"], rtol=1e-12)
     assert (out / "table2.md").read_text().startswith("| coefficient | value |")

@@ -73,7 +73,6 @@ def _png_claiming(width: int, height: int) -> bytes:
 
 def make_work(base: Path) -> dict[str, Path]:
     """The inputs the cases aim at, under ``base`` (created): returns name -> path."""
-    from cadra.cli.cadra2 import main as cadra2
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
     from cadra.validation.truth_files import write_trajectory_file
 
@@ -88,8 +87,11 @@ def make_work(base: Path) -> dict[str, Path]:
         write_trajectory_file(sim, base / name / "shot.toml",
                               base / f"{name}_stage1" / "trajectory.csv", rng)
     root = base / "root"
-    assert cadra2(["calibrate", str(base / "sphere_stage1"), "-o", str(base / "calibration"),
-                   "--stations-root", str(root), "-q"]) == 0
+    done = subprocess.run([sys.executable, "-m", "cadra.cli.cadra2", "calibrate",
+                           str(base / "sphere_stage1"), "-o", str(base / "calibration"),
+                           "--stations-root", str(root), "-q"], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"the work folder's calibration failed: {done.stderr.strip()}")
     (base / "models").mkdir()
     shutil.copy(REPO_ROOT / "cadra" / "aero" / "models" / "m2_m070.toml",
                 base / "models" / "mine.toml")
