@@ -240,8 +240,21 @@ def _input_forms(p: Path) -> set[Path]:
     return forms
 
 
+def output_kind(folder: str | os.PathLike) -> str | None:
+    """The kind of output CADRA wrote in ``folder`` (``"fit"``, ``"stage one"``, ...: its
+    :data:`OUTPUT_MARKER`'s first line), ``""`` for a marker of no known kind, None if the
+    folder holds no marker."""
+    marker = Path(folder) / OUTPUT_MARKER
+    try:
+        text = marker.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None if not marker.exists() else ""
+    first = text.splitlines()[0].strip() if text.strip() else ""
+    return first.removeprefix("kind: ") if first.startswith("kind: ") else ""
+
+
 def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (), *,
-                     cwd: str | os.PathLike | None = None) -> Path:
+                     cwd: str | os.PathLike | None = None, kind: str | None = None) -> Path:
     """Refuse an output folder that writing (with or without overwrite) would destroy.
 
     Refused, with :class:`UnsafeOutputError` (a ``ValueError``) naming the output and the
@@ -253,7 +266,8 @@ def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]
     An existing folder that holds a :data:`NEVER_REPLACED` file (a station history) at any
     depth is refused whatever the inputs, and so is an existing folder, not empty, that CADRA
     did not write (no :data:`OUTPUT_MARKER`): ``--overwrite`` replaces CADRA's own outputs,
-    never a folder of the user's.
+    never a folder of the user's; with ``kind``, only an output of that kind (a fit never
+    replaces a stage-one folder or a simulated shot).
 
     Parameters
     ----------
@@ -293,6 +307,11 @@ def check_output_dir(out: str | os.PathLike, inputs: Iterable[str | os.PathLike]
         raise UnsafeOutputError(f"output {shown} is a folder CADRA did not write (no "
                                 f"{OUTPUT_MARKER} in it); CADRA replaces only its own output "
                                 "folders, even with --overwrite: choose a new folder")
+    found = output_kind(out_r) if out_r.is_dir() else None
+    if kind is not None and found is not None and found != kind:
+        raise UnsafeOutputError(f"output {shown} is CADRA's {found or 'other'} output, not a "
+                                f"{kind} output; --overwrite replaces only an output of its "
+                                "own kind: choose a new folder")
     return out_r
 
 
@@ -342,7 +361,8 @@ def atomic_write_text(path: str | os.PathLike, text: str, overwrite: bool = Fals
 
 
 @contextlib.contextmanager
-def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
+def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False,
+                      kind: str = "output") -> Iterator[Path]:
     """Build a directory of outputs in a temporary sibling and move it into place at the end.
 
     ::
@@ -365,7 +385,7 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
     Stale temporary siblings of killed runs are removed first (:func:`clean_stale_temps`).
     """
     given = path
-    path = check_output_dir(path)
+    path = check_output_dir(path, kind=kind)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{given} exists; refusing to overwrite (pass overwrite=True)")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -375,8 +395,9 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
         with _locked(tmp):
             os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp's folder is private (0700)
             yield tmp
-            (tmp / OUTPUT_MARKER).write_text("written by CADRA: --overwrite may replace this "
-                                             "folder\n", encoding="utf-8")
+            (tmp / OUTPUT_MARKER).write_text(f"kind: {kind}\nwritten by CADRA: --overwrite "
+                                             f"replaces it with another {kind} output\n",
+                                             encoding="utf-8")
             if path.exists():
                 if not overwrite:
                     raise FileExistsError(f"{given} exists; refusing to overwrite")
@@ -398,5 +419,6 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False) -> Itera
 
 
 __all__ = ["NEVER_REPLACED", "OUTPUT_MARKER", "UnsafeOutputError", "atomic_output_dir",
+           "output_kind",
            "atomic_write_bytes", "atomic_write_text", "check_output_dir", "clean_stale_temps",
            "stale_temps"]

@@ -249,7 +249,7 @@ def test_stale_temps_cleaned_only_when_ours_and_dead(tmp_path):
     for p in (stale_tmp, stale_old / "d", alive, other_host, *foreign):
         p.mkdir(parents=True)
     (stale_old / "d" / "report.md").write_text("the previous output")
-    (stale_old / "d" / ".cadra-output").write_text("")       # a CADRA output folder
+    (stale_old / "d" / ".cadra-output").write_text("kind: output\n")   # a CADRA output
     assert stale_temps(out) == sorted([stale_tmp, stale_old])
     # the run was killed between its two renames: the previous output is moved back
     assert sorted(clean_stale_temps(out)) == sorted([stale_tmp, stale_old])
@@ -685,3 +685,22 @@ def test_a_shot_file_naming_a_missing_facility_is_warned_about(work, tmp_path, c
             "--max-iterations", "2", "-o", str(tmp_path / "fit"), "-q", "--no-plots"])
     err = capsys.readouterr().err
     assert "the facility 'hfaff' the shot file names is not found" in err, err
+
+
+def test_overwrite_replaces_only_an_output_of_its_own_kind(work, tmp_path, capsys):
+    """A simulated shot's folder (CADRA's, with its images) given to fit with --overwrite is
+    refused: a fit replaces a fit, never a shot or a stage-one folder."""
+    from cadra.atomic import output_kind
+
+    shot = tmp_path / "sim"
+    assert cadra2(["simulate", str(work / "specs" / "small.toml"), "-o", str(shot),
+                   "--no-images", "-q"]) == 0
+    assert output_kind(shot) == "shot"
+    before = tree_hash(shot)
+    assert cadra2(["fit", str(work / "m2_stage1"), "--model", "m2_m070", "-o", str(shot),
+                   "--overwrite", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "is CADRA's shot output, not a fit output" in err, err
+    assert tree_hash(shot) == before
+    assert cadra2(["simulate", str(work / "specs" / "small.toml"), "-o", str(shot),
+                   "--no-images", "-q", "--overwrite"]) == 0        # its own kind: replaced

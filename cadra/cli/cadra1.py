@@ -81,7 +81,7 @@ def _main(argv: list[str] | None) -> int:
 
     out = Path(args.out) if args.out else Path(args.shot_file).resolve().parent / "cadra1"
     try:
-        check_output_dir(out, _input_paths(args))  # before measuring: never over an input
+        check_output_dir(out, _input_paths(args), kind="stage one")  # never over an input
         if out.exists() and not args.overwrite:
             raise FileExistsError(f"{out} exists; refusing to overwrite (use --overwrite)")
         check_model_size(load_shot(args.shot_file))  # a size in the wrong unit: no measuring

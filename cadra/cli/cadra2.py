@@ -75,6 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: the kind of output folder each command writes (``cadra.atomic.output_kind``): with
+#: --overwrite a command replaces only an output of its own kind
+OUTPUT_KINDS = {"simulate": "shot", "fit": "fit", "single": "single fits",
+                "holdone": "hold-one study", "calibrate": "calibration",
+                "diagnose": "diagnosis", "motion": "motion", "roll": "roll"}
+
+
 def main(argv: list[str] | None = None) -> int:
     """The ``cadra2`` console script (module doc); returns the exit status."""
     return console_main("cadra2", _main, argv)
@@ -88,7 +95,7 @@ def _main(argv: list[str] | None) -> int:
     if getattr(args, "output", None) is None:  # a command that writes nothing (models)
         return args.func(args)
     try:  # every command writes one folder, never over its inputs
-        check_output_dir(args.output, input_paths(args))
+        check_output_dir(args.output, input_paths(args), kind=OUTPUT_KINDS.get(args.command))
     except UnsafeOutputError as exc:
         print(f"cadra2 {args.command}: {exc}", file=sys.stderr)
         return 1

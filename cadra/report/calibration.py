@@ -99,7 +99,8 @@ def write_calibration(est, table, comparison, history, out_dir: str | os.PathLik
     ``entry``), or with ``append_error`` saying why it was not: the report never claims a
     record that is not there (:func:`history_sentence`)."""
     out_dir = Path(out_dir)
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite,
+                           kind="calibration") as tmp:
         save_bias_table(table, tmp / "bias_table.csv")
         comparison.to_csv(tmp / "comparison.csv", index=False)
         figures.save(plot_biases(table, history), tmp / "biases.png")

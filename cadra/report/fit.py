@@ -556,7 +556,8 @@ def write_fit_outputs(result: FitResult, shots: Sequence[ShotData], out_dir: str
                                      result.covariance[:na, :na], reference)
         if reference_model is None:
             reference_model = reference.model
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite,
+                           kind="fit") as tmp:
         data = results_dict(result, shots, start_model=start_model, title=title)
         reference_lines: list[str] = []
         if cmp is not None:

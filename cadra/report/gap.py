@@ -139,7 +139,8 @@ def write_diagnosis(dg, result, out_dir: str | os.PathLike, *, overwrite: bool =
     "where" tables of the fit as given (``where_tables``, :func:`cadra.gap.where.where_analysis`)
     and where.png; atomically."""
     out_dir = Path(out_dir)
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite,
+                           kind="diagnosis") as tmp:
         dg.ranking.to_csv(tmp / "ranking.csv", index=False)
         if dg.evidence is not None:
             dg.evidence.to_csv(tmp / "evidence.csv", index=False)

@@ -289,7 +289,8 @@ def write_outputs(results, out_dir: str | os.PathLike, *, overwrite: bool = Fals
     files = ["report.md", "angles.csv", "arms.csv", "coefficients.csv", "yaw_card.png",
              "arms.png"]
     sectional = any(r.kb is not None for r in results)
-    with atomic_output_dir(Path(out_dir), overwrite=overwrite) as tmp:
+    with atomic_output_dir(Path(out_dir), overwrite=overwrite,
+                           kind="motion") as tmp:
         (tmp / "report.md").write_text(report_markdown(results), encoding="utf-8")
         angles_table(results).to_csv(tmp / "angles.csv", index=False, float_format="%.10g")
         arms_table(results).to_csv(tmp / "arms.csv", index=False, float_format="%.10g")

@@ -87,7 +87,8 @@ def write_roll(fit, tables: Mapping[str, pd.DataFrame], records: Sequence, alpha
     """The fit's folder (module doc), atomically; an existing one is refused unless
     ``overwrite``."""
     out_dir = Path(out_dir)
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite,
+                           kind="roll") as tmp:
         for name, df in tables.items():
             df.to_csv(tmp / f"{name}.csv")
             (tmp / f"{name}.md").write_text(table_markdown(df, digits), encoding="utf-8")

@@ -71,11 +71,12 @@ def write_stage1(result, out_dir: str | os.PathLike, *, truth: pd.DataFrame | No
     output that is or holds an input, ``FileExistsError`` for an existing one (without
     ``overwrite``)."""
     out_dir = Path(out_dir)
-    check_output_dir(out_dir, result.inputs)
+    check_output_dir(out_dir, result.inputs, kind="stage one")
     if out_dir.exists() and not overwrite:
         raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use --overwrite)")
     table, quality, meta, shot = result.trajectory, result.quality, result.meta, result.shot
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite,
+                           kind="stage one") as tmp:
         (tmp / "trajectory.csv").write_text(trajectory_to_csv(table, meta), encoding="utf-8")
         quality.to_csv(tmp / "quality.csv", index=False, float_format="%.8g")
         plot_table = table.assign(ok=table["status"] != "failed")

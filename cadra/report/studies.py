@@ -128,7 +128,7 @@ def write_single_fits(table: pd.DataFrame, model: AeroModel, out_dir: str | os.P
     against = [c for c in ("alpha_rms_deg", "sigma_rms_deg") if c in table] if checks.trends \
         else []
     summaries, trend_rows = {}, []
-    with atomic_output_dir(Path(out_dir), overwrite=overwrite) as tmp:
+    with atomic_output_dir(Path(out_dir), overwrite=overwrite, kind="single fits") as tmp:
         table.to_csv(tmp / "single_fits.csv", index=False)
         (tmp / "plots").mkdir()
         for name in names:
@@ -165,7 +165,7 @@ def write_hold_one(table: pd.DataFrame, name: str, out_dir: str | os.PathLike, *
     """``hold_one.csv`` (:func:`cadra.studies.holdone.hold_one_study`'s table) and
     ``hold_one.png`` (:func:`plot_hold_one`) in ``out_dir``, atomically."""
     out_dir = Path(out_dir)
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite, kind="hold-one study") as tmp:
         table.to_csv(tmp / "hold_one.csv", index=False)
         figures.save(plot_hold_one(table, name), tmp / "hold_one.png")
     return out_dir

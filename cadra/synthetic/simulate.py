@@ -439,7 +439,8 @@ def write_shot(shot: SimulatedShot, out_dir: str | os.PathLike, *, images: bool 
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise FileExistsError(f"{out_dir} exists; refusing to overwrite (use overwrite=True)")
-    with atomic_output_dir(out_dir, overwrite=overwrite) as tmp:
+    with atomic_output_dir(out_dir, overwrite=overwrite,
+                           kind="shot") as tmp:
         paths: dict[int, dict[str, str]] = {}
         image_truth = []
         if images:
