@@ -1,6 +1,7 @@
 """What several test modules share: the suite runs from the repository root (the sample specs'
-paths are relative to it) whichever folder pytest is started in, and the capsule shot with
-an offset centre of gravity that the fit's extras and its problem tests both fit.
+paths are relative to it) whichever folder pytest is started in, the capsule shot with an
+offset centre of gravity that the fit's extras and its problem tests both fit, and the folder
+of inputs (``work``) the output-safety tests aim their outputs at.
 
 Shared harness code (simulated records, gap cases, trajectory writers, image fixtures) lives
 in :mod:`cadra.validation`, which the tools use too; tests never import a tool or another
@@ -43,3 +44,38 @@ def cg_offset_shot():
     y0 = np.array([t.x_cg_m, t.y_cg_m, t.z_cg_m, t.vx_m_s, t.vy_m_s, t.vz_m_s,
                    t.q0, t.q1, t.q2, t.q3, t.p_rad_s, t.q_rad_s, t.r_rad_s])
     return SimpleNamespace(cg_z=cg_z, sim=sim, data=sd, y0=y0)
+
+
+def _trajectory(sim, shot_file: Path, out_dir: Path, rng) -> Path:
+    """A stage-one folder for ``sim``: its exact truth plus seeded noise, written by
+    tests/test_cadra2_cli.py's helper (no images needed, and the fit converges)."""
+    from cadra.validation.truth_files import write_trajectory_file as trajectory_file
+
+    out_dir.mkdir()
+    trajectory_file(sim, shot_file, out_dir / "trajectory.csv", rng)
+    return out_dir
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    """One folder of inputs: a 2-station shot with images (``shot/``, for cadra1), whole
+    M2-2429 and sphere shots without images with stage-one folders the fit and the
+    calibration accept (``m2/``, ``m2_stage1/``, ``sphere/``, ``sphere_stage1/``: so the old
+    code would have run to the end and written over them) and a 3-station spec
+    (``specs/small.toml``)."""
+    import dataclasses
+
+    from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
+
+    spec_m2 = ROOT / "sample_shots" / "specs" / "m2_2429.toml"
+    base = tmp_path_factory.mktemp("safety")
+    spec = dataclasses.replace(load_shot_spec(spec_m2), n_stations=2)
+    write_shot(simulate_shot(spec), base / "shot", images=True, progress=False)
+    rng = np.random.default_rng(17)
+    for name, spec_file in (("m2", spec_m2), ("sphere", spec_m2.with_name("sphere_1.toml"))):
+        sim = simulate_shot(load_shot_spec(spec_file))
+        write_shot(sim, base / name, images=False, progress=False)
+        _trajectory(sim, base / name / "shot.toml", base / f"{name}_stage1", rng)
+    (base / "specs").mkdir()
+    (base / "specs" / "small.toml").write_text("n_stations = 3\n" + spec_m2.read_text())
+    return base

@@ -31,7 +31,6 @@ from cadra.cli.cadra2 import main as cadra2
 from cadra.imaging.shot import measure_shot
 from cadra.io.trajectory import load_trajectory
 from cadra.report.stage1 import write_stage1
-from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = ROOT / "sample_shots" / "specs" / "m2_2429.toml"
@@ -48,40 +47,6 @@ def tree_hash(root: Path) -> str:
         elif p.is_file():
             h.update(p.read_bytes())
     return h.hexdigest()
-
-
-def _trajectory(sim, shot_file: Path, out_dir: Path, rng) -> Path:
-    """A stage-one folder for ``sim``: its exact truth plus seeded noise, written by
-    tests/test_cadra2_cli.py's helper (no images needed, and the fit converges)."""
-    from cadra.validation.truth_files import write_trajectory_file as trajectory_file
-
-    out_dir.mkdir()
-    trajectory_file(sim, shot_file, out_dir / "trajectory.csv", rng)
-    return out_dir
-
-
-@pytest.fixture(scope="module")
-def work(tmp_path_factory):
-    """One folder of inputs: a 2-station shot with images (``shot/``, for cadra1), whole
-    M2-2429 and sphere shots without images with stage-one folders the fit and the
-    calibration accept (``m2/``, ``m2_stage1/``, ``sphere/``, ``sphere_stage1/``: so the old
-    code would have run to the end and written over them) and a 3-station spec
-    (``specs/small.toml``)."""
-    import dataclasses
-
-    import numpy as np
-
-    base = tmp_path_factory.mktemp("safety")
-    spec = dataclasses.replace(load_shot_spec(SPEC), n_stations=2)
-    write_shot(simulate_shot(spec), base / "shot", images=True, progress=False)
-    rng = np.random.default_rng(17)
-    for name, spec_file in (("m2", SPEC), ("sphere", SPEC.with_name("sphere_1.toml"))):
-        sim = simulate_shot(load_shot_spec(spec_file))
-        write_shot(sim, base / name, images=False, progress=False)
-        _trajectory(sim, base / name / "shot.toml", base / f"{name}_stage1", rng)
-    (base / "specs").mkdir()
-    (base / "specs" / "small.toml").write_text("n_stations = 3\n" + SPEC.read_text())
-    return base
 
 
 #: per command: the stage-one folder it accepts and its other options (calibrate never
@@ -488,58 +453,6 @@ def test_outputs_get_the_mode_of_a_plain_open(tmp_path, monkeypatch):
     assert (tmp_path / "d").stat().st_mode & 0o777 == 0o750
 
 
-# -- the station history: never replaced by an output, whatever root it comes from ---------
-
-def test_an_output_never_replaces_the_station_history(work, capsys, monkeypatch, tmp_path):
-    """Calibrate once (entry 1 recorded), then aim outputs at the history's folder and its
-    parents, with the root given, from the environment and not yet created: every one is
-    refused before anything is written, and the history is byte for byte what it was."""
-    from cadra.calibration.history import history_path
-
-    root = tmp_path / "root"
-    sphere = str(work / "sphere_stage1")
-    assert cadra2(["calibrate", sphere, "-o", str(tmp_path / "cal1"), "--stations-root",
-                   str(root), "-q"]) == 0
-    hist = history_path(root, "hffaf")
-    kept = hist.read_bytes()
-    assert kept.count(b"\n") == 1
-    capsys.readouterr()
-    for out in (hist.parent, root / "stations"):
-        for extra in (["--stations-root", str(root)], []):
-            monkeypatch.setenv("CADRA_STATIONS_ROOT", str(root))
-            _refused(cadra2, ["calibrate", sphere, "-o", str(out), *extra, "--overwrite"],
-                     "output", capsys, work, 1)
-            assert hist.read_bytes() == kept
-        _refused(cadra2, ["fit", str(work / "m2_stage1"), "--model", "m2_m070",
-                          "--bias-table", "current", "-o", str(out), "--overwrite"],
-                 "output", capsys, work, 1)
-        assert hist.read_bytes() == kept
-    # a first calibration aimed at the folder its history is about to be created in
-    fresh = tmp_path / "fresh"
-    _refused(cadra2, ["calibrate", sphere, "-o", str(fresh / "stations" / "hffaf"),
-                      "--stations-root", str(fresh)], "holds the input", capsys, work, 1)
-    assert not (fresh / "stations").exists()
-
-
-def test_no_library_call_replaces_a_station_history(tmp_path):
-    """The guard is in the writer itself: a folder holding a station history at any depth
-    is never an output, with or without overwrite, whatever inputs were named."""
-    from cadra.atomic import NEVER_REPLACED
-    from cadra.calibration.history import HISTORY_FILENAME
-
-    assert HISTORY_FILENAME in NEVER_REPLACED
-    deep = tmp_path / "mine" / "stations" / "hffaf"
-    deep.mkdir(parents=True)
-    (deep / HISTORY_FILENAME).write_text("{}\n")
-    for folder in (tmp_path / "mine", deep):
-        with pytest.raises(UnsafeOutputError, match="station history"):
-            check_output_dir(folder)
-        with pytest.raises(UnsafeOutputError, match="station history"):
-            with atomic_output_dir(folder, overwrite=True) as tmp:
-                (tmp / "report.md").write_text("x")
-    assert (deep / HISTORY_FILENAME).read_text() == "{}\n"
-
-
 def test_a_looping_link_among_the_images_fails_its_station_only(work, tmp_path, capsys):
     """An image that is a symbolic link to itself: its station fails with that reason, the
     other is measured, no traceback (the output guard resolving it used to raise)."""
@@ -557,40 +470,6 @@ def test_a_looping_link_among_the_images_fails_its_station_only(work, tmp_path, 
     t = load_trajectory(tmp_path / "out" / "trajectory.csv").table.set_index("station")
     assert t.loc[1, "status"] == "failed" and "symbolic link" in t.loc[1, "reason"]
     assert t.loc[2, "status"] != "failed"
-
-
-def test_a_station_history_that_is_a_folder_is_refused_in_one_line(work, tmp_path, capsys):
-    root = tmp_path / "root"
-    (root / "stations" / "hffaf" / "bias_history.jsonl").mkdir(parents=True)
-    for argv in (["calibrate", str(work / "sphere_stage1")],
-                 ["fit", str(work / "m2_stage1"), "--model", "m2_m070", "--bias-table",
-                  "current"]):
-        code = cadra2([*argv, "-o", str(tmp_path / "out"), "--stations-root", str(root)])
-        err = capsys.readouterr().err.strip()
-        assert code == 1 and len(err.splitlines()) == 1, err
-        assert "cannot be read" in err and "it must be a file" in err
-        assert not (tmp_path / "out").exists()
-
-
-def test_fit_with_the_current_bias_table_passes_on_the_history_s_warnings(work, tmp_path,
-                                                                         capsys):
-    """A torn last line (an interrupted append) is skipped by the history's reader with a
-    warning: the fit applying the latest complete entry says so on the console and in its
-    report, instead of calling it the latest."""
-    from cadra.calibration.history import history_path
-
-    root = tmp_path / "root"
-    assert cadra2(["calibrate", str(work / "sphere_stage1"), "-o", str(tmp_path / "cal"),
-                   "--stations-root", str(root), "-q"]) == 0
-    with open(history_path(root, "hffaf"), "ab") as fh:
-        fh.write(b'{"format": "cadra-bias-table-1", "facil')         # torn mid-append
-    capsys.readouterr()
-    out = tmp_path / "fit"
-    cadra2(["fit", str(work / "m2_stage1"), "--model", "m2_m070", "--bias-table", "current",
-            "--stations-root", str(root), "--max-iterations", "3", "-o", str(out), "-q"])
-    err = capsys.readouterr().err
-    assert "the history warns" in err and "interrupted write" in err, err
-    assert "latest complete entry (1" in (out / "report.md").read_text()
 
 
 @POSIX
