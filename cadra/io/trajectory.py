@@ -93,8 +93,7 @@ def header_value(text: str) -> str:
     """A metadata value as its ``# key: value`` line holds it: as it is, unless it would break
     the line or not read back the same (a line break of any kind in a path, surrounding
     blanks, a leading quote): then as a JSON string (:func:`read_header_value`)."""
-    if (text != text.strip() or text.startswith('"') or len(text.splitlines()) > 1
-            or (text and text.splitlines()[0] != text)):
+    if text != text.strip() or text.startswith('"') or text.splitlines() not in ([], [text]):
         return json.dumps(text)
     return text
 
