@@ -25,6 +25,10 @@ from pathlib import Path
 _SUMMARY = re.compile(r"=+ (.*\b(?:passed|failed|error)\b.*) in [\d.]+s.* =+")
 
 
+#: pytest's short test summary lines, e.g. "FAILED tests/test_x.py::test_y - AssertionError"
+_FAILED = re.compile(r"^(?:FAILED|ERROR) (\S+)")
+
+
 def _counts(summary: str) -> dict[str, int]:
     return {word: int(n) for n, word in re.findall(r"(\d+) (\w+)", summary)}
 
@@ -33,7 +37,7 @@ def fresh_runs(root, runs: int = 3, python: str = sys.executable, keep: bool = F
                log=print) -> dict:
     """Clone ``root``'s HEAD into a new temporary folder, make a venv with ``python`` there
     and run ``.ci/run`` ``runs`` times (the first with an empty numba cache); per run the wall
-    time (s), exit status and pytest's counts. ``keep``: leave the folder (its path is in the
+    time (s), exit status, pytest's counts and the ids of the tests that failed. ``keep``: leave the folder (its path is in the
     figures)."""
     root = Path(root).resolve()
     commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
@@ -59,7 +63,9 @@ def fresh_runs(root, runs: int = 3, python: str = sys.executable, keep: bool = F
                             if (m := _SUMMARY.search(line))), "")
             (work / f"run_{k + 1}.log").write_text(proc.stdout, encoding="utf-8")
             out.append({"seconds": round(seconds, 1), "status": proc.returncode,
-                        "summary": summary, **_counts(summary)})
+                        "summary": summary, **_counts(summary),
+                        "failed_tests": [m.group(1) for line in lines
+                                         if (m := _FAILED.match(line))]})
             log(f"  {seconds:.0f} s, exit {proc.returncode}: {summary}")
     finally:
         if not keep:
