@@ -296,6 +296,42 @@ def test_ctrl_c_or_sigterm_cadra2_one_line_nothing_written(tmp_path, sig, code, 
     assert not out.exists() and _temps(out) == []
 
 
+#: cadra2 simulate, where the signal lands inside a constructor: the half-built object's
+#: finalizer fails later (as llvmlite's OutputString did when SIGTERM cut it off)
+HALF_BUILT = """
+import os, signal, sys
+import cadra.synthetic.simulate as sim
+SIG = int(sys.argv.pop(1))
+class HalfBuilt:
+    def __init__(self):
+        os.kill(os.getpid(), SIG)                    # the signal arrives here ...
+        self._ptr = None                             # ... so this is never set
+    def __del__(self):
+        if self._ptr is not None:
+            pass
+def simulate_shot(spec):
+    keep = HalfBuilt()
+    raise AssertionError("not reached")
+sim.simulate_shot = simulate_shot
+from cadra.cli.cadra2 import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@POSIX
+@pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "interrupted"),
+                                             (signal.SIGTERM, 143, "terminated")])
+def test_an_interrupted_constructor_adds_no_traceback_to_the_one_line(tmp_path, sig, code,
+                                                                      word):
+    out = tmp_path / "sim"
+    proc = subprocess.run([sys.executable, "-c", HALF_BUILT, str(int(sig)), "simulate",
+                           str(SPEC), "-o", str(out), "-q"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == code, proc.stderr
+    assert proc.stderr.strip().splitlines() == [f"cadra2: {word}"], proc.stderr
+    assert not out.exists()
+
+
 # -- cadra1: Ctrl-C and a killed parent with pool workers --------------------------------------
 
 #: cadra1's own main, with each station slowed down so the signal lands while the pool works

@@ -207,6 +207,18 @@ def plain_text_streams() -> None:
                 stream.reconfigure(errors="cadra-plain-text")
 
 
+def quiet_finalizers() -> None:
+    """After an interrupt, drop what finalizers raise for the rest of the process.
+
+    A signal raises where the program happens to be, possibly inside a library's constructor
+    (llvmlite's ``OutputString`` was seen cut off before it had set its pointer); that
+    half-built object's ``__del__`` then fails when the interpreter collects it, and Python
+    prints "Exception ignored in ..." with a traceback after the command's one line. The
+    process is ending on the user's request and nothing is left to clean up, so those
+    reports are noise (:data:`sys.unraisablehook`)."""
+    sys.unraisablehook = lambda unraisable: None
+
+
 def console_main(prog: str, body, argv) -> int:
     """Run a console script's ``body(argv)`` to the conventions of docs/cli.md: Ctrl-C ends
     it with one line and status 130 (and is never lost: :func:`take_ctrl_c`), a closed
@@ -222,9 +234,11 @@ def console_main(prog: str, body, argv) -> int:
         sys.stdout.flush()   # a closed stdout shows here, inside the handler below
         return status
     except Terminated:
+        quiet_finalizers()
         print(f"{prog}: terminated", file=sys.stderr)
         return EXIT_TERMINATED
     except KeyboardInterrupt:
+        quiet_finalizers()
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:   # stdout's reader went away (| head): quietly, 141
@@ -233,5 +247,6 @@ def console_main(prog: str, body, argv) -> int:
 
 __all__ = ["EXIT_STDOUT_CLOSED", "EXIT_TERMINATED", "PLAIN_TEXT", "HelpFormatter", "Terminated",
            "add_verbosity", "add_version", "console_main", "join_number_lists", "number",
-           "plain_text_streams", "stdout_closed", "take_ctrl_c", "take_sigterm", "warn",
+           "plain_text_streams", "quiet_finalizers", "stdout_closed", "take_ctrl_c",
+           "take_sigterm", "warn",
            "write_error"]
