@@ -10,6 +10,7 @@ test."""
 from __future__ import annotations
 
 import os
+import shutil
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -79,3 +80,48 @@ def work(tmp_path_factory):
     (base / "specs").mkdir()
     (base / "specs" / "small.toml").write_text("n_stations = 3\n" + spec_m2.read_text())
     return base
+
+
+# -- a real headless browser (the campaign page's tests) ----------------------------------------
+
+
+def _chromium() -> str:
+    for name in ("chromium", "chromium-browser"):
+        found = shutil.which(name)
+        if found:
+            return found
+    pytest.fail("no Chromium on PATH (chromium or chromium-browser): the campaign page's "
+                "browser test needs one (Debian: apt-get install chromium)", pytrace=False)
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """Debian's Chromium, headless, driven by Playwright. A missing browser or Playwright
+    FAILS the test (never skips: CI must run the browser tests)."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError as exc:
+        pytest.fail(f"playwright is not installed ({exc}): the campaign page's browser test "
+                    "needs it", pytrace=False)
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=_chromium(),
+                              args=["--no-sandbox", "--headless=new"])
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="session")
+def open_page():
+    """``open_page(browser, url) -> (page, errors)``: a new page at ``url`` with every console
+    error and page error collected in ``errors``."""
+
+    def _open(browser, url):
+        page = browser.new_page()
+        errors = []
+        page.on("console", lambda m: errors.append(f"console: {m.text}")
+                if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(f"pageerror: {e}"))
+        page.goto(url)
+        return page, errors
+
+    return _open

@@ -37,8 +37,8 @@ def fresh_runs(root, runs: int = 3, python: str = sys.executable, keep: bool = F
                log=print) -> dict:
     """Clone ``root``'s HEAD into a new temporary folder, make a venv with ``python`` there
     and run ``.ci/run`` ``runs`` times (the first with an empty numba cache); per run the wall
-    time (s), exit status, pytest's counts and the ids of the tests that failed. ``keep``: leave the folder (its path is in the
-    figures)."""
+    time (s), exit status, pytest's counts and the ids of the tests that failed. ``keep``:
+    leave the folder (its path is in the figures)."""
     root = Path(root).resolve()
     commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True, check=True).stdout.strip()

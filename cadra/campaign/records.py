@@ -1,0 +1,202 @@
+"""What the client makes of a task's outcome: the database's rows and the task's folder.
+
+Each finished task's rows replace that task's earlier rows (the same ``kind:name``);
+each task writes its own folder named by its key (``shots/<shot>/stage1-<key>``,
+``groups/<group>/multifit-<key>``, ...), so a rerun never overwrites an earlier result. The
+shot's and group's reports are the library's own (:mod:`cadra.report`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from cadra.campaign.database import CampaignDB
+from cadra.campaign.manifest import Manifest
+from cadra.campaign.tasks import Outcome
+
+#: how much of a key names a task's folder
+KEY_CHARS = 10
+
+
+def slug(name: str) -> str:
+    """A folder name for a shot or group id (letters, digits, ``.-_`` kept)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "unnamed"
+
+
+def task_folder(out: Path, kind: str, name: str, key: str) -> Path:
+    top = "shots" if kind in ("stage1", "single") else (
+        "calibration" if kind == "calibrate" else "groups")
+    return out / top / slug(name) / f"{kind}-{key[:KEY_CHARS]}"
+
+
+def _rel(path: Path | None, out: Path) -> str:
+    return "" if path is None else path.relative_to(out).as_posix()
+
+
+def _first_line(text: str) -> str:
+    return (text or "").strip().splitlines()[0] if (text or "").strip() else ""
+
+
+def record(db: CampaignDB, manifest: Manifest, out: Path, o: Outcome) -> None:
+    """Write ``o``'s folder (when it has one) and its database rows."""
+    {"stage1": _stage1, "calibrate": _calibrate, "single": _single, "multifit": _multifit,
+     "holdone": _holdone, "diagnose": _diagnose}[o.kind](db, manifest, out, o)
+
+
+def _stage1(db, manifest, out, o):
+    from cadra.report.stage1 import write_stage1
+
+    entry = manifest.shot(o.name)
+    row = {"shot_id": o.name, "role": entry.role, "group_name": manifest.group_of(o.name),
+           "status": "done" if o.ok else "failed", "error": _first_line(o.error),
+           "body": _body((entry.spec or {}).get("model"))}
+    if o.ok:
+        v = o.value
+        folder = task_folder(out, "stage1", o.name, o.key)
+        if not folder.exists():
+            write_stage1(v["stage1"], folder, truth=v["truth"])
+        row.update(mach=v["mach"], velocity_m_s=v["velocity_m_s"],
+                   n_stations=v["n_stations"], stage1_report=_rel(folder / "report.md", out),
+                   body=row["body"] or _body(v["stage1"].shot.model))
+    db.replace("shots", {"shot_id": o.name}, [row], o.key)
+
+
+def _body(model) -> str:
+    """A body's short name: its preset (``M2``) or its kind (``sphere``)."""
+    model = model if isinstance(model, dict) else {}
+    return str(model.get("preset") or model.get("kind") or "")
+
+
+def _calibrate(db, manifest, out, o):
+    if not o.ok:
+        db.replace("station_biases", {}, [], o.key)
+        return
+    est = o.value
+    rows = []
+    names = ("x_m", "y_m", "z_m", "time_s")
+    for k, st in enumerate(est.stations):
+        r = {"facility": est.facility, "station": int(st), "applied": 1}
+        for j, n in enumerate(names):
+            r[n] = float(est.bias[k, j])
+            r[f"sigma_{n}"] = float(est.sigma[k, j])
+        rows.append(r)
+    db.replace("station_biases", {}, rows, o.key)
+    folder = task_folder(out, "calibrate", o.name, o.key)
+    if not folder.exists():
+        from cadra.atomic import atomic_output_dir
+
+        with atomic_output_dir(folder) as tmp:
+            pd.DataFrame(rows).to_csv(tmp / "station_biases.csv", index=False)
+
+
+def _single(db, manifest, out, o):
+    where = {"scope": "single", "name": o.name}
+    if not o.ok:
+        db.replace("fits", where, [{**where, "status": "failed", "converged": 0,
+                                    "note": _first_line(o.error)}], o.key)
+        db.replace("coefficients", where, [], o.key)
+        return
+    row, model = o.value["row"], o.value["model"]
+    fit = {**where, "model": model, "status": row["status"], "converged": row["converged"],
+           "chi2nu": row["reduced_chi2"], "dof": row["dof"], "n_shots": 1, "shots": o.name}
+    db.replace("fits", where, [fit], o.key)
+    params = [k[:-6] for k in row if k.endswith("_sigma") and not k.endswith("_sigma_sigma")
+              and f"{k[:-6]}" in row and not k[:-6].endswith("_sigma")]
+    coefs = [{**where, "model": model, "parameter": p, "value": row[p],
+              "sigma": row[f"{p}_sigma"], "vary": 1, "mach": o.value["mach"],
+              "alpha_rms_deg": row.get("alpha_rms_deg"),
+              "sigma_rms_deg": row.get("sigma_rms_deg")} for p in params]
+    db.replace("coefficients", where, coefs, o.key)
+
+
+def _multifit(db, manifest, out, o):
+    where = {"scope": "group", "name": o.name}
+    group = next(g for g in manifest.groups if g.name == o.name)
+    if not o.ok:
+        db.replace("fits", where, [{**where, "model": group.model, "status": "failed",
+                                    "converged": 0, "note": _first_line(o.error)}], o.key)
+        db.replace("coefficients", where, [], o.key)
+        db.replace("curves", {"group_name": o.name}, [], o.key)
+        return
+    result, shots, missing = o.value["result"], o.value["shots"], o.value["missing"]
+    folder = task_folder(out, "multifit", o.name, o.key)
+    if not folder.exists():
+        from cadra.report.fit import write_fit_outputs
+
+        write_fit_outputs(result, shots, folder, title=f"{o.name}: {result.model.name}",
+                          notes=[f"not in this fit: {k} ({_first_line(v)})"
+                                 for k, v in missing.items()])
+    note = (f"ran on {len(shots)} of {len(group.shots)} shots: "
+            + "; ".join(f"{k} failed ({_first_line(v)})" for k, v in missing.items())
+            if missing else "")
+    mach = float(np.mean([r for r in _machs(db, [s.shot_id for s in shots]) if r is not None]
+                         or [math.nan]))
+    db.replace("fits", where, [{
+        **where, "model": result.model.name, "status": result.status,
+        "converged": bool(result), "chi2nu": result.reduced_chi2, "dof": result.dof,
+        "n_shots": len(shots), "shots": ",".join(s.shot_id for s in shots), "note": note,
+        "report": _rel(folder / "report.md", out)}], o.key)
+    rows = []
+    for p in result.params.values():
+        if p.kind != "aero":
+            continue
+        rows.append({**where, "model": result.model.name, "parameter": p.name,
+                     "value": p.value, "sigma": p.stderr, "vary": p.vary, "mach": mach})
+    db.replace("coefficients", where, rows, o.key)
+    curves = o.value.get("curves")
+    crow = [] if curves is None else [{"group_name": o.name, **r}
+                                      for r in curves.to_dict("records")]
+    db.replace("curves", {"group_name": o.name}, crow, o.key)
+
+
+def _machs(db, ids):
+    q = f"SELECT mach FROM shots WHERE shot_id IN ({', '.join('?' for _ in ids)})"
+    return [r[0] for r in db.conn.execute(q, ids).fetchall()]
+
+
+def _holdone(db, manifest, out, o):
+    group = next(g for g in manifest.groups if g.name == o.name)
+    where = {"group_name": o.name}
+    if not o.ok:
+        db.replace("hold_study", where, [], o.key)
+        return
+    table = o.value
+    folder = task_folder(out, "holdone", o.name, o.key)
+    if not folder.exists():
+        from cadra.report.studies import write_hold_one
+
+        write_hold_one(table, group.hold_study.parameter, folder)
+    rows = [{"group_name": o.name, "parameter": group.hold_study.parameter,
+             "held_value": r["value"], "status": r["status"], "converged": r["converged"],
+             "reduced_chi2": r["reduced_chi2"], "theta_rms_deg": r.get("theta_rms_deg"),
+             "psi_rms_deg": r.get("psi_rms_deg")} for r in table.to_dict("records")]
+    db.replace("hold_study", where, rows, o.key)
+
+
+def _diagnose(db, manifest, out, o):
+    where = {"group_name": o.name}
+    if not o.ok:
+        db.replace("gap_verdicts", where, [{**where, "verdict": "not diagnosed",
+                                            "summary": _first_line(o.error)}], o.key)
+        return
+    dg = o.value
+    folder = task_folder(out, "diagnose", o.name, o.key)
+    if not folder.exists():
+        from cadra.report.gap import write_diagnosis
+
+        write_diagnosis(dg, dg.fit_given, folder, where_tables=dg.where_tables)
+    best = dg.ranking.iloc[0] if len(dg.ranking) else None
+    db.replace("gap_verdicts", where, [{
+        **where, "verdict": _first_line(dg.verdict),
+        "best_effect": "" if best is None else str(best["candidate"]),
+        "best_p": None if best is None else best.get("p_value"),
+        "chi2nu_before": dg.reduced_chi2_before, "chi2nu_after": dg.reduced_chi2_after,
+        "summary": dg.verdict}], o.key)
+
+
+__all__ = ["KEY_CHARS", "record", "slug", "task_folder"]
