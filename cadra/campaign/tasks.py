@@ -103,7 +103,9 @@ def _shot_data(outcome: Outcome, table=None, significance: float = 3.0):
     from cadra.calibration.sphere import apply_bias_table
 
     sd = outcome.value["stage1"].shot_data()
-    return apply_bias_table(sd, table, min_significance=significance) if table else sd
+    if table is None or (sd.facility and table.facility and sd.facility != table.facility):
+        return sd     # a shot of another range: its stations are not the spheres'
+    return apply_bias_table(sd, table, min_significance=significance)
 
 
 def _bias_table(calibration: Outcome | None):
