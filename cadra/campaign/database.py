@@ -137,22 +137,22 @@ class CampaignDB:
     def started(self, key: str, kind: str, name: str, utc: str) -> None:
         with self.conn:
             self.conn.execute("INSERT INTO tasks (key, kind, name, status, started_utc, "
-                              "current) VALUES (?, ?, ?, 'running', ?, 1)",
+                              "current) VALUES (?, ?, ?, 'submitted', ?, 1)",
                               (key, kind, name, utc))
 
     def finished(self, outcome, finished_utc: str, result: str | None) -> None:
         with self.conn:
             self.conn.execute(
                 "UPDATE tasks SET status = ?, started_utc = ?, finished_utc = ?, seconds = ?, "
-                "worker = ?, error = ?, result = ? WHERE key = ? AND status = 'running'",
+                "worker = ?, error = ?, result = ? WHERE key = ? AND status = 'submitted'",
                 ("done" if outcome.ok else "failed", outcome.started_utc, finished_utc,
                  outcome.seconds, outcome.worker, outcome.error, result, outcome.key))
 
     def interrupted(self) -> int:
-        """Mark tasks a killed run left 'running' as 'interrupted'; returns how many."""
+        """Mark tasks a stopped run left 'submitted' as 'interrupted'; returns how many."""
         with self.conn:
             return self.conn.execute("UPDATE tasks SET status = 'interrupted' WHERE "
-                                     "status = 'running'").rowcount
+                                     "status = 'submitted'").rowcount
 
     # ------------------------------------------------------------------ results
 

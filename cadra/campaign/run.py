@@ -56,6 +56,8 @@ class RunSummary:
     seconds: float = 0.0
     workers: int = 0
     ran_ids: list[str] = field(default_factory=list)
+    #: worker address -> its process's peak resident memory, MB (when tasks ran)
+    peak_rss_mb: dict = field(default_factory=dict)
 
     def __str__(self) -> str:
         fail = f", {len(self.failed)} failed ({', '.join(self.failed[:5])})" if self.failed \
@@ -125,6 +127,13 @@ def _client(scheduler: str | None, workers: int | None):
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                            dashboard_address=":0", silence_logs=logging.ERROR)
     return Client(cluster), cluster
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory, MB (Linux reports KiB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _report_key(tasks: list[Task], db: CampaignDB) -> str:
@@ -268,6 +277,10 @@ class _Scheduler:
             self.bar.close()
         finally:
             if self.client is not None:
+                try:
+                    self.summary.peak_rss_mb = self.client.run(_peak_rss_mb)
+                except Exception:  # noqa: BLE001 - a figure, not a result
+                    pass
                 self.client.close()
             if self.cluster is not None:
                 self.cluster.close()

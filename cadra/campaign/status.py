@@ -2,8 +2,8 @@
 
 :func:`campaign_status` plans the manifest again (its files hashed as they are now) and
 says, for every task, whether it is ``done`` (its current key has a stored result),
-``failed`` (its current key failed when last run), ``running`` (submitted by a run that holds
-the folder now), ``interrupted`` (submitted by a run that was killed), ``stale`` (done
+``failed`` (its current key failed when last run), ``submitted`` (queued or running in a run
+that holds the folder now), ``interrupted`` (submitted by a run that was killed), ``stale`` (done
 under an earlier key: an input changed since) or ``to do`` (never run).
 """
 
@@ -19,7 +19,7 @@ from cadra.campaign.manifest import load_manifest
 from cadra.campaign.plan import file_sha256, plan
 
 #: the states, in the order the summary lists them
-STATES = ("done", "failed", "running", "interrupted", "stale", "to do")
+STATES = ("done", "failed", "submitted", "interrupted", "stale", "to do")
 
 
 def _held(out: Path) -> bool:
@@ -61,8 +61,9 @@ def campaign_status(folder: str | os.PathLike, manifest=None) -> pd.DataFrame:
                 state = "done"
             elif last and last[0] == "failed":
                 state = "failed"
-            elif last and last[0] in ("running", "interrupted"):
-                state = "running" if running_now and last[0] == "running" else "interrupted"
+            elif last and last[0] in ("submitted", "interrupted"):
+                state = ("submitted" if running_now and last[0] == "submitted"
+                         else "interrupted")
             elif earlier:
                 state = "stale"
             else:

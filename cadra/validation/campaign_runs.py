@@ -101,4 +101,121 @@ def synthetic_manifest(folder: str | os.PathLike, n_shots: int, *, tag: int = 0)
     return path
 
 
-__all__ = ["GROUP_SIZE", "MIX", "flown_model", "group_recovery", "synthetic_manifest"]
+# -- the benchmark ---------------------------------------------------------------------------
+
+
+def _task_costs(folder) -> dict:
+    """Worker seconds per task kind over the current tasks that finished: count and total."""
+    t = read_tables(folder)["tasks"]
+    t = t[(t["current"] == 1) & t["status"].isin(["done", "failed"])]
+    return {k: {"tasks": int(len(d)), "seconds": float(d["seconds"].sum())}
+            for k, d in t.groupby("kind")}
+
+
+def _done_keys(folder) -> set[str]:
+    t = read_tables(folder)["tasks"]
+    return set(t.loc[(t["current"] == 1) & (t["status"] == "done"), "key"])
+
+
+def killed_and_resumed(manifest: Path, out: Path, fraction: float = 0.5,
+                       workers: int = 2) -> dict:
+    """Run the campaign with ``cadra campaign run`` in a process, stop it with SIGTERM once
+    ``fraction`` of its tasks are done, then resume it here: the tasks the resumed run ran
+    and those it should have (every task without a stored result when the first was stopped).
+    """
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from cadra.campaign import run_campaign
+    from cadra.campaign.plan import plan
+
+    n = len(plan(load_manifest(manifest)))
+    proc = subprocess.Popen([sys.executable, "-m", "cadra.cli.campaign", "campaign", "run",
+                             str(manifest), "-o", str(out), "--workers", str(workers), "-q"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    while proc.poll() is None:
+        time.sleep(2.0)
+        try:
+            if len(_done_keys(out)) >= fraction * n:
+                break
+        except (FileNotFoundError, Exception):  # noqa: BLE001 - the database is not made yet
+            continue
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=600)
+    done = _done_keys(out)
+    summary = run_campaign(manifest, out, workers=workers, progress=False)
+    return {"resume_tasks": n, "resume_done_before_kill": len(done),
+            "resume_rerun_tasks": summary.ran, "resume_expected_tasks": n - len(done),
+            "resume_exit_status": proc.returncode}
+
+
+def changed_one(manifest: Path, out: Path, workers: int = 2) -> dict:
+    """Change one capsule's specification (its seed) and rerun: the tasks that ran and those
+    that should have (that shot's stage one and single fit, its group's tasks, and any task
+    that had failed)."""
+    import tomllib
+
+    import tomli_w
+
+    from cadra.campaign import run_campaign
+    from cadra.campaign.plan import plan
+
+    data = tomllib.loads(manifest.read_text(encoding="utf-8"))
+    shot = next(s for s in data["shots"] if s["id"].startswith("capsule"))
+    shot["spec"]["seed"] += 7
+    changed = manifest.with_name("changed.toml")
+    changed.write_bytes(tomli_w.dumps(data).encode("utf-8"))
+    before = {t.id: t.key for t in plan(load_manifest(manifest))}
+    after = {t.id: t.key for t in plan(load_manifest(changed))}
+    t = read_tables(out)["tasks"]
+    failed = set(t.loc[(t["current"] == 1) & (t["status"] == "failed"), "kind"] + ":"
+                 + t.loc[(t["current"] == 1) & (t["status"] == "failed"), "name"])
+    expected = {i for i in after if after[i] != before.get(i)} | failed
+    summary = run_campaign(changed, out, workers=workers, progress=False)
+    return {"change_one_rerun_tasks": summary.ran,
+            "change_one_expected_tasks": len(expected),
+            "change_one_ran_as_expected": set(summary.ran_ids) <= expected,
+            "change_one_report_written": summary.report_written}
+
+
+def bench(n_shots: int, work: Path, *, memory_sizes=()) -> dict:
+    """The campaign benchmark (tools/bench_campaign.py): ``n_shots`` synthetic shots on one
+    and on two local workers, per-stage costs, peak memory per worker (also for each of
+    ``memory_sizes``), a stopped-and-resumed run and a one-shot change."""
+    from cadra.campaign import run_campaign
+
+    work = Path(work)
+    manifest = synthetic_manifest(work / "manifest", n_shots)
+    one = run_campaign(manifest, work / "one_worker", workers=1, progress=True)
+    two = run_campaign(manifest, work / "two_workers", workers=2, progress=True)
+    costs = _task_costs(work / "one_worker")
+    worker_s = sum(c["seconds"] for c in costs.values())
+    speedup = one.seconds / two.seconds
+    per_shot = worker_s / n_shots
+    efficiency = speedup / 2.0
+    out = {"shots": n_shots, "workers": 2, "tasks": two.tasks,
+           "wall_s": round(two.seconds, 1), "wall_s_1_worker": round(one.seconds, 1),
+           "seconds_per_shot": round(two.seconds / n_shots, 2),
+           "worker_seconds_per_shot": round(per_shot, 2),
+           "stage_seconds_per_task": {k: round(c["seconds"] / max(c["tasks"], 1), 2)
+                                      for k, c in costs.items()},
+           "stage_tasks": {k: c["tasks"] for k, c in costs.items()},
+           "speedup_2_workers": round(speedup, 3),
+           "peak_rss_mb_per_worker": round(max(two.peak_rss_mb.values(), default=math.nan), 1),
+           "failed_tasks": sorted(set(one.failed) | set(two.failed)),
+           "projected_1000_shots_s": round(1000 * per_shot / (2 * efficiency), 0),
+           "projected_formula": "T(1000 shots, W workers) = 1000 * c / (W * e); c = worker "
+                                "seconds per shot, e = speedup_2_workers / 2"}
+    for n in memory_sizes:
+        m = synthetic_manifest(work / f"manifest_{n}", n, tag=n)
+        r = run_campaign(m, work / f"memory_{n}", workers=2, progress=True)
+        out[f"peak_rss_mb_per_worker_{n}_shots"] = round(max(r.peak_rss_mb.values()), 1)
+    out |= killed_and_resumed(manifest, work / "resumed")
+    out |= changed_one(manifest, work / "resumed")
+    return out
+
+
+__all__ = ["GROUP_SIZE", "MIX", "bench", "changed_one", "flown_model", "group_recovery",
+           "killed_and_resumed", "synthetic_manifest"]
