@@ -4,7 +4,9 @@ failed shot, the database, status and export, and the report page in a real brow
 
 The campaign here is small and fast: three sphere shots of four stations flown and rendered
 in memory (one with an impossible launch, so its stage one fails), fitted as one group with
-the bundled sphere model; the truth is that model's own values.
+the bundled sphere model, and one calibration sphere that cannot fly either (so the
+calibration fails and the fits go on uncorrected, saying so); the truth is the sphere model's
+own values.
 """
 
 from __future__ import annotations
@@ -45,6 +47,10 @@ SPHERE = ('model = {{ kind = "sphere", d_cm = 2.0 }}, aero_model = "sphere", aim
 def manifest_text(speeds=(450.0, 700.0, -5.0), seeds=(11, 12, 13)) -> str:
     shots = "".join(f'[[shots]]\nid = "S-{k + 1}"\nspec = {{ {SPHERE.format(seed=s, speed=v)} }}\n'
                     for k, (v, s) in enumerate(zip(speeds, seeds, strict=True)))
+    # a calibration sphere that cannot fly: the calibration fails, the fits go on uncorrected
+    bad = SPHERE.format(seed=5, speed=-1)
+    shots += f'[[shots]]\nid = "C-1"\nrole = "sphere"\nspec = {{ {bad} }}\n'
+
     return (f'name = "spheres"\n{shots}\n[[groups]]\nname = "all spheres"\nmodel = "sphere"\n'
             f'shots = ["S-1", "S-2", "S-3"]\n')
 
@@ -89,8 +95,9 @@ def test_a_changed_shot_changes_the_keys_of_exactly_what_depends_on_it(tmp_path)
     base = _keys(write_manifest(tmp_path / "a"))
     changed = _keys(write_manifest(tmp_path / "b", seeds=(11, 99, 13)))
     assert set(base) == set(changed) == {
-        "stage1:S-1", "stage1:S-2", "stage1:S-3", "single:S-1", "single:S-2", "single:S-3",
-        "multifit:all spheres", "diagnose:all spheres"}
+        "stage1:S-1", "stage1:S-2", "stage1:S-3", "stage1:C-1", "calibrate:spheres",
+        "single:S-1", "single:S-2", "single:S-3", "multifit:all spheres",
+        "diagnose:all spheres"}
     assert {k for k in base if base[k] != changed[k]} == {
         "stage1:S-2", "single:S-2", "multifit:all spheres", "diagnose:all spheres"}
     # the manifest's folder or file name is not content: a copy elsewhere has the same keys
@@ -102,8 +109,8 @@ def test_a_fit_setting_changes_the_fits_keys_not_stage_ones(tmp_path):
     path = write_manifest(tmp_path / "b")
     path.write_text(path.read_text() + "[settings]\nmax_iterations = 20\n", encoding="utf-8")
     changed = _keys(path)
-    assert {k for k in base if base[k] != changed[k]} == {k for k in base
-                                                           if not k.startswith("stage1")}
+    assert {k for k in base if base[k] != changed[k]} == {
+        k for k in base if not k.startswith(("stage1", "calibrate"))}
 
 
 def test_file_hashes_are_cached_until_the_file_changes(tmp_path):
@@ -158,8 +165,9 @@ def campaign(tmp_path_factory):
 
 def test_every_task_runs_and_the_failed_shot_is_isolated(campaign):
     _, out, summary = campaign
-    assert summary.tasks == 8 and summary.ran == 8 and summary.reused == 0
-    assert sorted(summary.failed) == ["single:S-3", "stage1:S-3"]
+    assert summary.tasks == 10 and summary.ran == 10 and summary.reused == 0
+    assert sorted(summary.failed) == ["calibrate:spheres", "single:S-3", "stage1:C-1",
+                                      "stage1:S-3"]
     t = read_tables(out)
     shots = t["shots"].set_index("shot_id")
     assert list(shots.loc[["S-1", "S-2"], "status"]) == ["done", "done"]
@@ -168,6 +176,10 @@ def test_every_task_runs_and_the_failed_shot_is_isolated(campaign):
     fit = t["fits"].set_index(["scope", "name"]).loc[("group", "all spheres")]
     assert fit["converged"] == 1 and fit["n_shots"] == 2 and fit["shots"] == "S-1,S-2"
     assert fit["note"].startswith("ran on 2 of 3 shots: S-3 failed")
+    uncorrected = "not corrected for station biases: the sphere calibration failed (no sphere"
+    assert uncorrected in fit["note"]
+    singles = t["fits"][t["fits"]["scope"] == "single"].set_index("name")
+    assert singles.loc["S-1", "note"].startswith(uncorrected)
     tasks = t["tasks"].set_index("name")
     assert set(t["tasks"]["status"]) == {"done", "failed"}
     assert tasks.loc["all spheres"]["worker"].str.startswith("tcp://").all()
@@ -192,8 +204,9 @@ def test_a_rerun_does_nothing_and_a_changed_shot_reruns_only_its_tasks(campaign,
     copy = tmp_path / "out"
     shutil.copytree(out, copy)
     again = run_campaign(manifest, copy, workers=1, progress=False)
-    # the failed shot and what took it are tried again; everything else is reused
-    assert sorted(again.ran_ids) == ["single:S-3", "stage1:S-3"] and again.reused == 6
+    # what failed is tried again; what went on without it stands while it fails again
+    failed = ["calibrate:spheres", "single:S-3", "stage1:C-1", "stage1:S-3"]
+    assert sorted(again.ran_ids) == failed and again.reused == 6
     assert not again.report_written
     before = read_tables(copy)["coefficients"]
     changed = write_manifest(tmp_path / "m2", seeds=(11, 99, 13))
@@ -201,8 +214,8 @@ def test_a_rerun_does_nothing_and_a_changed_shot_reruns_only_its_tasks(campaign,
     assert status["stage1:S-2"] == "stale" and status["stage1:S-1"] == "done"
     assert status["stage1:S-3"] == "failed"
     rerun = run_campaign(changed, copy, workers=1, progress=False)
-    assert sorted(rerun.ran_ids) == ["diagnose:all spheres", "multifit:all spheres",
-                                     "single:S-2", "single:S-3", "stage1:S-2", "stage1:S-3"]
+    assert sorted(rerun.ran_ids) == sorted(["diagnose:all spheres", "multifit:all spheres",
+                                            "single:S-2", "stage1:S-2", *failed])
     assert rerun.report_written
     after = read_tables(copy)["coefficients"]
     s1 = [d[(d["name"] == "S-1")].drop(columns="task_key").reset_index(drop=True)
@@ -217,7 +230,7 @@ def test_status_and_export_from_the_command_line(campaign, tmp_path, capsys):
     _, out, _ = campaign
     assert cadra(["campaign", "status", str(out)]) == 0
     text = capsys.readouterr().out
-    assert text.splitlines()[0] == "tasks: 6 done, 2 failed"
+    assert text.splitlines()[0] == "tasks: 6 done, 4 failed"
     assert "failed      stage1:S-3: SpecError" in text
     dest = tmp_path / "export"
     assert cadra(["campaign", "export", str(out), "-o", str(dest), "-q"]) == 0
@@ -283,7 +296,7 @@ def test_a_real_scheduler_and_workers_give_the_same_database(campaign, tmp_path)
             client.wait_for_workers(2, timeout=120)
         there = tmp_path / "out"
         summary = run_campaign(manifest, there, scheduler=address, progress=False)
-        assert summary.workers == 2 and summary.ran == 8
+        assert summary.workers == 2 and summary.ran == 10
         local, remote = read_tables(out), read_tables(there)
         for name in ("shots", "coefficients", "fits", "curves", "gap_verdicts"):
             pd.testing.assert_frame_equal(local[name], remote[name], check_exact=True)

@@ -103,7 +103,8 @@ def _single(db, manifest, out, o):
         return
     row, model = o.value["row"], o.value["model"]
     fit = {**where, "model": model, "status": row["status"], "converged": row["converged"],
-           "chi2nu": row["reduced_chi2"], "dof": row["dof"], "n_shots": 1, "shots": o.name}
+           "chi2nu": row["reduced_chi2"], "dof": row["dof"], "n_shots": 1, "shots": o.name,
+           "note": o.value.get("note", "")}
     db.replace("fits", where, [fit], o.key)
     params = [k[:-6] for k in row if k.endswith("_sigma") and not k.endswith("_sigma_sigma")
               and f"{k[:-6]}" in row and not k[:-6].endswith("_sigma")]
@@ -131,9 +132,10 @@ def _multifit(db, manifest, out, o):
         write_fit_outputs(result, shots, folder, title=f"{o.name}: {result.model.name}",
                           notes=[f"not in this fit: {k} ({_first_line(v)})"
                                  for k, v in missing.items()])
-    note = (f"ran on {len(shots)} of {len(group.shots)} shots: "
-            + "; ".join(f"{k} failed ({_first_line(v)})" for k, v in missing.items())
-            if missing else "")
+    notes = [f"ran on {len(shots)} of {len(group.shots)} shots: "
+             + "; ".join(f"{k} failed ({_first_line(v)})" for k, v in missing.items())
+             ] if missing else []
+    note = "; ".join(notes + ([o.value["note"]] if o.value.get("note") else []))
     mach = float(np.mean([r for r in _machs(db, [s.shot_id for s in shots]) if r is not None]
                          or [math.nan]))
     db.replace("fits", where, [{

@@ -109,12 +109,15 @@ def _shot_data(outcome: Outcome, table=None, significance: float = 3.0):
 
 
 def _bias_table(calibration: Outcome | None):
+    """The campaign's bias table and a note: (None, "") without sphere shots; (None, why) when
+    the calibration failed (the fits go on uncorrected and say so)."""
     if calibration is None:
-        return None
+        return None, ""
     if not calibration.ok:
-        raise UpstreamFailed(f"the sphere calibration failed: {calibration.error}")
+        first = calibration.error.strip().splitlines()[0] if calibration.error else ""
+        return None, f"not corrected for station biases: the sphere calibration failed ({first})"
     return calibration.value.to_table(created_utc="2000-01-01T00:00:00Z",
-                                      note="campaign calibration")
+                                      note="campaign calibration"), ""
 
 
 # --------------------------------------------------------------------------- tasks
@@ -140,7 +143,8 @@ def single(payload: dict, stage1: Outcome, calibration: Outcome | None) -> dict:
 
     if not stage1.ok:
         raise UpstreamFailed(f"stage one failed: {stage1.error}")
-    sd = _shot_data(stage1, _bias_table(calibration), payload["bias_significance"])
+    table, note = _bias_table(calibration)
+    sd = _shot_data(stage1, table, payload["bias_significance"])
     if payload.get("model"):
         model = resolve_model(payload["model"])
     elif sd.body_kind == "sphere":     # a sphere has drag only: its own model
@@ -149,7 +153,7 @@ def single(payload: dict, stage1: Outcome, calibration: Outcome | None) -> dict:
         model = linear_template_for(sd)
     row = single_fit(sd, model, None,
                      options=FitOptions(max_iterations=payload["max_iterations"]))
-    return {"row": row, "model": model.name, "mach": stage1.value["mach"]}
+    return {"row": row, "model": model.name, "mach": stage1.value["mach"], "note": note}
 
 
 def multifit(payload: dict, calibration: Outcome | None, *members: Outcome) -> dict:
@@ -158,7 +162,7 @@ def multifit(payload: dict, calibration: Outcome | None, *members: Outcome) -> d
     import cadra
 
     group = payload["group"]
-    table = _bias_table(calibration)
+    table, note = _bias_table(calibration)
     missing = {o.name: o.error for o in members if not o.ok}
     shots = [_shot_data(o, table, payload["bias_significance"]) for o in members if o.ok]
     if not shots:
@@ -166,7 +170,7 @@ def multifit(payload: dict, calibration: Outcome | None, *members: Outcome) -> d
                              + "; ".join(f"{k}: {v}" for k, v in missing.items()))
     result = cadra.fit(shots, group.model, hold=group.hold or None, free=group.free or None,
                        max_iterations=payload["max_iterations"])
-    return {"result": result, "shots": shots, "missing": missing,
+    return {"result": result, "shots": shots, "missing": missing, "note": note,
             "curves": coefficient_curve_table(result, shots) if result.problem else None}
 
 

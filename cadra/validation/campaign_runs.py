@@ -208,7 +208,10 @@ def bench(n_shots: int, work: Path, *, memory_sizes=()) -> dict:
            "projected_1000_shots_s": round(1000 * per_shot / (2 * efficiency), 0),
            "projected_formula": "T(1000 shots, W workers) = 1000 * c / (W * e); c = worker "
                                 "seconds per shot, e = speedup_2_workers / 2"}
+    out[f"peak_rss_mb_per_worker_{n_shots}_shots"] = out["peak_rss_mb_per_worker"]
     for n in memory_sizes:
+        if n == n_shots:
+            continue
         m = synthetic_manifest(work / f"manifest_{n}", n, tag=n)
         r = run_campaign(m, work / f"memory_{n}", workers=2, progress=True)
         out[f"peak_rss_mb_per_worker_{n}_shots"] = round(max(r.peak_rss_mb.values()), 1)
