@@ -173,6 +173,8 @@ def test_every_task_runs_and_the_failed_shot_is_isolated(campaign):
     assert list(shots.loc[["S-1", "S-2"], "status"]) == ["done", "done"]
     assert shots.loc["S-3", "status"] == "failed"
     assert "speed_m_s" in shots.loc["S-3", "error"]           # the reason, from the spec check
+    link = shots.loc["S-1", "fit_report"]                      # the group fit it is in
+    assert link.startswith("groups/all_spheres/multifit-") and (out / link).is_file()
     fit = t["fits"].set_index(["scope", "name"]).loc[("group", "all spheres")]
     assert fit["converged"] == 1 and fit["n_shots"] == 2 and fit["shots"] == "S-1,S-2"
     assert fit["note"].startswith("ran on 2 of 3 shots: S-3 failed")

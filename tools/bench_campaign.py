@@ -21,6 +21,20 @@ from cadra.validation.tool import one_thread, run_tool
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def _without(argv: list[str], option: str) -> list[str]:
+    """``argv`` without ``option`` and its value: where the work goes changes no figure, and
+    the recorded command names no folder of this machine."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a == option:
+            skip = True
+        elif not a.startswith(option + "="):
+            out.append(a)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--shots", type=int, default=100)
@@ -34,7 +48,8 @@ def main(argv=None) -> int:
     n = 10 if args.quick else args.shots
     sizes = [int(s) for s in args.memory_sizes.split(",") if s.strip()]
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="cadra_bench_"))
-    run_tool("bench_campaign", ROOT, lambda: bench(n, work, memory_sizes=sizes), argv=argv,
+    shown = _without(sys.argv[1:] if argv is None else list(argv), "--work")
+    run_tool("bench_campaign", ROOT, lambda: bench(n, work, memory_sizes=sizes), argv=shown,
              seconds_key="seconds")
     return 0
 

@@ -143,6 +143,9 @@ def _multifit(db, manifest, out, o):
         "converged": bool(result), "chi2nu": result.reduced_chi2, "dof": result.dof,
         "n_shots": len(shots), "shots": ",".join(s.shot_id for s in shots), "note": note,
         "report": _rel(folder / "report.md", out)}], o.key)
+    with db.conn:   # each shot's row links to the group fit it is in
+        db.conn.executemany("UPDATE shots SET fit_report = ? WHERE shot_id = ?",
+                            [(_rel(folder / "report.md", out), s.shot_id) for s in shots])
     rows = []
     for p in result.params.values():
         if p.kind != "aero":
