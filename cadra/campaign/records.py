@@ -18,6 +18,7 @@ import pandas as pd
 from cadra.campaign.database import CampaignDB
 from cadra.campaign.manifest import Manifest
 from cadra.campaign.tasks import Outcome
+from cadra.campaign.tasks import first_line as _first_line
 
 #: how much of a key names a task's folder
 KEY_CHARS = 10
@@ -36,10 +37,6 @@ def task_folder(out: Path, kind: str, name: str, key: str) -> Path:
 
 def _rel(path: Path | None, out: Path) -> str:
     return "" if path is None else path.relative_to(out).as_posix()
-
-
-def _first_line(text: str) -> str:
-    return (text or "").strip().splitlines()[0] if (text or "").strip() else ""
 
 
 def record(db: CampaignDB, manifest: Manifest, out: Path, o: Outcome) -> None:
@@ -106,8 +103,7 @@ def _single(db, manifest, out, o):
            "chi2nu": row["reduced_chi2"], "dof": row["dof"], "n_shots": 1, "shots": o.name,
            "note": o.value.get("note", "")}
     db.replace("fits", where, [fit], o.key)
-    params = [k[:-6] for k in row if k.endswith("_sigma") and not k.endswith("_sigma_sigma")
-              and f"{k[:-6]}" in row and not k[:-6].endswith("_sigma")]
+    params = [k for k in row if f"{k}_sigma_scaled" in row]   # studies.single's columns
     coefs = [{**where, "model": model, "parameter": p, "value": row[p],
               "sigma": row[f"{p}_sigma"], "vary": 1, "mach": o.value["mach"],
               "alpha_rms_deg": row.get("alpha_rms_deg"),

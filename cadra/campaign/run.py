@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import os
 import pickle
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -30,7 +29,7 @@ from cadra.campaign.database import CampaignDB, read_tables
 from cadra.campaign.manifest import Manifest, load_manifest
 from cadra.campaign.plan import Task, file_sha256, plan
 from cadra.campaign.records import record
-from cadra.campaign.tasks import Outcome, run_task
+from cadra.campaign.tasks import Outcome, first_line, run_task
 
 #: the campaign folder's kind (its :data:`cadra.atomic.OUTPUT_MARKER`)
 KIND = "campaign"
@@ -143,11 +142,11 @@ def _report_key(tasks: list[Task], db: CampaignDB) -> str:
 
 def run_campaign(manifest: Manifest | str | os.PathLike, out_dir: str | os.PathLike, *,
                  scheduler: str | None = None, workers: int | None = None,
-                 progress: bool = True, log: Callable[[str], None] | None = None
-                 ) -> RunSummary:
+                 progress: bool = True) -> RunSummary:
     """Run (or resume) a campaign into ``out_dir``: every task whose result is not yet stored
     runs on Dask, and the database and report follow. ``scheduler``: an existing Dask
     scheduler's address (default: a local cluster of ``workers`` processes, one per core).
+    ``progress``: one bar over the tasks that run, with a line for each that fails.
     Returns a :class:`RunSummary`."""
     import time
 
@@ -171,8 +170,7 @@ def run_campaign(manifest: Manifest | str | os.PathLike, out_dir: str | os.PathL
         summary = RunSummary(out, tasks=len(tasks))
         stored = {t.id: o for t in tasks
                   if (rel := db.done(t.key)) and (o := _load(out, rel)) is not None}
-        _Scheduler(tasks, stored, db, manifest, out, summary).run(
-            scheduler, workers, progress, log)
+        _Scheduler(tasks, stored, db, manifest, out, summary).run(scheduler, workers, progress)
         _drop_superseded(db, tasks)
         key = _report_key(tasks, db)
         if key != db.get("report_key") or not (out / REPORT).exists():
@@ -259,7 +257,7 @@ class _Scheduler:
             self.bar.total = len(self.ran)
             self.bar.refresh()
 
-    def run(self, scheduler, workers, progress, log) -> None:
+    def run(self, scheduler, workers, progress) -> None:
         from tqdm import tqdm
 
         self.scheduler, self.workers, self.by_key, self.cluster = scheduler, workers, {}, None
@@ -272,7 +270,7 @@ class _Scheduler:
             self.bar = tqdm(total=len(self.ran), desc=f"campaign {self.manifest.name}",
                             unit="task", disable=not progress)
             for f in self.done:
-                self._finish(f, log)
+                self._finish(f)
                 waiting = [t for t in waiting if not self._decide(t)]
             self.bar.close()
         finally:
@@ -287,7 +285,7 @@ class _Scheduler:
         if waiting:   # cannot happen: every input is decided once the runs are finished
             raise RuntimeError(f"tasks left undecided: {[t.id for t in waiting]}")
 
-    def _finish(self, f, log) -> None:
+    def _finish(self, f) -> None:
         t = self.by_key[f.key]
         try:
             o = f.result()
@@ -307,9 +305,8 @@ class _Scheduler:
         self.summary.ran_ids.append(t.id)
         if not o.ok:
             self.summary.failed.append(t.id)
-            if log:
-                self.bar.write(f"{t.id}: failed: "
-                               f"{o.error.splitlines()[0] if o.error else ''}")
+            if not self.bar.disable:
+                self.bar.write(f"{t.id}: failed: {first_line(o.error)}")
         self.bar.update(1)
         f.release()
 

@@ -17,6 +17,7 @@ import pandas as pd
 from cadra.campaign.database import FILENAME, PUBLIC_TABLES, CampaignDB, read_tables
 from cadra.campaign.manifest import load_manifest
 from cadra.campaign.plan import file_sha256, plan
+from cadra.campaign.tasks import first_line
 
 #: the states, in the order the summary lists them
 STATES = ("done", "failed", "submitted", "interrupted", "stale", "to do")
@@ -68,7 +69,7 @@ def campaign_status(folder: str | os.PathLike, manifest=None) -> pd.DataFrame:
                 state = "stale"
             else:
                 state = "to do"
-            err = (last[3] or "").strip().splitlines()[0] if last and last[3] else ""
+            err = first_line(last[3]) if last else ""
             rows.append({"task": t.id, "kind": t.kind, "name": t.name, "state": state,
                          "seconds": last[1] if last else None,
                          "worker": last[2] if last else None, "error": err})

@@ -22,6 +22,7 @@ import time
 import traceback
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -71,6 +72,12 @@ def _utc() -> str:
     return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def first_line(text: str | None) -> str:
+    """The first non-empty line of an error text ("" for none): what tables and status show;
+    the whole text stays in the ``tasks`` table."""
+    return next((line.strip() for line in (text or "").splitlines() if line.strip()), "")
+
+
 # --------------------------------------------------------------------------- stage one
 
 
@@ -78,12 +85,11 @@ def stage_one(entry, formation: str = "view") -> dict:
     """A shot's trajectory: its specification flown and rendered in memory, or its shot
     file's images, through stage one on this worker's one core."""
     import cadra
+    from cadra.flight.estimates import kinematics_at_epoch
     from cadra.io.spec_file import spec_from_dict
 
     truth = None
     if entry.spec is not None:
-        from pathlib import Path
-
         spec = spec_from_dict(dict(entry.spec), source_path=Path(entry.spec_path)
                               if entry.spec_path else None)
         shot = cadra.simulate(spec)
@@ -92,11 +98,12 @@ def stage_one(entry, formation: str = "view") -> dict:
     else:
         result = cadra.measure(entry.shot, workers=1, formation=formation)
     sd = result.shot_data()
-    speed = np.linalg.norm(np.diff(sd.meas[:, :3], axis=0), axis=1) / np.diff(sd.t_s)
-    v0 = float(np.median(speed[:3])) if len(speed) else math.nan
-    return {"stage1": result, "truth": truth, "velocity_m_s": v0,
-            "mach": v0 / sd.rigid.speed_of_sound_m_s,
-            "n_stations": int(result.n_measured)}
+    try:   # the speed at the shot's epoch (its middle station), as linear theory reads it
+        v = float(np.linalg.norm(kinematics_at_epoch(sd)[1]))
+    except ValueError:      # fewer than three positions: no speed to read
+        v = math.nan
+    return {"stage1": result, "truth": truth, "velocity_m_s": v,
+            "mach": v / sd.rigid.speed_of_sound_m_s, "n_stations": int(result.n_measured)}
 
 
 def _shot_data(outcome: Outcome, table=None, significance: float = 3.0):
@@ -114,8 +121,8 @@ def _bias_table(calibration: Outcome | None):
     if calibration is None:
         return None, ""
     if not calibration.ok:
-        first = calibration.error.strip().splitlines()[0] if calibration.error else ""
-        return None, f"not corrected for station biases: the sphere calibration failed ({first})"
+        return None, ("not corrected for station biases: the sphere calibration failed "
+                      f"({first_line(calibration.error)})")
     return calibration.value.to_table(created_utc="2000-01-01T00:00:00Z",
                                       note="campaign calibration"), ""
 
@@ -176,32 +183,22 @@ def multifit(payload: dict, calibration: Outcome | None, *members: Outcome) -> d
 
 def coefficient_curve_table(result, shots, n_points: int = 61) -> pd.DataFrame:
     """The fitted coefficients and their 1-sigma along the angles the flights covered, at
-    the flights' mean Mach (the points of seed 004 Figs. 9-14's curves): ``coefficient``,
-    ``angle`` (``alpha`` or ``sigma``), ``angle_deg``, ``mach``, ``value``, ``sigma``."""
+    the flights' mean Mach (the points of seed 004 Figs. 9-14's curves), the angles and Mach
+    from the fit's own forward model (:func:`cadra.fitting.histories.fitted_histories`):
+    ``coefficient``, ``angle`` (``alpha`` or ``sigma``), ``angle_deg``, ``mach``, ``value``,
+    ``sigma``."""
+    from cadra.fitting.histories import fitted_histories
     from cadra.report.fit_plots import coefficient_curves
-    from cadra.studies.single import aero_angle_history, fitted_states
 
     model = result.model
-    angles, machs = [], []
-    for sf, sd in zip(result.shots, shots, strict=False):
-        st = fitted_states(sd, model, sf.state, sf.t0_s)
-        h = aero_angle_history(sd, st)
-        key = "sigma" if model.angle_plane == "sigma" else "alpha"
-        angles.append(np.asarray(h[key]))
-        machs.append(np.asarray(h["mach"]))
-    a = np.concatenate(angles)
-    mach = float(np.mean(np.concatenate(machs)))
-    lo, hi = float(np.min(a)), float(np.max(a))
-    grid = np.linspace(lo, hi, n_points)
+    angle = "sigma" if model.angle_plane == "sigma" else "alpha"
+    h = pd.concat(list(fitted_histories(result, shots).values()), ignore_index=True)
+    mach = float(h["mach"].mean())
+    grid = np.radians(np.linspace(h[f"{angle}_deg"].min(), h[f"{angle}_deg"].max(), n_points))
     zeros = np.zeros_like(grid)
     na = len(result.aero_names)
-    cov = result.covariance[:na, :na]
-    if model.angle_plane == "sigma":
-        curves = coefficient_curves(model, result.aero_names, cov, grid, zeros, grid, mach)
-        angle = "sigma"
-    else:
-        curves = coefficient_curves(model, result.aero_names, cov, grid, zeros, None, mach)
-        angle = "alpha"
+    curves = coefficient_curves(model, result.aero_names, result.covariance[:na, :na], grid,
+                                zeros, grid if angle == "sigma" else None, mach)
     rows = []
     for c, (v, s) in curves.items():
         v = np.broadcast_to(np.asarray(v, dtype=float), grid.shape)
@@ -273,4 +270,5 @@ def run_task(kind: str, name: str, key: str, payload: dict, *upstream: Outcome) 
                    failed_inputs=failed)
 
 
-__all__ = ["KINDS", "Outcome", "UpstreamFailed", "coefficient_curve_table", "run_task"]
+__all__ = ["KINDS", "Outcome", "UpstreamFailed", "coefficient_curve_table", "first_line",
+           "run_task"]

@@ -71,8 +71,7 @@ def _run(args) -> int:
 
     try:
         summary = run_campaign(args.manifest, args.output, scheduler=args.scheduler,
-                               workers=args.workers, progress=not args.quiet,
-                               log=print)
+                               workers=args.workers, progress=not args.quiet)
     except (ManifestError, CampaignError, ValueError, OSError) as exc:
         print(f"cadra campaign run: {exc}", file=sys.stderr)
         return 1
