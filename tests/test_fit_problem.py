@@ -159,3 +159,27 @@ def test_station_terms_are_in_the_prediction_not_in_the_trajectory(fitted):
     names = prob.param_names
     assert [names[i] for i in range(lay["extras"].start, lay["extras"].stop)] == ["cg_y", "cg_z"]
     assert names[lay["locals"]["M2-2429"].start] == "M2-2429:x_cg_m"
+
+
+def test_one_core_gives_the_same_jacobian_without_the_thread_pool(fitted, monkeypatch):
+    """Under ``cores.limit(1)`` (a campaign task: Dask gives it one core) the complex-step
+    runs stay in the calling thread, and the Jacobian is the threaded one, bit for bit."""
+    from cadra import cores
+    from cadra.fitting import sensitivity
+
+    res, _ = fitted
+    threaded = res.problem.jacobian()[0]
+
+    def no_pool():
+        raise AssertionError("the propagation used the thread pool under cores.limit(1)")
+
+    monkeypatch.setattr(sensitivity, "_pool", no_pool)
+    monkeypatch.setattr(sensitivity.os, "cpu_count", lambda: 2)   # a pool would be used
+    with cores.limit(1):
+        assert cores.available() == 1
+        one = res.problem.jacobian()[0]
+    np.testing.assert_array_equal(one, threaded)
+    assert cores.available() == 2
+    with pytest.raises(ValueError, match="at least 1 core"):
+        with cores.limit(0):
+            pass

@@ -255,9 +255,12 @@ def run_task(kind: str, name: str, key: str, payload: dict, *upstream: Outcome) 
     """Run one task and return its :class:`Outcome`; never raises (a failure is the
     outcome's ``error``: for an input's failure, that input's reason; otherwise the
     exception and its last frames)."""
+    from cadra import cores
+
     started, t0 = _utc(), time.perf_counter()
     try:
-        value = _KINDS[kind](payload, *upstream)
+        with cores.limit(1):     # Dask gives the task one core: the library's pools give way
+            value = _KINDS[kind](payload, *upstream)
         ok, error = True, ""
     except UpstreamFailed as exc:
         value, ok, error = None, False, str(exc)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cadra import cores
 from cadra.channels import N_CHANNELS, OBSERVED
 from cadra.conventions import quat_mul, rotvec_quat
 from cadra.dynamics.integrate import propagate_batch
@@ -60,7 +61,7 @@ class Integration:
     h_max_s: float = 2e-3
     tol_position_m: float = 1e-8
     tol_angle_rad: float = 1e-8
-    threads: int = 0        # 0: all cores
+    threads: int = 0        # 0: all cores (cadra.cores.available)
 
     def __post_init__(self):
         for k in ("h_max_s", "tol_position_m", "tol_angle_rad"):
@@ -93,7 +94,7 @@ def _run(Y0, t0, times, PHYS, program, PARAMS, integ: Integration) -> np.ndarray
     m = Y0.shape[0]
     OUT = np.empty((m, len(times), N_STATE), dtype=Y0.dtype)
     plane = plane_code(program.angle_plane)
-    workers = integ.threads or (os.cpu_count() or 1)
+    workers = integ.threads or cores.available()
     chunks = [c for c in np.array_split(np.arange(m), min(workers, m)) if c.size]
 
     def job(idx):

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from cadra import cores
 from cadra.imaging.station import VIEWS, StationResult, measure_station
 from cadra.io.shotfile import ShotFile
 from cadra.io.trajectory import station_rows
@@ -333,7 +334,7 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
 def _run(tasks: list, workers: int | None, label: str | None) -> list[StationResult]:
     """The station tasks, in a process pool of ``workers`` (default: the cores; 1 = here),
     with a progress bar labelled ``label`` (None: none)."""
-    workers = (os.cpu_count() or 1) if workers is None else max(int(workers), 1)
+    workers = cores.available() if workers is None else max(int(workers), 1)
     workers = min(workers, len(tasks)) or 1
     bar = None
     if label is not None:
