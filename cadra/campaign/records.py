@@ -1,9 +1,10 @@
 """What the client makes of a task's outcome: the database's rows and the task's folder.
 
-Each finished task's rows replace that task's earlier rows (the same ``kind:name``);
-each task writes its own folder named by its key (``shots/<shot>/stage1-<key>``,
-``groups/<group>/multifit-<key>``, ...), so a rerun never overwrites an earlier result. The
-shot's and group's reports are the library's own (:mod:`cadra.report`).
+Each finished task's rows replace that task's earlier rows (the same ``kind:name``); each
+task's folder (drawn on its worker, :mod:`cadra.campaign.folders`) is written under a name
+made of its key (``shots/<shot>/stage1-<key>``, ``groups/<group>/multifit-<key>``, ...), so
+a rerun never overwrites an earlier result. The shot's and group's reports are the
+library's own (:mod:`cadra.report`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from cadra.campaign.database import CampaignDB
+from cadra.campaign.folders import ensure
 from cadra.campaign.manifest import Manifest
 from cadra.campaign.tasks import Outcome
 from cadra.campaign.tasks import first_line as _first_line
@@ -46,8 +48,6 @@ def record(db: CampaignDB, manifest: Manifest, out: Path, o: Outcome) -> None:
 
 
 def _stage1(db, manifest, out, o):
-    from cadra.report.stage1 import write_stage1
-
     entry = manifest.shot(o.name)
     row = {"shot_id": o.name, "role": entry.role, "group_name": manifest.group_of(o.name),
            "status": "done" if o.ok else "failed", "error": _first_line(o.error),
@@ -55,8 +55,7 @@ def _stage1(db, manifest, out, o):
     if o.ok:
         v = o.value
         folder = task_folder(out, "stage1", o.name, o.key)
-        if not folder.exists():
-            write_stage1(v["stage1"], folder, truth=v["truth"])
+        ensure(folder, o.kind, o.name, v, o.folder)
         row.update(mach=v["mach"], velocity_m_s=v["velocity_m_s"],
                    n_stations=v["n_stations"], stage1_report=_rel(folder / "report.md", out),
                    body=row["body"] or _body(v["stage1"].shot.model))
@@ -122,12 +121,7 @@ def _multifit(db, manifest, out, o):
         return
     result, shots, missing = o.value["result"], o.value["shots"], o.value["missing"]
     folder = task_folder(out, "multifit", o.name, o.key)
-    if not folder.exists():
-        from cadra.report.fit import write_fit_outputs
-
-        write_fit_outputs(result, shots, folder, title=f"{o.name}: {result.model.name}",
-                          notes=[f"not in this fit: {k} ({_first_line(v)})"
-                                 for k, v in missing.items()])
+    ensure(folder, o.kind, o.name, o.value, o.folder)
     notes = [f"ran on {len(shots)} of {len(group.shots)} shots: "
              + "; ".join(f"{k} failed ({_first_line(v)})" for k, v in missing.items())
              ] if missing else []
@@ -168,10 +162,7 @@ def _holdone(db, manifest, out, o):
         return
     table = o.value
     folder = task_folder(out, "holdone", o.name, o.key)
-    if not folder.exists():
-        from cadra.report.studies import write_hold_one
-
-        write_hold_one(table, group.hold_study.parameter, folder)
+    ensure(folder, o.kind, o.name, table, o.folder)
     rows = [{"group_name": o.name, "parameter": group.hold_study.parameter,
              "held_value": r["value"], "status": r["status"], "converged": r["converged"],
              "reduced_chi2": r["reduced_chi2"], "theta_rms_deg": r.get("theta_rms_deg"),
@@ -187,10 +178,7 @@ def _diagnose(db, manifest, out, o):
         return
     dg = o.value
     folder = task_folder(out, "diagnose", o.name, o.key)
-    if not folder.exists():
-        from cadra.report.gap import write_diagnosis
-
-        write_diagnosis(dg, dg.fit_given, folder, where_tables=dg.where_tables)
+    ensure(folder, o.kind, o.name, dg, o.folder)
     best = dg.ranking.iloc[0] if len(dg.ranking) else None
     db.replace("gap_verdicts", where, [{
         **where, "verdict": _first_line(dg.verdict),

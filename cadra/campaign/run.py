@@ -26,10 +26,11 @@ from pathlib import Path
 
 from cadra.atomic import OUTPUT_MARKER, atomic_write_bytes, output_kind
 from cadra.campaign.database import CampaignDB, read_tables
+from cadra.campaign.folders import run_drawn
 from cadra.campaign.manifest import Manifest, load_manifest
 from cadra.campaign.plan import Task, file_sha256, plan
 from cadra.campaign.records import record
-from cadra.campaign.tasks import Outcome, first_line, run_task
+from cadra.campaign.tasks import Outcome, first_line
 
 #: the campaign folder's kind (its :data:`cadra.atomic.OUTPUT_MARKER`)
 KIND = "campaign"
@@ -111,9 +112,13 @@ def _load(out: Path, rel: str) -> Outcome | None:
 
 
 def _store(out: Path, o: Outcome) -> str:
+    """Store ``o`` (without its drawn folder: the folder is written beside it)."""
+    from dataclasses import replace
+
     rel = f"results/{o.key}.pkl"
     if not (out / rel).exists():
-        atomic_write_bytes(out / rel, pickle.dumps(o, protocol=pickle.HIGHEST_PROTOCOL))
+        atomic_write_bytes(out / rel, pickle.dumps(replace(o, folder=None),
+                                                   protocol=pickle.HIGHEST_PROTOCOL))
     return rel
 
 
@@ -256,7 +261,7 @@ class _Scheduler:
             from distributed import as_completed
 
             self.done = as_completed()
-        f = self.client.submit(run_task, t.kind, t.name, t.key, t.payload,
+        f = self.client.submit(run_drawn, t.kind, t.name, t.key, t.payload,
                                *(self._arg(u) for u in t.inputs),
                                key=f"{t.kind}-{t.key[:16]}-{os.getpid()}", pure=False)
         self.futures[t.id] = f

@@ -45,6 +45,9 @@ class Outcome:
     #: the inputs (``kind:name``) that had failed when this task ran: a rerun reuses this
     #: outcome only if the same inputs fail again
     failed_inputs: tuple[str, ...] = ()
+    #: the task's report folder, drawn on the worker (:func:`cadra.campaign.folders.run_drawn`);
+    #: the client writes it and stores the outcome without it
+    folder: Any = None
 
     @property
     def id(self) -> str:
@@ -213,7 +216,7 @@ def holdone(payload: dict, fitted: Outcome) -> pd.DataFrame:
     """The group's hold-one study (seed 004 Fig. 15), from its converged multi-fit."""
     from cadra.fitting import FitOptions
     from cadra.fitting.inputs import values_to_si
-    from cadra.studies.holdone import hold_one_study
+    from cadra.studies.holdone import hold_one_study, with_linear_prediction
 
     if not fitted.ok:
         raise UpstreamFailed(f"the group's multi-fit failed: {fitted.error}")
@@ -223,8 +226,10 @@ def holdone(payload: dict, fitted: Outcome) -> pd.DataFrame:
                              "study needs a converged start")
     study = payload["group"].hold_study
     si = values_to_si(result.model, study.parameter, list(study.values))
-    return hold_one_study(shots, result.model, [sf.state for sf in result.shots], study.parameter,
-                          si, options=FitOptions(max_iterations=payload["max_iterations"]))
+    table = hold_one_study(shots, result.model, [sf.state for sf in result.shots],
+                           study.parameter, si,
+                           options=FitOptions(max_iterations=payload["max_iterations"]))
+    return with_linear_prediction(table, result, study.parameter)
 
 
 def diagnose(payload: dict, fitted: Outcome):
