@@ -73,7 +73,7 @@ class ModelFileError(ValueError):
 _F = Fields(ModelFileError)
 _MODEL_KEYS = ("format", "name", "description", "angle_plane", "moment_reference", "reference",
                "coefficients", "parameters")
-_PARAM_KEYS = ("value", "vary", "min", "max", "unit", "note")
+_PARAM_KEYS = ("value", "vary", "min", "max", "unit", "note", "sigma")
 
 
 def _is_number(x) -> bool:
@@ -93,6 +93,9 @@ class Parameter:
     min, max : bounds, SI; ``-inf``/``inf`` when unbounded. ``min <= value <= max``.
     unit : unit of the value *in the file*: ``""`` (as is) or ``"deg"`` (file degrees).
     note : free text (provenance, OCR decisions); kept through save/load.
+    sigma : the value's own standard uncertainty, SI (0: exact). A held parameter's sigma
+        is propagated into the free ones' as a consider covariance
+        (:mod:`cadra.fitting.consider`, docs/fitting.md, "Held values with an uncertainty").
     """
 
     name: str
@@ -102,6 +105,7 @@ class Parameter:
     max: float = math.inf
     unit: str = ""
     note: str = ""
+    sigma: float = 0.0
 
     def __post_init__(self):
         key = f"parameters.{self.name}"
@@ -110,7 +114,7 @@ class Parameter:
                              "starting with a letter)")
         if self.name in RESERVED:
             raise ValueError(f"{key}: reserved name (a variable, function or constant)")
-        for attr in ("value", "min", "max"):
+        for attr in ("value", "min", "max", "sigma"):
             v = getattr(self, attr)
             if not _is_number(v):
                 raise ValueError(f"{key}: {attr} must be a number, got {v!r}")
@@ -120,6 +124,8 @@ class Parameter:
             object.__setattr__(self, attr, v)
         if not math.isfinite(self.value):
             raise ValueError(f"{key}: value must be finite, got {self.value}")
+        if not (math.isfinite(self.sigma) and self.sigma >= 0.0):
+            raise ValueError(f"{key}: sigma must be a finite number >= 0, got {self.sigma}")
         if not isinstance(self.vary, bool | np.bool_):
             raise ValueError(f"{key}: vary must be true or false, got {self.vary!r}")
         object.__setattr__(self, "vary", bool(self.vary))
@@ -141,6 +147,11 @@ class Parameter:
     def file_value(self) -> float:
         """The value in the file's unit (:attr:`unit`)."""
         return _to_file(self.value, self.unit)
+
+    @property
+    def file_sigma(self) -> float:
+        """The value's own uncertainty in the file's unit (:attr:`unit`)."""
+        return _to_file(self.sigma, self.unit)
 
     def to_si(self, file_value: float) -> float:
         """A value in this parameter's file unit (:attr:`unit`, e.g. degrees) -> SI."""
@@ -326,6 +337,10 @@ class AeroModel:
         """A copy with parameters freed (True) or held (False)."""
         return self._changed({n: {"vary": v} for n, v in vary.items()})
 
+    def with_sigmas(self, sigmas: Mapping[str, float]) -> AeroModel:
+        """A copy with the parameters' own uncertainties (SI; 0: exact) changed."""
+        return self._changed({n: {"sigma": v} for n, v in sigmas.items()})
+
     def with_bounds(self, bounds: Mapping[str, tuple[float, float]]) -> AeroModel:
         """A copy with new ``(min, max)`` bounds (SI)."""
         return self._changed({n: {"min": b[0], "max": b[1]} for n, b in bounds.items()})
@@ -453,6 +468,8 @@ class AeroModel:
                 d["unit"] = p.unit
             if p.note:
                 d["note"] = p.note
+            if p.sigma > 0.0:
+                d["sigma"] = p.file_sigma
             params[p.name] = d
         out = {"format": FILE_FORMAT, "name": self.name}
         if self.description:
@@ -505,7 +522,8 @@ def _model_from_dict(data: Mapping, source: str) -> AeroModel:
         if unit not in UNITS:
             raise ValueError(f"{key}.unit: must be one of {sorted(UNITS)}, got {unit!r}")
         conv = {}
-        for k, default in (("value", None), ("min", -math.inf), ("max", math.inf)):
+        for k, default in (("value", None), ("min", -math.inf), ("max", math.inf),
+                           ("sigma", 0.0)):
             v = entry.get(k, default)
             if not _is_number(v):
                 raise ValueError(f"{key}.{k}: must be a number, got {v!r}")
@@ -520,7 +538,8 @@ def _model_from_dict(data: Mapping, source: str) -> AeroModel:
         if not isinstance(note, str):
             raise ValueError(f"{key}.note: must be a string")
         params.append(Parameter(name=str(name), value=conv["value"], vary=vary,
-                                min=conv["min"], max=conv["max"], unit=unit, note=note))
+                                min=conv["min"], max=conv["max"], unit=unit, note=note,
+                                sigma=conv["sigma"]))
     name = data.get("name", Path(source).stem)
     if not isinstance(data.get("reference", {}), Mapping):
         raise ValueError("reference: must be a table of name = value")

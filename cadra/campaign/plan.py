@@ -1,11 +1,12 @@
 """A campaign's task graph, each task keyed by the content of what it depends on.
 
 A task's key is the SHA-256 of a canonical JSON text holding its kind, the task code's
-version (:data:`TASK_VERSION` with the package's), the settings that change its result and
-its inputs by content: a specification's parsed values and the files it names (aero model,
-facility), a shot file's bytes and its images' bytes, a group's model file, and the keys of
-the tasks it takes results from. So the same work is never done twice, and a changed input
-reruns exactly the tasks downstream of it (docs/campaign.md, "Resuming").
+version (its kind's in :data:`TASK_VERSIONS`, with the package's), the settings that change
+its result and its inputs by content: a specification's parsed values and the files it
+names (aero model, facility), a shot file's bytes and its images' bytes, a group's model
+file, and the keys of the tasks it takes results from. So the same work is never done
+twice, and a changed input reruns exactly the tasks downstream of it (docs/campaign.md,
+"Resuming").
 
 Tasks (their ids ``kind:name``): ``stage1:<shot>`` for every shot; ``calibrate:spheres``
 from the sphere shots' stage one; ``single:<shot>`` for every test shot (after the
@@ -24,8 +25,10 @@ from pathlib import Path
 
 from cadra.campaign.manifest import Manifest, ShotEntry
 
-#: bump when a task's code changes what it returns for the same inputs
-TASK_VERSION = "2"
+#: per kind, bumped when that kind's code changes what it returns for the same inputs (a
+#: change to one kind reruns it and what takes its results, not the campaign's stage one)
+TASK_VERSIONS = {"stage1": "2", "calibrate": "2", "single": "2", "multifit": "2",
+                 "holdone": "3", "diagnose": "2"}
 
 
 @dataclass(frozen=True)
@@ -59,7 +62,8 @@ def file_sha256(path: str | os.PathLike) -> str:
 def _key(obj) -> str:
     from cadra import __version__
 
-    text = json.dumps({"code": [__version__, TASK_VERSION], **obj}, sort_keys=True,
+    text = json.dumps({"code": [__version__, TASK_VERSIONS[obj["kind"]]], **obj},
+                      sort_keys=True,
                       separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -139,4 +143,4 @@ def plan(manifest: Manifest, hasher: Callable[[Path], str] = file_sha256) -> lis
     return list(tasks.values())
 
 
-__all__ = ["TASK_VERSION", "Task", "file_sha256", "plan", "shot_content"]
+__all__ = ["TASK_VERSIONS", "Task", "file_sha256", "plan", "shot_content"]

@@ -60,8 +60,10 @@ def add_data_options(p, *, model: bool = True) -> None:
                    help="shot file of each trajectory, same order (default: the one the "
                         "trajectory file names)")
     if model:
-        p.add_argument("--hold", action="append", metavar="NAME[=VALUE]",
-                       help="hold a parameter (at VALUE, in the model file's unit)")
+        p.add_argument("--hold", action="append", metavar="NAME[=VALUE[+-SIGMA]]",
+                       help="hold a parameter (at VALUE, in the model file's unit; +-SIGMA: "
+                            "the value's uncertainty, carried into the free parameters' "
+                            "sigmas as a consider covariance)")
         p.add_argument("--free", action="append", metavar="NAME",
                        help="free a held parameter")
         p.add_argument("--bound", action="append", metavar="NAME=LO:HI",

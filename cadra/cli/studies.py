@@ -65,7 +65,7 @@ def run_holdone(args) -> int:
     from cadra.fitting import FitOptions, fit_shots
     from cadra.fitting.inputs import values_to_si
     from cadra.report.studies import write_hold_one
-    from cadra.studies.holdone import hold_one_study, lowest_converged
+    from cadra.studies.holdone import hold_one_study, lowest_converged, with_linear_prediction
 
     out = Path(args.output)
     try:
@@ -83,6 +83,7 @@ def run_holdone(args) -> int:
         start = free.model.with_vary({args.param: model.parameter(args.param).vary})
         table = hold_one_study(shots, start, [sf.state for sf in free.shots], args.param, si,
                                options=options)
+        table = with_linear_prediction(table, free, args.param)
     except cli.REFUSED as exc:
         return cli.refused("cadra2 holdone", exc)
     write_hold_one(table, args.param, out, overwrite=args.overwrite)

@@ -30,7 +30,10 @@ def apply_holds(model: AeroModel, hold: Iterable[str] | None = None,
                 ) -> AeroModel:
     """``model`` with parameters held, freed and bounded as a user writes them.
 
-    ``hold``: ``"NAME"`` or ``"NAME=VALUE"`` (held at VALUE); ``free``: ``"NAME"``;
+    ``hold``: ``"NAME"`` (held at its value, with the model's own uncertainty),
+    ``"NAME=VALUE"`` (held at VALUE, exactly) or ``"NAME=VALUE+-SIGMA"`` (``±`` too: held at
+    VALUE with the standard uncertainty SIGMA, propagated into the free parameters' sigmas as
+    a consider covariance, :mod:`cadra.fitting.consider`); ``free``: ``"NAME"``;
     ``bound``: ``"NAME=LO:HI"`` (either side may be empty: unbounded). Values are in the
     parameter's unit in the model file (degrees for ``alpha_ref``), converted to SI through
     the unit table (:meth:`cadra.aero.Parameter.to_si`). Unknown names raise ``KeyError``,
@@ -46,7 +49,12 @@ def apply_holds(model: AeroModel, hold: Iterable[str] | None = None,
     for name, value in parse_assignments(hold).items():
         model = model.with_vary({name: False})
         if value is not None:
-            model = model.with_values({name: si(name, value)})
+            text, sep, sigma = value.replace("±", "+-").partition("+-")
+            model = model.with_values({name: si(name, text)})
+            s = abs(si(name, sigma) - si(name, "0")) if sep else 0.0
+            if not s >= 0.0 or not math.isfinite(s):
+                raise ValueError(f"{name}: uncertainty {sigma!r} is not a finite number")
+            model = model.with_sigmas({name: s})
     for name in free or []:
         model = model.with_vary({name.strip(): True})
     for name, value in parse_assignments(bound).items():

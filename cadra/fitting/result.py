@@ -26,6 +26,7 @@ import math
 import re
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -188,6 +189,17 @@ class FitResult:
     def aero_sigma_coloured(self) -> np.ndarray:
         na = len(self.aero_names)
         return np.sqrt(np.maximum(np.diag(self.covariance_coloured)[:na], 0.0))
+
+    @cached_property
+    def consider(self):
+        """The consider covariance of the parameters the model holds with an uncertainty
+        (:class:`cadra.fitting.consider.ConsiderAnalysis`: conditional and consider sigmas,
+        d(free)/d(held)); None when it holds none, or without the fit's forward model."""
+        from cadra.fitting.consider import consider, held_with_sigma
+
+        if self.problem is None or not held_with_sigma(self.model) or self.jacobian is None:
+            return None
+        return consider(self)
 
     @property
     def aero_sigma_scaled(self) -> np.ndarray:

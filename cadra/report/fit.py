@@ -178,6 +178,8 @@ def results_dict(result: FitResult, shots: Sequence[ShotData], *,
     sig = dict(zip(result.aero_names, result.aero_sigma, strict=True))
     sig_c = dict(zip(result.aero_names, result.aero_sigma_coloured, strict=True))
     sig_s = dict(zip(result.aero_names, result.aero_sigma_scaled, strict=True))
+    ca = result.consider
+    cons = {} if ca is None else dict(zip(ca.names, ca.sigma, strict=True))
     params = {}
     for p in result.model.parameters:
         free = p.name in sig
@@ -189,6 +191,8 @@ def results_dict(result: FitResult, shots: Sequence[ShotData], *,
             "initial": (start_model.parameter(p.name).value if start_model is not None
                         else None),
             "held": not free, "min": p.min, "max": p.max, "at_bound": _at_bound(p),
+            "held_sigma": p.sigma if not free else None,
+            "sigma_consider": cons.get(p.name) if free else None,
         }
     out = {
         "format": RESULTS_FORMAT,
@@ -216,6 +220,10 @@ def results_dict(result: FitResult, shots: Sequence[ShotData], *,
         "warnings": list(result.warnings) + extra_warnings(result, start_model),
         "param_names": list(result.param_names),
         "options": result.options,
+        # d(free)/d(held) of the holds with an uncertainty (SI), free parameter -> held -> value
+        "consider_sensitivity": ({} if ca is None else
+                                 ca.sensitivity_table(list(result.aero_names)).to_dict(
+                                     orient="index")),
     }
     return plain(out)
 
@@ -275,6 +283,36 @@ def coefficient_markdown(table: pd.DataFrame) -> str:
         cells.append(str(d.get("other") or ""))
         rows.append(cells)
     return "\n".join(markdown.table(head, rows))
+
+
+def _held_text(p) -> str:
+    unit = f" {p.unit}" if p.unit else ""
+    if p.sigma > 0.0:
+        return f"{p.name} = {p.file_value:g} ± {p.file_sigma:g}{unit}"
+    return f"{p.name} = {p.file_value:g}{unit} (exact)"
+
+
+def consider_lines(ca, names: Sequence[str], at_least: float = 1.0) -> list[str]:
+    """What each hold with an uncertainty does to the free parameters: the ones its own ±σ
+    moves by ``at_least`` of their conditional sigmas or more, and d(free)/d(held)."""
+    shift = ca.shift_per_sigma()
+    idx = [ca.names.index(n) for n in names]
+    out = ["### What the holds do", ""]
+    for j, h in enumerate(ca.held):
+        moved = sorted(((abs(shift[i, j]), ca.names[i]) for i in idx
+                        if abs(shift[i, j]) >= at_least), reverse=True)
+        said = (" and ".join(f"{n} by {m:.2g} σ" for m, n in moved[:4])
+                + (f" (and {len(moved) - 4} more)" if len(moved) > 4 else ""))
+        out.append(f"- held {h} = {ca.held_values[j]:.6g} ± {ca.held_sigma[j]:.2g} (SI) "
+                   + (f"moves {said} over its ±σ: their conditional sigmas are not their "
+                      "uncertainty; the consider sigmas above carry it."
+                      if moved else f"moves no free parameter by {at_least:g} of its "
+                      "conditional sigma over its ±σ."))
+    sens = ca.sensitivity_table(list(names))
+    out += ["", "d(free)/d(held), SI:", ""]
+    out += markdown.table(("parameter", *ca.held),
+                          ((n, *(f"{v:.4g}" for v in sens.loc[n])) for n in sens.index))
+    return out
 
 
 def _bounds_text(p) -> str:
@@ -355,9 +393,15 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     sig = dict(zip(result.aero_names, result.aero_sigma, strict=True))
     sig_c = dict(zip(result.aero_names, result.aero_sigma_coloured, strict=True))
     sig_s = dict(zip(result.aero_names, result.aero_sigma_scaled, strict=True))
+    ca = result.consider
+    cons = {} if ca is None else dict(zip(ca.names, ca.sigma, strict=True))
     L += ["## Parameters", "",
           "Values SI (angles in rad); σ from (JᵀWJ)⁻¹; σ coloured: sandwich estimate for "
-          "correlated residuals; σ scaled: σ·√(χ²/dof) when that exceeds 1.", ""]
+          "correlated residuals; σ scaled: σ·√(χ²/dof) when that exceeds 1."
+          + (" The model holds parameters with an uncertainty: value ± σ is the consider "
+             "sigma (the held values' own uncertainty propagated, docs/fitting.md), σ "
+             "conditional the sigma with the held values taken as exact."
+             if ca is not None else ""), ""]
     rows = []
     for n in result.aero_names:
         p = result.model.parameter(n)
@@ -374,14 +418,19 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
             flags.append("UNDETERMINED")
         if any(d["hold"] == n for d in result.near_singular):
             flags.append("hold suggested")
-        rows.append((n, pm(p.value, sig[n]), _pct(p.value, sig[n]), f"{sig_c[n]:.2g}",
-                     f"{sig_s[n]:.2g}", init, _bounds_text(p), ", ".join(flags)))
-    L += markdown.table(("parameter", "value ± σ", "σ (%)", "σ coloured", "σ scaled",
-                         "initial", "bounds", "flags"), rows)
+        main = cons.get(n, sig[n])
+        rows.append((n, pm(p.value, main), _pct(p.value, main))
+                    + ((f"{sig[n]:.2g}",) if ca is not None else ())
+                    + (f"{sig_c[n]:.2g}", f"{sig_s[n]:.2g}", init, _bounds_text(p),
+                       ", ".join(flags)))
+    L += markdown.table(("parameter", "value ± σ", "σ (%)")
+                        + (("σ conditional",) if ca is not None else ())
+                        + ("σ coloured", "σ scaled", "initial", "bounds", "flags"), rows)
     held = [p for p in result.model.parameters if p.name not in sig]
     if held:
-        L += ["", "Held: " + ", ".join(
-            f"{p.name} = {p.file_value:g}{' ' + p.unit if p.unit else ''}" for p in held) + "."]
+        L += ["", "Held: " + ", ".join(_held_text(p) for p in held) + "."]
+    if ca is not None:
+        L += ["", *consider_lines(ca, result.aero_names)]
     L += ["", "## Coefficients (seed 004 Table 4 layout)", "",
           coefficient_markdown(result.coefficient_table()), ""]
 

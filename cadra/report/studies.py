@@ -57,7 +57,9 @@ def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
     ``ax`` None: a new figure with one panel of residual rms (theta, psi, sigma in deg) and
     one panel per other free parameter (value with 1-sigma bars). A single Axes: only the rms
     panel, drawn there. A sequence of Axes: the rms panel and then the parameter panels, as
-    many as given. Non-converged refits are drawn hollow. Returns the figure (never shown).
+    many as given. Non-converged refits are drawn hollow; a table with ``<parameter>_linear``
+    columns (:func:`cadra.studies.holdone.with_linear_prediction`) adds them dashed. Returns
+    the figure (never shown).
     """
     name = name or (str(table["held"].iloc[0]) if "held" in table and len(table) else "held")
     t = table.sort_values("value")
@@ -101,6 +103,10 @@ def plot_hold_one(table: pd.DataFrame, name: str | None = None, ax=None):
         a.errorbar(x[ok], y[ok], yerr=e[ok], fmt="o-", ms=4, capsize=2, color="C0", lw=1)
         if (~ok).any():
             a.plot(x[~ok], y[~ok], "o", mfc="none", color="C0", ms=4)
+        if f"{p}_linear" in t:    # the first-order prediction from the base fit
+            a.plot(x, t[f"{p}_linear"].to_numpy(float), "--", color="C3", lw=1,
+                   label="linear (consider)")
+            a.legend(fontsize=7)
         a.set_xlabel(f"{name} (held)")
         a.set_ylabel(p)
         a.grid(alpha=0.3)

@@ -109,4 +109,18 @@ def lowest_converged(table: pd.DataFrame) -> float | None:
     return float(ok.loc[ok["chi2"].idxmin(), "value"]) if len(ok) else None
 
 
-__all__ = ["hold_one_refit", "hold_one_study", "lowest_converged"]
+def with_linear_prediction(table: pd.DataFrame, result, name: str) -> pd.DataFrame:
+    """``table`` (:func:`hold_one_study`'s) with each other free parameter's first-order
+    prediction from ``result``, the fit the study started from (``<parameter>_linear``,
+    :func:`cadra.fitting.consider.linear_hold_prediction`): the study is the nonlinear check
+    of the consider sensitivity. ``table`` unchanged when ``result`` has no forward model."""
+    from cadra.fitting.consider import linear_hold_prediction
+
+    if getattr(result, "problem", None) is None or result.jacobian is None:
+        return table
+    pred = linear_hold_prediction(result, name, table["value"].to_numpy(float))
+    keep = [c for c in pred.columns if c != "value" and c[:-len("_linear")] in table]
+    return pd.concat([table.reset_index(drop=True), pred[keep]], axis=1)
+
+
+__all__ = ["hold_one_refit", "hold_one_study", "lowest_converged", "with_linear_prediction"]

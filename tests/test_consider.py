@@ -1,0 +1,151 @@
+"""Held values with an uncertainty (cadra.fitting.consider) against independent truth.
+
+Two M1 M1.10 shots flown with an exactly linear model (linear_template_sigma at known
+values), read noise-free with film-level sigmas, fitted with C_mq held at the truth:
+
+- the consider covariance with the held value's sigma set to what the free fit gives it is the
+  free fit's covariance (the block inverse of the free fit's normal matrix: an identity of
+  linear algebra, so they agree to the solver's convergence);
+- the sensitivity d(free)/d(held) is the slope of real refits held at the truth +- one sigma
+  (converged tightly, central differences), to 1e-3;
+- ``--hold NAME=VALUE+-SIGMA`` and a model file's ``sigma`` reach the parameter, in the file's
+  unit, and a hold without an uncertainty is exact.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cadra.aero import load_bundled_model, model_from_dict
+from cadra.fitting import FitOptions
+from cadra.fitting.consider import consider
+from cadra.fitting.inputs import apply_holds
+from cadra.fitting.solver import fit
+from cadra.flight.data import FILM_SIGMAS, shot_data_from_truth
+from cadra.synthetic.simulate import simulate_shot, spec_from_dict
+
+ROOT = Path(__file__).resolve().parents[1]
+SPECS = ROOT / "sample_shots" / "specs"
+TRUTH = {"CD_0": 1.25, "CL_a": -1.40, "Cm_a": -0.100, "Cmq_0": -0.5}
+OTHERS = ("CD_0", "CL_a", "Cm_a")
+
+
+@pytest.fixture(scope="module")
+def shots():
+    sims, data = [], []
+    for name in ("m1_2388", "m1_2366"):
+        spec = tomllib.loads((SPECS / f"{name}.toml").read_text())
+        spec["aero_model"] = "linear_template_sigma"
+        spec["aero_values"] = dict(TRUTH)
+        sim = simulate_shot(spec_from_dict(spec))
+        sims.append(sim)
+        data.append(shot_data_from_truth(sim.truth, sim.rigid, sim.spec.shot_id, sim.body.kind,
+                                         sigma_position_m=FILM_SIGMAS["position_m"],
+                                         sigma_angle_rad=FILM_SIGMAS["angle_rad"]))
+    states = [s.states[d.epoch_index] for s, d in zip(sims, data, strict=True)]
+    model = load_bundled_model("linear_template_sigma").with_values(TRUTH)
+    free = fit(data, model, states)
+    assert free.converged
+    return data, states, model, free
+
+
+def test_consider_with_the_free_fits_sigma_is_the_free_fits_covariance(shots):
+    data, states, model, free = shots
+    s_free = free.sigma("Cmq_0")
+    held = model.with_vary({"Cmq_0": False}).with_sigmas({"Cmq_0": s_free})
+    res = fit(data, held, states)
+    assert res.converged
+    ca = consider(res)
+    assert ca.held == ("Cmq_0",)
+    i_free = [free.param_names.index(n) for n in OTHERS]
+    i_held = [ca.names.index(n) for n in OTHERS]
+    want = free.covariance[np.ix_(i_free, i_free)]
+    got = ca.covariance[np.ix_(i_held, i_held)]
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-4 * np.sqrt(
+        np.outer(np.diag(want), np.diag(want))).max())
+    # the conditional sigmas are smaller: the hold's uncertainty is what they lacked
+    table = ca.table().set_index("parameter")
+    assert (table.loc[list(OTHERS), "sigma_consider"]
+            > table.loc[list(OTHERS), "sigma_conditional"]).all()
+    assert set(table["dominant_held"]) == {"Cmq_0"}
+    # consider^2 = conditional^2 + (S sigma_c)^2, each parameter
+    S = ca.sensitivity_table().loc[list(OTHERS), "Cmq_0"].to_numpy()
+    np.testing.assert_allclose(table.loc[list(OTHERS), "sigma_consider"] ** 2,
+                               table.loc[list(OTHERS), "sigma_conditional"] ** 2
+                               + (S * s_free) ** 2, rtol=1e-10)
+
+
+def test_the_sensitivity_is_the_slope_of_real_refits(shots):
+    data, states, model, free = shots
+    s = free.sigma("Cmq_0")
+    held = model.with_vary({"Cmq_0": False}).with_sigmas({"Cmq_0": s})
+    ca = consider(fit(data, held, states))
+    # refits converged far past the solver's default stop (chi^2 steps below 1e-4: the
+    # parameters within 1 % of their sigma, while the hold moves CL_a by 2 % of its sigma)
+    tight = FitOptions(step_tol_sigma=1e-9, noise_tol_sigma=1e-9, max_iterations=50)
+    lo, hi = (fit(data, held.with_values({"Cmq_0": TRUTH["Cmq_0"] + d}), states,
+                  options=tight) for d in (-s, s))
+    assert lo.converged and hi.converged
+    sens = ca.sensitivity_table()["Cmq_0"]
+    for name in OTHERS:
+        slope = (hi.value(name) - lo.value(name)) / (2 * s)
+        assert sens[name] == pytest.approx(slope, rel=1e-3), name
+
+
+def test_a_fit_without_held_uncertainties_has_no_consider_analysis(shots):
+    *_, free = shots
+    assert consider(free) is None
+
+
+def test_hold_with_an_uncertainty_from_the_command_line_and_the_model_file():
+    model = load_bundled_model("m1_m110")
+    m = apply_holds(model, hold=["Cmq_A2=3.65+-0.75"])
+    p = m.parameter("Cmq_A2")
+    assert (p.vary, p.value, p.sigma) == (False, 3.65, 0.75)
+    assert apply_holds(model, hold=["Cmq_A2=3.65±0.75"]).parameter("Cmq_A2").sigma == 0.75
+    # a new value without an uncertainty is exact; a bare hold keeps the model's sigma
+    assert apply_holds(m, hold=["Cmq_A2=3.0"]).parameter("Cmq_A2").sigma == 0.0
+    assert apply_holds(m, hold=["Cmq_A2"]).parameter("Cmq_A2").sigma == 0.75
+    with pytest.raises(ValueError, match="not a number"):
+        apply_holds(model, hold=["Cmq_A2=3.65+-wide"])
+    # in the file's unit: an angle held in degrees has its sigma in degrees
+    model = load_bundled_model("m2_m070")
+    d = model.to_dict()
+    angle = next(n for n, e in d["parameters"].items() if e.get("unit") == "deg")
+    m = apply_holds(model, hold=[f"{angle}=20+-2"])
+    assert m.parameter(angle).sigma == pytest.approx(np.radians(2.0), rel=1e-12)
+    # the model file carries it both ways, in the file's unit
+    d = m.to_dict()
+    assert d["parameters"][angle]["sigma"] == pytest.approx(2.0, rel=1e-12)
+    back = model_from_dict(d, source="test")
+    assert back.parameter(angle).sigma == m.parameter(angle).sigma
+    d["parameters"][angle]["sigma"] = -1.0
+    with pytest.raises(ValueError, match=f"parameters.{angle}: sigma must be"):
+        model_from_dict(d, source="test")
+
+
+def test_the_report_says_what_a_hold_does(shots, tmp_path):
+    """The report's table shows the consider sigma, the conditional beside it, and says
+    which free parameters the hold's ±σ moves; a hold without an uncertainty is exact."""
+    from cadra.report.fit import report_markdown, results_dict
+
+    data, states, model, free = shots
+    held = model.with_vary({"Cmq_0": False}).with_sigmas({"Cmq_0": 0.2})
+    res = fit(data, held, states)
+    text = report_markdown(res, data)
+    assert "σ conditional" in text and "### What the holds do" in text
+    assert "held Cmq_0 = -0.5 ± 0.2 (SI) moves" in text
+    ca = res.consider
+    i = ca.names.index("Cm_a")
+    d = results_dict(res, data)
+    assert d["parameters"]["Cm_a"]["sigma_consider"] == pytest.approx(ca.sigma[i])
+    assert d["parameters"]["Cmq_0"]["held_sigma"] == 0.2
+    assert set(d["consider_sensitivity"]["Cm_a"]) == {"Cmq_0"}
+    exact = fit(data, model.with_vary({"Cmq_0": False}), states)
+    assert exact.consider is None
+    text = report_markdown(exact, data)
+    assert "Cmq_0 = -0.5 (exact)" in text and "σ conditional" not in text
