@@ -1,5 +1,6 @@
 """Held values with an uncertainty, by pulls: three-shot M1 M1.10 sets flown with the C_mq
-peak drawn uniformly in 2.9-4.4 (seed 004 Fig. 15's range), fitted holding it at 3.65 +- 0.75;
+peak drawn uniformly in 2.9-4.4 (seed 004 Fig. 15's range), fitted holding it at 3.65 +- 0.43
+(the bundled model's; +- 0.75 reported beside it);
 the free parameters' pulls with the conditional and with the consider sigma
 (``cadra/validation/consider_runs.py``). Last printed line: a JSON object.
 
