@@ -145,7 +145,12 @@ def test_the_report_says_what_a_hold_does(shots, tmp_path):
     assert d["parameters"]["Cm_a"]["sigma_consider"] == pytest.approx(ca.sigma[i])
     assert d["parameters"]["Cmq_0"]["held_sigma"] == 0.2
     assert set(d["consider_sensitivity"]["Cm_a"]) == {"Cmq_0"}
+    # the console report (what cadra2 fit prints) says the same
+    console = res.report()
+    assert "the consider sigma" in console and "Cmq_0 = -0.5 ± 0.2" in console
+    assert f"conditional {res.sigma('Cm_a'):.2g}" in console
     exact = fit(data, model.with_vary({"Cmq_0": False}), states)
+    assert "consider" not in exact.report()
     assert exact.consider is None
     text = report_markdown(exact, data)
     assert "Cmq_0 = -0.5 (exact)" in text and "σ conditional" not in text

@@ -71,23 +71,33 @@ def fit_report(result, *, verbose: bool = False, status: bool = True,
             f"{ch} ×{v:.3f}" for ch, v in vc["sigma_scale"].items())
             + f" (chi^2/nu with stage one's sigmas {vc['reduced_chi2_before']:.3f})")
     params = result.params
+    ca = result.consider
+    cons = {} if ca is None else dict(zip(ca.names, ca.sigma, strict=True))
+    if cons:
+        lines.append("value ± sigma: the consider sigma, the held values' own uncertainty "
+                     "included (docs/fitting.md); conditional: with them taken as exact")
     head = f"{'parameter':12s} {'value ± sigma':>24s}"
     lines.append(head + (f" {'sigma coloured':>15s} {'sigma scaled':>13s}" if verbose else ""))
     coloured = dict(zip(result.aero_names, result.aero_sigma_coloured, strict=True))
     scaled = dict(zip(result.aero_names, result.aero_sigma_scaled, strict=True))
     for name in result.aero_names:
         p = params[name]
-        row = f"{name:12s} {pm(p.value, p.stderr):>24s}"
+        sigma = cons.get(name, p.stderr)
+        row = f"{name:12s} {pm(p.value, sigma):>24s}"
         if verbose:
             row += f" {coloured[name]:>15.2g} {scaled[name]:>13.2g}"
         init = "" if p.init_value is None else f", init {p.init_value:.6g}"
-        lines.append(row + f"  {_share(p.value, p.stderr).strip()}{init}".rstrip())
+        cond = f", conditional {p.stderr:.2g}" if name in cons else ""
+        lines.append(row + f"  {_share(p.value, sigma).strip()}{init}{cond}".rstrip())
     for name in result.extra_names:
         p = params[name]
         lines.append(f"{name:12s} {pm(p.value, p.stderr):>24s}  (extra unknown)")
     held = [p for p in params.values() if p.kind == "aero" and not p.vary]
     if held:
-        lines.append("held: " + ", ".join(f"{p.name} = {p.value:.6g}" for p in held))
+        sig = {q.name: q.sigma for q in result.model.parameters}
+        lines.append("held: " + ", ".join(
+            f"{p.name} = {p.value:.6g}" + (f" ± {sig[p.name]:.3g}" if sig.get(p.name) else "")
+            for p in held))
     pairs = [(a, b, r) for a, b, r in result.high_correlations(correlation)
              if a in result.aero_names and b in result.aero_names]
     if pairs:
