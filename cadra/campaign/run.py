@@ -131,12 +131,14 @@ def _client(scheduler: str | None, workers: int | None):
         return Client(scheduler, timeout="30s"), None
     import dask
 
-    n = workers or os.cpu_count() or 1
+    from cadra import cores
+
+    n = workers or cores.available()
     # Dask's nanny starts each worker with MALLOC_TRIM_THRESHOLD_=65536. Setting that
     # threshold turns off glibc's adaptive mmap threshold, so every large array (an image, a
     # blurred copy) is mapped and unmapped afresh, its pages zeroed each time: stage one ran
     # 27 % slower on a worker than in a plain process (8.0 s against 6.3 s a shot,
-    # docs/campaign.md, "Dask"). The local cluster's workers keep glibc's default; a
+    # docs/campaign.md, "On Dask"). The local cluster's workers keep glibc's default; a
     # threshold set in the environment is still inherited.
     with dask.config.set({f"{PRE_SPAWN}.MALLOC_TRIM_THRESHOLD_": None}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,

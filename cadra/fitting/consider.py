@@ -8,8 +8,9 @@ ones. To first order the fitted unknowns theta move with the held values c as
 
     S = d theta / d c = -(J^T J)^-1 J^T C
 
-(J the fit's weighted Jacobian in theta, C its weighted columns in c, both from the fit's
-own forward model at the fitted point: :func:`cadra.fitting.problem.result_problem`), and
+(J the fit's own weighted Jacobian in theta, ``FitResult.jacobian``; C its weighted columns in
+c, one complex-step run per held value and shot of the fit's own forward model at the
+fitted point, :func:`cadra.fitting.problem.result_problem`), and
 their covariance becomes
 
     P_consider = P + S diag(sigma_c^2) S^T,
@@ -24,12 +25,13 @@ value moved by d moves theta by ``S d`` while the data stay near-linear in it
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
 from cadra.fitting.problem import result_problem
+from cadra.fitting.sensitivity import predict_with_jacobian
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,19 +101,22 @@ def held_with_sigma(model) -> tuple[str, ...]:
     return tuple(p.name for p in model.parameters if not p.vary and p.sigma > 0.0)
 
 
-def weighted_jacobian(problem) -> tuple[np.ndarray, tuple[str, ...]]:
-    """The fit problem's Jacobian at its own point, weighted by the sigmas, rows the shots'
-    used measurements in order (as ``FitResult.jacobian``'s), columns its ``param_names``."""
-    jacs = problem.jacobian()
+def held_columns(problem, held: Sequence[str]) -> np.ndarray:
+    """The weighted Jacobian columns of the held parameters ``held`` at the problem's own
+    point, rows the shots' used measurements in order (as ``FitResult.jacobian``'s): one
+    complex-step run per held parameter and shot, the fit's own forward model."""
+    model = problem.model
+    idx = np.array([model.index(h) for h in held], dtype=int)
+    program, params = model.compile(), model.values()
+    xv = np.array([e.value for e in problem.free_extras], dtype=float)
     blocks = []
     for k, sd in enumerate(problem.shots):
-        cols = problem.shot_columns(k)
-        mask = sd.mask
-        J = jacs[k][mask] / sd.sigma[mask][:, None]
-        dense = np.zeros((J.shape[0], problem.n_params))
-        dense[:, cols] = J
-        blocks.append(dense)
-    return np.vstack(blocks), tuple(problem.param_names)
+        phys, ref = problem.physics(k, xv)
+        _, jac = predict_with_jacobian(problem.epoch_states[k], problem.epochs[k], sd.t_s,
+                                       phys, program, params, ref, [], idx,
+                                       problem.integration)
+        blocks.append(jac[sd.mask] / sd.sigma[sd.mask][:, None])
+    return np.vstack(blocks)
 
 
 def consider(result, shots=None, held: Sequence[str] | None = None
@@ -126,12 +131,14 @@ def consider(result, shots=None, held: Sequence[str] | None = None
     free = [h for h in held if result.model.parameter(h).vary]
     if free:
         raise ValueError(f"consider: {free[0]} is free in this fit, not held")
+    if result.jacobian is None:
+        raise ValueError("consider: the fit has no Jacobian (its start did not predict)")
     problem = result_problem(result, shots)
-    freed = replace(problem, model=problem.model.with_vary({h: True for h in held}))
-    J_all, names_all = weighted_jacobian(freed)
-    names = tuple(result.param_names)
-    J = J_all[:, [names_all.index(n) for n in names]]
-    C = J_all[:, [names_all.index(h) for h in held]]
+    J = result.jacobian.toarray()           # the fit's own, at its final point
+    C = held_columns(problem, held)
+    if C.shape[0] != J.shape[0]:
+        raise ValueError(f"consider: {C.shape[0]} measurements against the fit's "
+                         f"{J.shape[0]}: give the shots the fit used")
     # S = -(J^T J)^-1 J^T C by least squares (the same solution, better conditioned)
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0.0] = 1.0
@@ -139,11 +146,11 @@ def consider(result, shots=None, held: Sequence[str] | None = None
     sig = np.array([result.model.parameter(h).sigma for h in held])
     P = np.asarray(result.covariance, dtype=float)
     cov = P + (S * sig[None, :] ** 2) @ S.T
-    theta = freed.theta0[[names_all.index(n) for n in names]]
     return ConsiderAnalysis(held=held,
                             held_values=np.array([result.model.parameter(h).value
                                                   for h in held]),
-                            held_sigma=sig, names=names, values=theta, sensitivity=S,
+                            held_sigma=sig, names=tuple(result.param_names),
+                            values=problem.theta0, sensitivity=S,
                             conditional=P, covariance=cov)
 
 
@@ -175,5 +182,5 @@ def linear_hold_prediction(result, name: str, values: Sequence[float], shots=Non
     return pd.DataFrame(out)
 
 
-__all__ = ["ConsiderAnalysis", "consider", "held_with_sigma", "linear_hold_prediction",
-           "weighted_jacobian"]
+__all__ = ["ConsiderAnalysis", "consider", "held_columns", "held_with_sigma",
+           "linear_hold_prediction"]

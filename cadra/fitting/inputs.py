@@ -51,10 +51,7 @@ def apply_holds(model: AeroModel, hold: Iterable[str] | None = None,
         if value is not None:
             text, sep, sigma = value.replace("±", "+-").partition("+-")
             model = model.with_values({name: si(name, text)})
-            s = abs(si(name, sigma) - si(name, "0")) if sep else 0.0
-            if not s >= 0.0 or not math.isfinite(s):
-                raise ValueError(f"{name}: uncertainty {sigma!r} is not a finite number")
-            model = model.with_sigmas({name: s})
+            model = model.with_sigmas({name: abs(si(name, sigma)) if sep else 0.0})
     for name in free or []:
         model = model.with_vary({name.strip(): True})
     for name, value in parse_assignments(bound).items():
