@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 __all__ = ["line_phases", "phase_gain", "sampling_bias_px", "systematic_cov"]
@@ -135,8 +136,35 @@ def systematic_cov(phi, s, cos_n: float, width_px: float, g2: float,
     """
     phi, s = np.asarray(phi, float), np.asarray(s, float)
     S = math.sqrt(float(np.mean(s ** 2)))
-    delta = (np.arange(n_shift) + 0.5) / n_shift
-    beta = sampling_bias_px(phi[None, :] + delta[:, None], width_px / abs(cos_n))
-    e = np.column_stack([np.mean((1.0 - s / S) * beta, axis=1),
-                         np.mean((1.0 + s / S) * beta, axis=1)])
+    w = width_px / abs(cos_n)
+    k = np.arange(-math.ceil(w) - 1, math.ceil(w) + 2, dtype=float)
+    e = _shift_errors(phi, s / S, w, k, n_shift)
     return g2 * (e.T @ e) / n_shift * cos_n ** 2
+
+
+@numba.njit(cache=True)
+def _shift_errors(phi, u, w, k, n_shift):
+    """(n_shift, 2) errors ``mean[(1 -+ u_i) beta(phi_i + delta)]`` of a line's two Gauss
+    points over the shifts ``delta`` (:func:`systematic_cov`; ``beta`` as
+    :func:`sampling_bias_px`, summed over the pixels ``k`` in the same order)."""
+    n = phi.shape[0]
+    e = np.zeros((n_shift, 2))
+    for a in range(n_shift):
+        delta = (a + 0.5) / n_shift
+        e0 = 0.0
+        e1 = 0.0
+        for i in range(n):
+            x = phi[i] + delta
+            num = 0.0
+            den = 0.0
+            for kk in k:
+                c = min(kk + 0.5, x + 0.5 * w) - max(kk - 0.5, x - 0.5 * w)
+                if c > 0.0:
+                    num += c * kk
+                    den += c
+            beta = num / den - x
+            e0 += (1.0 - u[i]) * beta
+            e1 += (1.0 + u[i]) * beta
+        e[a, 0] = e0 / n
+        e[a, 1] = e1 / n
+    return e

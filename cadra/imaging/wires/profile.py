@@ -160,9 +160,11 @@ def _pixel_profile(x0, ne, h, s, cov, dcov, F, N):
 
 
 @numba.njit(cache=True)
-def _row_basis(s0i, c, h, sc, at, mrow, kd, kw, A, O, dO, G, dG, cov, dcov, F, Nb):
+def _row_basis(s0i, c, h, sc, at, mrow, kd, kw, A, O, dO, G, dG, cov, dcov, F, Nb, cov_g,
+               dcov_g):
     """Fill ``A[:, :5]`` with one profile's basis at centre ``c`` (and ``dO``, ``dG`` with the
-    opacity's and the blurred opacity's derivatives in ``c``)."""
+    opacity's and the blurred opacity's derivatives in ``c``); ``cov_g``, ``dcov_g`` are
+    scratch of ``cov``'s length."""
     k = A.shape[0]
     hd = (kd.shape[0] - 1) // 2
     hw = (kw.shape[0] - 1) // 2
@@ -173,11 +175,13 @@ def _row_basis(s0i, c, h, sc, at, mrow, kd, kw, A, O, dO, G, dG, cov, dcov, F, N
     x0 = s0i - pad - c
     if at > _DRIFT_MIN:
         for g in range(3):
-            cov_g = np.zeros(ne)
-            dcov_g = np.zeros(ne)
+            cov_g[:] = 0.0
+            dcov_g[:] = 0.0
             _pixel_profile(x0 + _GL_X[g] * at, ne, h, sc, cov_g, dcov_g, F, Nb)
-            cov += _GL_W[g] * cov_g
-            dcov += _GL_W[g] * dcov_g
+            wg = _GL_W[g]
+            for j in range(ne):
+                cov[j] += wg * cov_g[j]
+                dcov[j] += wg * dcov_g[j]
     else:
         _pixel_profile(x0, ne, h, sc, cov, dcov, F, Nb)
     for j in range(hd, ne - hd):  # discrete blur after the pixel
@@ -242,6 +246,8 @@ def _fit_rows(P, m, s0, t, cos_t, h, c0, sigma_c, sigma_d, kd, kw, n_iter, want_
     ne = k + 2 * pad
     cov = np.empty(ne)
     dcov = np.empty(ne)
+    cov_g = np.empty(ne)
+    dcov_g = np.empty(ne)
     F = np.empty(ne + 1)
     Nb = np.empty(ne + 1)
     O = np.zeros(ne)
@@ -260,14 +266,14 @@ def _fit_rows(P, m, s0, t, cos_t, h, c0, sigma_c, sigma_d, kd, kw, n_iter, want_
             best = np.inf
             for d in _SCAN:
                 _row_basis(s0[i], c0[i] + d, h[i], sc, at, m[i], kd, kw, A, O, dO, G, dG,
-                           cov, dcov, F, Nb)
+                           cov, dcov, F, Nb, cov_g, dcov_g)
                 _, rss = _linear_rss(P[i], A, M, rhs, r)
                 if rss < best:
                     best = rss
                     c = c0[i] + d
         for it in range(n_iter + 1):
             _row_basis(s0[i], c, h[i], sc, at, m[i], kd, kw, A, O, dO, G, dG, cov, dcov, F,
-                       Nb)
+                       Nb, cov_g, dcov_g)
             beta, _ = _linear_rss(P[i], A, M, rhs, r)
             if it == n_iter:
                 out_r[i, :] = r
