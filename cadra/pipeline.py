@@ -90,6 +90,7 @@ def _shot_data(item) -> ShotData:
 
 def fit(shots, model: AeroModel | str | os.PathLike, *, hold: Iterable[str] | None = None,
         free: Iterable[str] | None = None, bound: Iterable[str] | None = None,
+        prior: Iterable[str] | None = None,
         start: str = "auto", auto_start: bool = True, max_iterations: int = 60,
         variance_components: bool = False, options: FitOptions | None = None,
         progress: bool = False) -> FitResult:
@@ -98,7 +99,9 @@ def fit(shots, model: AeroModel | str | os.PathLike, *, hold: Iterable[str] | No
     ``shots``: one shot or several (a multi-fit), each a :class:`ShotData` or a stage-one
     result. ``model``: a bundled model's name, a model file or an :class:`AeroModel`;
     ``hold``, ``free``, ``bound`` as ``cadra2 fit`` takes them (``"NAME[=VALUE]"``,
-    ``"NAME"``, ``"NAME=LO:HI"`` in the model file's units). ``start``: the linear theory the
+    ``"NAME"``, ``"NAME=LO:HI"`` in the model file's units); ``prior``: parameters freed
+    with a Gaussian prior (``"NAME=VALUE+-SIGMA"``, or ``"NAME"`` for its value and the
+    model's sigma; :mod:`cadra.fitting.priors`). ``start``: the linear theory the
     starting values come from (``"auto"``, ``"linear"`` or ``"epicyclic"``,
     :func:`cadra.flight.starts.start_estimates`); ``auto_start=False`` starts from the
     model's own values. ``variance_components``: rescale each channel's sigmas by what its
@@ -108,7 +111,7 @@ def fit(shots, model: AeroModel | str | os.PathLike, *, hold: Iterable[str] | No
     data = [_shot_data(s) for s in items]
     if not isinstance(model, AeroModel):
         model = resolve_model(model)
-    model = apply_holds(model, hold, free, bound)
+    model = apply_holds(model, hold, free, bound, prior)
     if options is None:
         options = FitOptions(max_iterations=max_iterations, progress=progress)
     estimates = start_estimates(data, start) if auto_start else None

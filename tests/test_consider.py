@@ -154,3 +154,73 @@ def test_the_report_says_what_a_hold_does(shots, tmp_path):
     assert exact.consider is None
     text = report_markdown(exact, data)
     assert "Cmq_0 = -0.5 (exact)" in text and "σ conditional" not in text
+
+
+# --- the Bayesian alternative: the held parameter free under a Gaussian prior -------------
+
+
+def test_a_gaussian_prior_combines_with_the_data_as_two_gaussians(shots):
+    """Noise-free data put the free fit at the truth with sigma s; a prior one s above it
+    with sigma s gives the posterior mean half-way and sigma s / sqrt 2 (the product of two
+    Gaussians), and the other parameters' covariance drops by the regression on it:
+    P_oo - P_oc P_co / (s^2 + s_p^2)."""
+    data, states, model, free = shots
+    s = free.sigma("Cmq_0")
+    mu = TRUTH["Cmq_0"] + s
+    res = fit(data, model.with_priors({"Cmq_0": (mu, s)}), states,
+              options=FitOptions(step_tol_sigma=1e-4))
+    assert res.converged and res.n_priors == 1
+    assert res.dof == free.dof + 1
+    assert abs(res.value("Cmq_0") - (TRUTH["Cmq_0"] + 0.5 * s)) < 0.01 * s
+    assert res.sigma("Cmq_0") == pytest.approx(s / np.sqrt(2.0), rel=2e-3)
+    # the prior's own chi^2 share: ((mu - posterior) / s)^2 = 1/4
+    assert res.prior_chi2 == pytest.approx(0.25, rel=0.02)
+    i = [free.param_names.index(n) for n in OTHERS]
+    c = free.param_names.index("Cmq_0")
+    P = free.covariance
+    want = P[np.ix_(i, i)] - np.outer(P[i, c], P[c, i]) / (2.0 * s * s)
+    j = [res.param_names.index(n) for n in OTHERS]
+    np.testing.assert_allclose(res.covariance[np.ix_(j, j)], want, rtol=2e-3,
+                               atol=2e-3 * np.sqrt(np.outer(np.diag(want),
+                                                            np.diag(want))).max())
+
+
+def test_a_wide_prior_is_a_free_fit_and_a_tight_one_a_hold(shots):
+    data, states, model, free = shots
+    s = free.sigma("Cmq_0")
+    wide = fit(data, model.with_priors({"Cmq_0": (TRUTH["Cmq_0"] + 3 * s, 1e4 * s)}), states)
+    assert wide.value("Cmq_0") == pytest.approx(free.value("Cmq_0"), abs=0.01 * s)
+    assert wide.sigma("Cmq_0") == pytest.approx(s, rel=1e-3)
+    at = TRUTH["Cmq_0"] + 2 * s
+    tight = fit(data, model.with_priors({"Cmq_0": (at, 1e-4 * s)}), states)
+    held = fit(data, model.with_vary({"Cmq_0": False}).with_values({"Cmq_0": at}), states)
+    assert tight.value("Cmq_0") == pytest.approx(at, abs=1e-3 * s)
+    for n in OTHERS:
+        assert tight.value(n) == pytest.approx(held.value(n), abs=0.01 * held.sigma(n))
+        assert tight.sigma(n) == pytest.approx(held.sigma(n), rel=1e-3)
+
+
+def test_priors_from_the_command_line_and_the_model_file():
+    from cadra.fitting.priors import holds_as_priors
+
+    m = load_bundled_model("m1_m110")
+    # NAME alone: the held value and the model's own sigma (0.433: seed 004's range)
+    bayes = apply_holds(m, prior=["Cmq_A2"])
+    p = bayes.parameter("Cmq_A2")
+    assert p.vary and p.prior == pytest.approx(3.65) and p.sigma == pytest.approx(0.433)
+    assert holds_as_priors(m).parameter("Cmq_A2") == p
+    q = apply_holds(load_bundled_model("m2_m070"), prior=["alpha_ref=10+-2"]
+                    ).parameter("alpha_ref")
+    assert q.prior == pytest.approx(np.radians(10.0)) and q.sigma == pytest.approx(np.radians(2))
+    with pytest.raises(ValueError, match="VALUE\\+-SIGMA"):
+        apply_holds(m, prior=["Cmq_A2=3.65"])
+    with pytest.raises(ValueError, match="uncertainty"):
+        apply_holds(m, prior=["Cm_A1"])
+    # the file keeps the prior in its unit, and a prior needs its sigma
+    d = bayes.to_dict()
+    assert d["parameters"]["Cmq_A2"]["prior"] == pytest.approx(3.65)
+    again = model_from_dict(d, "again")
+    assert again.parameter("Cmq_A2") == p
+    d["parameters"]["Cmq_A2"].pop("sigma")
+    with pytest.raises(ValueError, match="prior needs its sigma"):
+        model_from_dict(d, "bad")

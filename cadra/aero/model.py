@@ -73,7 +73,7 @@ class ModelFileError(ValueError):
 _F = Fields(ModelFileError)
 _MODEL_KEYS = ("format", "name", "description", "angle_plane", "moment_reference", "reference",
                "coefficients", "parameters")
-_PARAM_KEYS = ("value", "vary", "min", "max", "unit", "note", "sigma")
+_PARAM_KEYS = ("value", "vary", "min", "max", "unit", "note", "sigma", "prior")
 
 
 def _is_number(x) -> bool:
@@ -96,6 +96,9 @@ class Parameter:
     sigma : the value's own standard uncertainty, SI (0: exact). A held parameter's sigma
         is propagated into the free ones' as a consider covariance
         (:mod:`cadra.fitting.consider`, docs/fitting.md, "Held values with an uncertainty").
+    prior : the mean of a Gaussian prior, SI (None: no prior), whose standard deviation is
+        ``sigma``: the fit adds ``((value - prior) / sigma)^2`` to its chi^2 (the Bayesian
+        alternative to a hold with an uncertainty, :mod:`cadra.fitting.priors`).
     """
 
     name: str
@@ -106,6 +109,7 @@ class Parameter:
     unit: str = ""
     note: str = ""
     sigma: float = 0.0
+    prior: float | None = None
 
     def __post_init__(self):
         key = f"parameters.{self.name}"
@@ -126,6 +130,12 @@ class Parameter:
             raise ValueError(f"{key}: value must be finite, got {self.value}")
         if not (math.isfinite(self.sigma) and self.sigma >= 0.0):
             raise ValueError(f"{key}: sigma must be a finite number >= 0, got {self.sigma}")
+        if self.prior is not None:
+            if not (_is_number(self.prior) and math.isfinite(float(self.prior))):
+                raise ValueError(f"{key}: prior must be a finite number, got {self.prior!r}")
+            object.__setattr__(self, "prior", float(self.prior))
+            if not self.sigma > 0.0:
+                raise ValueError(f"{key}: a prior needs its sigma (> 0)")
         if not isinstance(self.vary, bool | np.bool_):
             raise ValueError(f"{key}: vary must be true or false, got {self.vary!r}")
         object.__setattr__(self, "vary", bool(self.vary))
@@ -341,6 +351,13 @@ class AeroModel:
         """A copy with the parameters' own uncertainties (SI; 0: exact) changed."""
         return self._changed({n: {"sigma": v} for n, v in sigmas.items()})
 
+    def with_priors(self, priors: Mapping[str, tuple[float, float] | None]) -> AeroModel:
+        """A copy with Gaussian priors ``name -> (mean, sigma)`` (SI) on parameters, each
+        made free; ``None`` removes a parameter's prior (its sigma stays)."""
+        return self._changed({n: ({"prior": None} if ms is None else
+                                  {"prior": ms[0], "sigma": ms[1], "vary": True})
+                              for n, ms in priors.items()})
+
     def with_bounds(self, bounds: Mapping[str, tuple[float, float]]) -> AeroModel:
         """A copy with new ``(min, max)`` bounds (SI)."""
         return self._changed({n: {"min": b[0], "max": b[1]} for n, b in bounds.items()})
@@ -470,6 +487,8 @@ class AeroModel:
                 d["note"] = p.note
             if p.sigma > 0.0:
                 d["sigma"] = p.file_sigma
+            if p.prior is not None:
+                d["prior"] = _to_file(p.prior, p.unit)
             params[p.name] = d
         out = {"format": FILE_FORMAT, "name": self.name}
         if self.description:
@@ -537,9 +556,14 @@ def _model_from_dict(data: Mapping, source: str) -> AeroModel:
         note = entry.get("note", "")
         if not isinstance(note, str):
             raise ValueError(f"{key}.note: must be a string")
+        prior = entry.get("prior")
+        if prior is not None:
+            if not _is_number(prior):
+                raise ValueError(f"{key}.prior: must be a number, got {prior!r}")
+            prior = _from_file(float(prior), unit)
         params.append(Parameter(name=str(name), value=conv["value"], vary=vary,
                                 min=conv["min"], max=conv["max"], unit=unit, note=note,
-                                sigma=conv["sigma"]))
+                                sigma=conv["sigma"], prior=prior))
     name = data.get("name", Path(source).stem)
     if not isinstance(data.get("reference", {}), Mapping):
         raise ValueError("reference: must be a table of name = value")

@@ -66,6 +66,10 @@ def add_data_options(p, *, model: bool = True) -> None:
                             "sigmas as a consider covariance)")
         p.add_argument("--free", action="append", metavar="NAME",
                        help="free a held parameter")
+        p.add_argument("--prior", action="append", metavar="NAME[=VALUE+-SIGMA]",
+                       help="free a parameter with a Gaussian prior (VALUE +- SIGMA in the "
+                            "model file's unit; NAME alone: its value and the model's sigma): "
+                            "the Bayesian alternative to --hold NAME=VALUE+-SIGMA")
         p.add_argument("--bound", action="append", metavar="NAME=LO:HI",
                        help="bounds of a parameter (file unit; either side may be empty)")
         p.add_argument("--max-iterations", type=number(int, 1), default=60,
@@ -91,12 +95,14 @@ def add_start_option(parser) -> None:
 
 
 def model_of(args):
-    """The aero model named by --model (bundled name or file) with --hold/--free/--bound."""
+    """The aero model named by --model (bundled name or file) with
+    --hold/--free/--bound/--prior."""
     from cadra.aero import resolve_model
     from cadra.fitting.inputs import apply_holds
 
     return apply_holds(resolve_model(args.model), getattr(args, "hold", None),
-                       getattr(args, "free", None), getattr(args, "bound", None))
+                       getattr(args, "free", None), getattr(args, "bound", None),
+                       getattr(args, "prior", None))
 
 
 def shots_of(args):

@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from cadra.fitting.problem import result_problem
+from cadra.fitting.priors import prior_rows
 from cadra.fitting.sensitivity import predict_with_jacobian
 
 
@@ -97,8 +98,10 @@ class ConsiderAnalysis:
 
 
 def held_with_sigma(model) -> tuple[str, ...]:
-    """The parameters ``model`` holds with an uncertainty (sigma > 0)."""
-    return tuple(p.name for p in model.parameters if not p.vary and p.sigma > 0.0)
+    """The parameters ``model`` holds with an uncertainty (sigma > 0; a held parameter with
+    a Gaussian prior is a profile's point, not a consider parameter)."""
+    return tuple(p.name for p in model.parameters
+                 if not p.vary and p.sigma > 0.0 and p.prior is None)
 
 
 def held_columns(problem, held: Sequence[str]) -> np.ndarray:
@@ -139,6 +142,10 @@ def consider(result, shots=None, held: Sequence[str] | None = None
     if C.shape[0] != J.shape[0]:
         raise ValueError(f"consider: {C.shape[0]} measurements against the fit's "
                          f"{J.shape[0]}: give the shots the fit used")
+    # the free parameters' Gaussian priors are measurements too (the held values move none)
+    Jp = prior_rows(result.model, result.param_names)
+    J = np.vstack([J, Jp])
+    C = np.vstack([C, np.zeros((Jp.shape[0], C.shape[1]))])
     # S = -(J^T J)^-1 J^T C by least squares (the same solution, better conditioned)
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0.0] = 1.0

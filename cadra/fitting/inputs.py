@@ -14,6 +14,7 @@ import math
 from collections.abc import Iterable
 
 from cadra.aero import AeroModel
+from cadra.fitting.priors import holds_as_priors
 
 
 def parse_assignments(items: Iterable[str] | None) -> dict[str, str | None]:
@@ -26,15 +27,18 @@ def parse_assignments(items: Iterable[str] | None) -> dict[str, str | None]:
 
 
 def apply_holds(model: AeroModel, hold: Iterable[str] | None = None,
-                free: Iterable[str] | None = None, bound: Iterable[str] | None = None
-                ) -> AeroModel:
+                free: Iterable[str] | None = None, bound: Iterable[str] | None = None,
+                prior: Iterable[str] | None = None) -> AeroModel:
     """``model`` with parameters held, freed and bounded as a user writes them.
 
     ``hold``: ``"NAME"`` (held at its value, with the model's own uncertainty),
     ``"NAME=VALUE"`` (held at VALUE, exactly) or ``"NAME=VALUE+-SIGMA"`` (``±`` too: held at
     VALUE with the standard uncertainty SIGMA, propagated into the free parameters' sigmas as
     a consider covariance, :mod:`cadra.fitting.consider`); ``free``: ``"NAME"``;
-    ``bound``: ``"NAME=LO:HI"`` (either side may be empty: unbounded). Values are in the
+    ``bound``: ``"NAME=LO:HI"`` (either side may be empty: unbounded); ``prior``:
+    ``"NAME"`` (free, with a Gaussian prior at its value with the model's own uncertainty)
+    or ``"NAME=VALUE+-SIGMA"`` (free, with the prior VALUE ± SIGMA): the Bayesian
+    alternative to a hold with an uncertainty (:mod:`cadra.fitting.priors`). Values are in the
     parameter's unit in the model file (degrees for ``alpha_ref``), converted to SI through
     the unit table (:meth:`cadra.aero.Parameter.to_si`). Unknown names raise ``KeyError``,
     malformed values ``ValueError``.
@@ -54,6 +58,14 @@ def apply_holds(model: AeroModel, hold: Iterable[str] | None = None,
             model = model.with_sigmas({name: abs(si(name, sigma)) if sep else 0.0})
     for name in free or []:
         model = model.with_vary({name.strip(): True})
+    for name, value in parse_assignments(prior).items():
+        if value is None:
+            model = holds_as_priors(model, [name])
+            continue
+        text, sep, sigma = value.replace("±", "+-").partition("+-")
+        if not sep or not abs(si(name, sigma)) > 0.0:
+            raise ValueError(f"--prior {name}: expected NAME=VALUE+-SIGMA with SIGMA > 0")
+        model = model.with_priors({name: (si(name, text), abs(si(name, sigma)))})
     for name, value in parse_assignments(bound).items():
         lo, sep, hi = (value or "").partition(":")
         if not sep:

@@ -35,6 +35,7 @@ from scipy import sparse
 
 from cadra.aero import AeroModel
 from cadra.channels import residual
+from cadra.fitting.priors import prior_chi2, prior_names, prior_rows
 from cadra.fitting.sensitivity import LOCAL_NAMES
 from cadra.flight.data import CHANNELS
 
@@ -105,6 +106,10 @@ class FitResult:
     problem: FitProblem | None = None
     #: the free aerodynamic parameters' values the fit started from (SI)
     initial_values: dict = field(default_factory=dict)
+    #: Gaussian priors (:mod:`cadra.fitting.priors`): their number (each counts as an
+    #: observation in :attr:`dof`) and their share of :attr:`chi2`
+    n_priors: int = 0
+    prior_chi2: float = 0.0
 
     def __bool__(self) -> bool:
         return self.status == "converged"
@@ -179,7 +184,7 @@ class FitResult:
 
     @property
     def dof(self) -> int:
-        return self.n_observations - self.n_free
+        return self.n_observations + self.n_priors - self.n_free
 
     @property
     def reduced_chi2(self) -> float:
@@ -453,9 +458,14 @@ def build_result(problem, params: np.ndarray, states, status: str, message: str,
                                  "normalized": float(res[i, j] / sd.sigma[i, j])})
         shot_fits.append((st, off, chi2_shot, rms))
     n_free = P
+    # Gaussian priors: pseudo-measurements of the parameters (cadra.fitting.priors)
+    Jp = prior_rows(model, names)
+    N += Jp.T @ Jp
+    chi2_prior = prior_chi2(model, params)
+    chi2_total += chi2_prior
     if have_jac and P:
         cov = _pinv_sym(N, options.rcond)
-        middle = _coloured_middle(blocks)
+        middle = _coloured_middle(blocks) + Jp.T @ Jp
         cov_c = cov @ middle @ cov
         near = _near_singular(N, names, na)
         # leverage: the diagonal of the weighted hat matrix J (J^T J)^+ J^T, shot by shot
@@ -511,6 +521,7 @@ def build_result(problem, params: np.ndarray, states, status: str, message: str,
         problem=final,
         initial_values={n: float(model.parameters[i].value)
                         for n, i in zip(names_aero, aero_idx, strict=True)},
+        n_priors=len(prior_names(model)), prior_chi2=chi2_prior,
         options={"max_iterations": options.max_iterations,
                  "step_tol_sigma": options.step_tol_sigma,
                  "integration": options.integration.__dict__, "final_lambda": lam})

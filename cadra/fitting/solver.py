@@ -34,6 +34,7 @@ from cadra.aero import AeroModel
 from cadra.channels import residual
 from cadra.dynamics.integrate import MAX_ADAPTIVE_EVALS
 from cadra.fitting.extras import Extra
+from cadra.fitting.priors import prior_terms
 from cadra.fitting.problem import FitProblem, default_local_free
 from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, Integration, apply_local
 from cadra.flight.data import ShotData
@@ -210,7 +211,24 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
               for k, (sd, y0, lf, t0) in enumerate(zip(problem.shots, problem.epoch_states,
                                                        problem.local_free, problem.epochs,
                                                        strict=True))]
-    n_obs = sum(st.mask.sum() for st in states)
+    # Gaussian priors (cadra.fitting.priors): one pseudo-measurement each; a free one's
+    # information and residual enter the shared block at its column
+    p_idx, p_mean, p_sig = prior_terms(model)
+    shared_at = {int(i): k for k, i in enumerate(aero_idx)}
+    p_col = np.array([shared_at.get(int(i), -1) for i in p_idx], dtype=int)
+
+    def chi2_prior(p):
+        z = (p[p_idx] - p_mean) / p_sig
+        return float(z @ z)
+
+    def with_priors(Ca, ga, p, blocked=None):
+        for c, i, m, s in zip(p_col, p_idx, p_mean, p_sig, strict=True):
+            if c >= 0 and (blocked is None or not blocked[c]):
+                Ca[c, c] += 1.0 / s**2
+                ga[c] += (m - p[i]) / s**2
+        return Ca, ga
+
+    n_obs = sum(st.mask.sum() for st in states) + p_idx.size
     n_free = ns + sum(st.local_free.size for st in states)
     warnings: list[str] = []
     message = ""
@@ -232,7 +250,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             st.pred, st.jac = pred, jac
         if not all(np.all(np.isfinite(st.jac[st.mask])) for st in states):
             return math.inf
-        return _chi2(states, [st.pred for st in states])
+        return _chi2(states, [st.pred for st in states]) + chi2_prior(p)
 
     def evaluate(p, xv, ys):
         return problem.predict_from(p, xv, ys)
@@ -275,6 +293,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                 bar.set_postfix(chi2=f"{chi2:.4g}", lam=f"{lam:.1e}")
             blocks = _blocks(states, ns)
             per, Ca, ga = _normal_equations(blocks, ns)
+            Ca, ga = with_priors(Ca, ga, params)
             ds, da = _scales(per, Ca)
             # Gauss-Newton step size (lambda ~ 0): the convergence test
             _, gn_a, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
@@ -287,6 +306,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             if blocked.any():
                 blocks = [(Js, np.where(blocked, 0.0, Ja), r) for Js, Ja, r in blocks]
                 per, Ca, ga = _normal_equations(blocks, ns)
+                Ca, ga = with_priors(Ca, ga, params, blocked)
                 ds, da = _scales(per, Ca)
                 _, _, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
             dof = max(n_obs - n_free, 1)
@@ -308,7 +328,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                     u[st.local_free] = dl
                     ys.append(apply_local(st.y_nom, u))
                 try:
-                    chi2_try = _chi2(states, evaluate(p_try, x_try, ys))
+                    chi2_try = _chi2(states, evaluate(p_try, x_try, ys)) + chi2_prior(p_try)
                 except (FloatingPointError, ZeroDivisionError):
                     chi2_try = math.inf
                 if chi2_try < chi2:

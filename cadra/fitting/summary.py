@@ -64,7 +64,9 @@ def fit_report(result, *, verbose: bool = False, status: bool = True,
     n_local = sum(len(sf.local_free) for sf in result.shots)
     lines += [f"shots: {shots}; {result.n_observations} observations, {result.n_free} "
               f"unknowns ({len(result.aero_names)} aerodynamic, {len(result.extras)} extra, "
-              f"{n_local} initial-state), {result.dof} degrees of freedom"]
+              f"{n_local} initial-state), "
+              + (f"{result.n_priors} prior(s), " if result.n_priors else "")
+              + f"{result.dof} degrees of freedom"]
     vc = result.options.get("variance_components") if isinstance(result.options, dict) else None
     if vc:
         lines.append("variance components: sigma scale " + ", ".join(
@@ -98,6 +100,11 @@ def fit_report(result, *, verbose: bool = False, status: bool = True,
         lines.append("held: " + ", ".join(
             f"{p.name} = {p.value:.6g}" + (f" ± {sig[p.name]:.3g}" if sig.get(p.name) else "")
             for p in held))
+    priors = [q for q in result.model.parameters if q.prior is not None]
+    if priors:
+        lines.append("Gaussian priors (their share of chi^2 "
+                     f"{result.prior_chi2:.3g}; the sigmas above are the posterior's): "
+                     + ", ".join(f"{q.name} {pm(q.prior, q.sigma)}" for q in priors))
     pairs = [(a, b, r) for a, b, r in result.high_correlations(correlation)
              if a in result.aero_names and b in result.aero_names]
     if pairs:

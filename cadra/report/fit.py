@@ -193,6 +193,7 @@ def results_dict(result: FitResult, shots: Sequence[ShotData], *,
             "held": not free, "min": p.min, "max": p.max, "at_bound": _at_bound(p),
             "held_sigma": p.sigma if not free else None,
             "sigma_consider": cons.get(p.name) if free else None,
+            "prior": p.prior, "prior_sigma": p.sigma if p.prior is not None else None,
         }
     out = {
         "format": RESULTS_FORMAT,
@@ -200,6 +201,7 @@ def results_dict(result: FitResult, shots: Sequence[ShotData], *,
         "status": result.status, "message": result.message, "converged": result.converged,
         "chi2": result.chi2, "dof": result.dof, "reduced_chi2": result.reduced_chi2,
         "n_observations": result.n_observations, "n_free": result.n_free,
+        "n_priors": result.n_priors, "prior_chi2": result.prior_chi2,
         "iterations": result.iterations, "elapsed_s": result.elapsed_s,
         "chi2_history": list(result.history),
         "model": {"name": result.model.name, "angle_plane": result.model.angle_plane},
@@ -365,8 +367,10 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
     L += ["## Fit statistics", ""]
     L += markdown.table(("quantity", "value"), (
         ("χ²", f"{result.chi2:.6g}"),
-        ("degrees of freedom", f"{result.dof} ({result.n_observations} measurements − "
-                               f"{result.n_free} free unknowns)"),
+        ("degrees of freedom", f"{result.dof} ({result.n_observations} measurements"
+                               + (f" + {result.n_priors} Gaussian prior(s)"
+                                  if result.n_priors else "")
+                               + f" − {result.n_free} free unknowns)"),
         ("reduced χ²", f"{result.reduced_chi2:.4g}"),
         ("shots", len(result.shots)),
         ("iterations", result.iterations),
@@ -431,6 +435,12 @@ def report_markdown(result: FitResult, shots: Sequence[ShotData], *,
         L += ["", "Held: " + ", ".join(_held_text(p) for p in held) + "."]
     if ca is not None:
         L += ["", *consider_lines(ca, result.aero_names)]
+    priors = [p for p in result.model.parameters if p.prior is not None]
+    if priors:
+        L += ["", "Gaussian priors (the Bayesian alternative to a hold with an uncertainty, "
+              "docs/fitting.md; their share of χ²: " f"{result.prior_chi2:.4g}; σ above is the "
+              "posterior's): " + ", ".join(f"{p.name} {pm(p.prior, p.sigma)}" for p in priors)
+              + "."]
     L += ["", "## Coefficients (seed 004 Table 4 layout)", "",
           coefficient_markdown(result.coefficient_table()), ""]
 

@@ -12,6 +12,13 @@ its pulls have a standard deviation near 1 and about 95 % lie within 2σ; the co
 sigma is not, where the hold moves a parameter by more than its sigma. The bundled 0.43 reads
 the range as a uniform spread (width / sqrt 12); the same fits' consider sigmas with the range
 read as +-1 sigma (0.75, :data:`HALF_RANGE_SIGMA`) are reported too.
+
+The Bayesian alternative (:mod:`cadra.fitting.priors`) fits the same data with the peak free
+under a Gaussian prior 3.65 ± 0.43; its pulls are counted the same way. In the first
+``holdone_sets`` sets, seed 004's hold-one study (:func:`cadra.studies.holdone.hold_one_study`,
+the peak held at :data:`HOLD_VALUES`) checks the linear consider prediction of each free
+parameter's shift (:func:`cadra.fitting.consider.linear_hold_prediction`) wherever the refit's
+shift exceeds the parameter's sigma: the prediction's error as a fraction of that shift.
 """
 
 from __future__ import annotations
@@ -31,15 +38,20 @@ HELD = "Cmq_A2"
 #: sigma = width / sqrt(12) = 0.43)
 HALF_RANGE_SIGMA = (PEAK_RANGE[1] - PEAK_RANGE[0]) / 2.0
 SHOTS_PER_SET = 3
+#: the hold-one study's held values across the range (the bundled hold, 3.65, among them)
+HOLD_VALUES = (2.9, 3.275, 3.65, 4.025, 4.4)
 
 
-def trial(k: int, seed: int = 0) -> dict:
-    """Trial ``k``: three M1 shots flown with a drawn C_mq peak, fitted holding 3.65 ± 0.75;
-    the free parameters' values, truths and both sigmas."""
+def trial(k: int, seed: int = 0, holdone: bool = False) -> dict:
+    """Trial ``k``: three M1 shots flown with a drawn C_mq peak, fitted holding it at the
+    bundled 3.65 ± 0.43 and, the Bayesian way, with it free under that Gaussian prior; the
+    free parameters' values, truths and sigmas (and with ``holdone`` the hold-one study's
+    shifts against their linear prediction)."""
     from dataclasses import replace
 
     from cadra import cores
     from cadra.aero import load_bundled_model
+    from cadra.fitting.priors import holds_as_priors
     from cadra.fitting.solver import fit
     from cadra.synthetic.simulate import simulate_shot
     from cadra.validation.gap_measure import measure
@@ -60,10 +72,18 @@ def trial(k: int, seed: int = 0) -> dict:
             states.append(sim.states[sd.epoch_index])
         t0 = time.perf_counter()
         res = fit(data, model, states)
+        seconds = time.perf_counter() - t0
         ca = res.consider if res else None
+        bayes = fit(data, holds_as_priors(model), states)
+        shifts = _hold_one_shifts(data, res) if holdone and res else []
     out = {"trial": k, "peak": peak, "shots": names, "status": res.status,
-           "reduced_chi2": res.reduced_chi2, "seconds": time.perf_counter() - t0,
-           "params": {}}
+           "reduced_chi2": res.reduced_chi2, "seconds": seconds,
+           "params": {}, "bayes_status": bayes.status, "bayes_params": {},
+           "holdone_shifts": shifts}
+    if bayes:
+        for n, v, s in zip(bayes.aero_names, bayes.aero_values, bayes.aero_sigma, strict=True):
+            out["bayes_params"][n] = {"value": float(v), "truth": truth.parameter(n).value,
+                                      "sigma": float(s)}
     if ca is None:
         return out
     j = ca.held.index(HELD)
@@ -77,18 +97,51 @@ def trial(k: int, seed: int = 0) -> dict:
     return out
 
 
+def _hold_one_shifts(data, res) -> list[dict]:
+    """The hold-one study from ``res`` (the peak held at each of :data:`HOLD_VALUES`): per
+    converged refit and free parameter, the refit's shift from ``res`` and the linear
+    consider prediction of it, both in ``res``'s conditional sigmas."""
+    from cadra.studies.holdone import hold_one_study, with_linear_prediction
+
+    table = with_linear_prediction(
+        hold_one_study(data, res.model, [sf.state for sf in res.shots], HELD,
+                       list(HOLD_VALUES)), res, HELD)
+    out = []
+    for _, row in table[table["converged"].astype(bool)].iterrows():
+        for n, v, s in zip(res.aero_names, res.aero_values, res.aero_sigma, strict=True):
+            if f"{n}_linear" in row:
+                out.append({"value": float(row["value"]), "param": n,
+                            "shift_sigma": float((row[n] - v) / s),
+                            "linear_sigma": float((row[f"{n}_linear"] - v) / s)})
+    return out
+
+
+def _linear_figures(rows: list[dict]) -> dict:
+    """How the linear prediction met the refits where a shift exceeds 1 sigma."""
+    big = [d for r in rows for d in r["holdone_shifts"] if abs(d["shift_sigma"]) > 1.0]
+    if not big:
+        return {"sets": 0}
+    err = np.array([abs(d["linear_sigma"] - d["shift_sigma"]) / abs(d["shift_sigma"])
+                    for d in big])
+    return {"sets": sum(1 for r in rows if r["holdone_shifts"]), "shifts_above_1sigma": len(big),
+            "within_20pct_frac": float(np.mean(err <= 0.2)),
+            "rel_error_median": float(np.median(err)), "rel_error_max": float(err.max()),
+            "rel_error_p95": float(np.quantile(err, 0.95)),
+            "largest_shift_sigma": float(max(abs(d["shift_sigma"]) for d in big))}
+
+
 def _bundled_sigma() -> float:
     from cadra.aero import load_bundled_model
 
     return load_bundled_model("m1_m110").parameter(HELD).sigma
 
 
-def _pull_figures(rows: list[dict], which: str) -> dict:
+def _pull_figures(rows: list[dict], which: str, key: str = "params") -> dict:
     pulls = np.array([(p["value"] - p["truth"]) / p[which] for r in rows
-                      for p in r["params"].values()])
+                      for p in r[key].values()])
     by_param: dict[str, list[float]] = {}
     for r in rows:
-        for n, p in r["params"].items():
+        for n, p in r[key].items():
             by_param.setdefault(n, []).append((p["value"] - p["truth"]) / p[which])
     std = {n: float(np.std(v, ddof=1)) for n, v in by_param.items()}
     return {"pull_std_all": float(np.std(pulls, ddof=1)),
@@ -97,8 +150,11 @@ def _pull_figures(rows: list[dict], which: str) -> dict:
             "pull_std_min": min(std.values()), "pull_std_max": max(std.values())}
 
 
-def run(trials: int, seed: int = 0, workers: int = 2, progress: bool = True) -> dict:
-    """``trials`` trials in ``workers`` processes; the pull figures with both sigmas."""
+def run(trials: int, seed: int = 0, workers: int = 2, progress: bool = True,
+        holdone_sets: int = 20) -> dict:
+    """``trials`` trials in ``workers`` processes; the pull figures with both sigmas and the
+    Bayesian fit's, and the hold-one study's check of the linear prediction in the first
+    ``holdone_sets`` sets."""
     import multiprocessing
 
     from tqdm import tqdm
@@ -107,13 +163,14 @@ def run(trials: int, seed: int = 0, workers: int = 2, progress: bool = True) -> 
     rows = []
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-        futures = [ex.submit(trial, k, seed) for k in range(trials)]
+        futures = [ex.submit(trial, k, seed, k < holdone_sets) for k in range(trials)]
         for f in tqdm(as_completed(futures), total=trials, desc="consider trials",
                       unit="set", disable=not progress):
             rows.append(f.result())
     rows.sort(key=lambda r: r["trial"])
     ok = [r for r in rows if r["status"] == "converged" and r["params"]]
     chi2 = [r["reduced_chi2"] for r in ok]
+    bayes = [r for r in rows if r["bayes_status"] == "converged" and r["bayes_params"]]
     return {"trials": trials, "converged": len(ok), "held": HELD,
             "held_value": 3.65, "held_sigma": _bundled_sigma(), "peak_range": list(PEAK_RANGE),
             "reduced_chi2_median": float(np.median(chi2)) if chi2 else math.nan,
@@ -122,6 +179,9 @@ def run(trials: int, seed: int = 0, workers: int = 2, progress: bool = True) -> 
             "half_range_sigma": HALF_RANGE_SIGMA,
             "consider_half_range": (_pull_figures(ok, "sigma_consider_half_range") if ok
                                     else {}),
+            "bayes_converged": len(bayes),
+            "bayes": _pull_figures(bayes, "sigma", "bayes_params") if bayes else {},
+            "linear_vs_holdone": _linear_figures(rows),
             "fit_seconds_median": float(np.median([r["seconds"] for r in rows])),
             "wall_s": time.perf_counter() - t0}
 
