@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from cadra.fitting.problem import result_problem
 from cadra.fitting.priors import prior_rows
+from cadra.fitting.problem import result_problem
 from cadra.fitting.sensitivity import predict_with_jacobian
 
 
