@@ -340,3 +340,24 @@ def test_the_local_workers_keep_the_allocators_adaptive_threshold(monkeypatch):
     finally:
         client.close()
         cluster.close()
+
+
+def test_a_database_an_older_cadra_wrote_gains_the_new_columns(tmp_path):
+    import sqlite3
+
+    from cadra.campaign.database import FILENAME, SCHEMA
+
+    old = sqlite3.connect(tmp_path / FILENAME)
+    cols = {c: t for c, t in SCHEMA["coefficients"].items() if c != "sigma_consider"}
+    old.execute("CREATE TABLE coefficients (" + ", ".join(f"{c} {t}" for c, t in cols.items())
+                + ", task_key TEXT)")
+    old.execute("INSERT INTO coefficients (scope, name, parameter, value, sigma) "
+                "VALUES ('group', 'G', 'CD_A1', 1.25, 0.01)")
+    old.commit()
+    old.close()
+    db = CampaignDB(tmp_path)
+    try:
+        rows = db.conn.execute("SELECT value, sigma, sigma_consider FROM coefficients").fetchall()
+    finally:
+        db.close()
+    assert rows == [(1.25, 0.01, None)]

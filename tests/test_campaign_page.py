@@ -302,3 +302,18 @@ def test_importing_the_module_does_not_import_plotly():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_groups_consider_sigma_is_its_value_pm_sigma_with_the_conditional_beside(tables):
+    coef = tables["coefficients"].copy()
+    coef["sigma_consider"] = np.nan
+    m3 = (coef["scope"] == "group") & (coef["name"] == "M3") & (coef["vary"] == 1)
+    coef.loc[m3 & (coef["parameter"] == "CA"), "sigma_consider"] = 0.0042
+    coef.loc[m3 & (coef["parameter"] == "Cm_a"), "sigma_consider"] = 0.0071
+    fits = _sections(campaign_page_html({**tables, "coefficients": coef}, title="t"))["fits"]
+    tables_html = re.findall(r"<table.*?</table>", fits, flags=re.DOTALL)
+    m2 = next(t for t in tables_html if "1.5900" in t)           # M2: every hold exact
+    m3 = next(t for t in tables_html if "1.6400" in t)           # M3: the consider sigma
+    assert "1.5900 ± 0.0015" in m2 and "σ conditional" not in m2
+    assert "1.6400 ± 0.0042" in m3 and "σ conditional" in m3
+    assert ">0.0015<" in m3 and "(held)" in m3

@@ -33,7 +33,8 @@ SCHEMA: dict[str, dict[str, str]] = {
               "n_stations": "INTEGER", "stage1_report": "TEXT", "fit_report": "TEXT"},
     "coefficients": {"scope": "TEXT", "name": "TEXT", "model": "TEXT", "parameter": "TEXT",
                      "value": "REAL", "sigma": "REAL", "vary": "INTEGER", "mach": "REAL",
-                     "alpha_rms_deg": "REAL", "sigma_rms_deg": "REAL"},
+                     "alpha_rms_deg": "REAL", "sigma_rms_deg": "REAL",
+                     "sigma_consider": "REAL"},
     "fits": {"scope": "TEXT", "name": "TEXT", "model": "TEXT", "status": "TEXT",
              "converged": "INTEGER", "chi2nu": "REAL", "dof": "INTEGER", "n_shots": "INTEGER",
              "shots": "TEXT", "note": "TEXT", "report": "TEXT"},
@@ -71,6 +72,11 @@ def _create(conn: sqlite3.Connection) -> None:
         extra = ", task_key TEXT" if table in RESULT_TABLES else ""
         body = ", ".join(f"{c} {t}" for c, t in cols.items())
         conn.execute(f"CREATE TABLE IF NOT EXISTS {table} ({body}{extra})")
+        # a database an older CADRA wrote gains the columns added since (NULL in its rows)
+        have = {row[1] for row in conn.execute(f"PRAGMA table_info({table})")}
+        for c, t in cols.items():
+            if c not in have:
+                conn.execute(f"ALTER TABLE {table} ADD COLUMN {c} {t}")
     conn.execute("CREATE INDEX IF NOT EXISTS tasks_key ON tasks (key)")
 
 

@@ -136,12 +136,15 @@ def _multifit(db, manifest, out, o):
     with db.conn:   # each shot's row links to the group fit it is in
         db.conn.executemany("UPDATE shots SET fit_report = ? WHERE shot_id = ?",
                             [(_rel(folder / "report.md", out), s.shot_id) for s in shots])
+    ca = result.consider     # held values with an uncertainty: their consider sigma
+    cons = {} if ca is None else dict(zip(ca.names, ca.sigma, strict=True))
     rows = []
     for p in result.params.values():
         if p.kind != "aero":
             continue
         rows.append({**where, "model": result.model.name, "parameter": p.name,
-                     "value": p.value, "sigma": p.stderr, "vary": p.vary, "mach": mach})
+                     "value": p.value, "sigma": p.stderr, "vary": p.vary, "mach": mach,
+                     "sigma_consider": cons.get(p.name) if p.vary else None})
     db.replace("coefficients", where, rows, o.key)
     curves = o.value.get("curves")
     crow = [] if curves is None else [{"group_name": o.name, **r}

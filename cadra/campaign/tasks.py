@@ -189,7 +189,8 @@ def coefficient_curve_table(result, shots, n_points: int = 61) -> pd.DataFrame:
     the flights' mean Mach (the points of seed 004 Figs. 9-14's curves), the angles and Mach
     from the fit's own forward model (:func:`cadra.fitting.histories.fitted_histories`):
     ``coefficient``, ``angle`` (``alpha`` or ``sigma``), ``angle_deg``, ``mach``, ``value``,
-    ``sigma``."""
+    ``sigma`` (with the held values' own uncertainty where the model gives them one: the
+    consider covariance, :mod:`cadra.fitting.consider`)."""
     from cadra.fitting.histories import fitted_histories
     from cadra.report.fit_plots import coefficient_curves
 
@@ -200,7 +201,9 @@ def coefficient_curve_table(result, shots, n_points: int = 61) -> pd.DataFrame:
     grid = np.radians(np.linspace(h[f"{angle}_deg"].min(), h[f"{angle}_deg"].max(), n_points))
     zeros = np.zeros_like(grid)
     na = len(result.aero_names)
-    curves = coefficient_curves(model, result.aero_names, result.covariance[:na, :na], grid,
+    ca = result.consider
+    cov = result.covariance if ca is None else ca.covariance   # same order: param_names
+    curves = coefficient_curves(model, result.aero_names, cov[:na, :na], grid,
                                 zeros, grid if angle == "sigma" else None, mach)
     rows = []
     for c, (v, s) in curves.items():

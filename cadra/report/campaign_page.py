@@ -500,11 +500,27 @@ def _fits_section(t, groups) -> str:
         if c is None or not len(c):
             out.append(_none("parameters"))
         else:
-            out.append(_html_table(
-                ("parameter", "value ± σ", "vary"),
-                ((r.parameter, _pm(r.value, r.sigma) if _flag(r.vary) == "yes"
-                  else f"{_text(r.value)} (held)", _flag(r.vary, "free", "held"))
-                 for r in c.itertuples(index=False)), numeric=(1,)))
+            # held values with an uncertainty: value ± the consider sigma, the conditional
+            # one beside it (docs/fitting.md, "Held values with an uncertainty")
+            cons = (_floats(c["sigma_consider"]) if "sigma_consider" in c
+                    else np.full(len(c), np.nan))
+            if np.isfinite(cons).any():
+                out.append("<p>value ± σ: the consider sigma (the held values' own "
+                           "uncertainty included); σ conditional: with them taken as exact.</p>")
+                out.append(_html_table(
+                    ("parameter", "value ± σ", "σ conditional", "vary"),
+                    ((r.parameter, _pm(r.value, s) if _flag(r.vary) == "yes"
+                      else f"{_text(r.value)} (held)",
+                      _text(r.sigma, 2) if _flag(r.vary) == "yes" else "",
+                      _flag(r.vary, "free", "held"))
+                     for r, s in zip(c.itertuples(index=False), cons, strict=True)),
+                    numeric=(1, 2)))
+            else:
+                out.append(_html_table(
+                    ("parameter", "value ± σ", "vary"),
+                    ((r.parameter, _pm(r.value, r.sigma) if _flag(r.vary) == "yes"
+                      else f"{_text(r.value)} (held)", _flag(r.vary, "free", "held"))
+                     for r in c.itertuples(index=False)), numeric=(1,)))
     out.append("<h3>Single fits</h3>")
     sfits = None if fits is None else fits[fits["scope"] == "single"]
     if sfits is None or not len(sfits):
