@@ -382,3 +382,25 @@ def test_steps_won_on_the_two_evaluations_difference_end_as_convergence():
     pulls = (res.aero_values - np.array([truth.parameter(n).value
                                          for n in res.aero_names])) / res.aero_sigma
     assert np.all(np.abs(pulls) < 3)
+
+
+def test_the_stop_rules_on_the_figures_that_motivated_them():
+    """The solver's stop rules (cadra.fitting.solver._stop_rule) on one iteration's figures.
+    The stationary-point rule's figures are those of an M1 M1.10 fit with the C_mq peak free
+    on stage-one data: chi^2 167.741, no worthwhile step, Gauss-Newton promise 0.12 along the
+    peak's ridge, scaled gradient 1.8e-4; the fit had gone on for 60 iterations at that chi^2
+    (and, stalled, said "the model may not describe the data")."""
+    from cadra.fitting.solver import _stop_rule
+
+    opts = FitOptions()
+    status, msg = _stop_rule(True, -1.9e-4, 167.741, 0.12, 1.8e-4, 1.1, opts)
+    assert status == "converged" and "stationary point" in msg
+    # the same, but the gradient still promises a real gain: go on, or stalled when no step
+    assert _stop_rule(True, -1.9e-4, 167.741, 0.12, 0.3, 1.1, opts) is None
+    status, msg = _stop_rule(False, 0.0, 167.741, 0.47, 0.3, 1.1, opts)
+    assert status == "stalled" and "may not describe" in msg
+    # a worthwhile step: go on, whatever the gradient
+    assert _stop_rule(True, 0.17, 167.87, 1.25, 0.0087, 1.1, opts) is None
+    # the Gauss-Newton step inside the noise floor: converged, accepted or not
+    assert _stop_rule(True, 1e-6, 60.0, 1e-3, 1e-3, 1.0, opts)[0] == "converged"
+    assert _stop_rule(False, 0.0, 60.0, 1e-3, 1e-3, 1.0, opts)[0] == "converged"

@@ -166,6 +166,54 @@ def _step(per, Ca, ga, ds, da, lam, rcond):
     return local_steps, delta_a_s / da, decrease
 
 
+def _stop_rule(accepted: bool, decrease: float, chi2: float, gn_decrease: float,
+               gradient: float, scale: float, options: FitOptions) -> tuple[str, str] | None:
+    """Whether an iteration ends the fit, after its Levenberg-Marquardt trials: ``(status,
+    message)``, or None to go on. ``accepted``: a trial reduced chi^2 (by ``decrease``);
+    ``gn_decrease``: what the full Gauss-Newton step predicts; ``gradient``: the scaled
+    gradient's share of chi^2, ``sum (g_j / |J_j|)^2`` (what a small step along each unknown's
+    own direction can gain); ``scale``: max(1, chi^2 / dof). The fit stops:
+
+    1. accepted, but gaining less than the convergence tolerance with the Gauss-Newton step
+       inside the noise floor: converged (the trial, a prediction, and the Jacobian run
+       integrate on different step sequences and differ by ~1e-5 in chi^2, so a heavily
+       damped step can "win" on that difference alone, for ever: seen, 60 such iterations);
+    2. no step, or no worthwhile one, and the gradient within the noise while the
+       Gauss-Newton step still promises more: converged to a stationary point, the promise
+       lying along near-degenerate directions where chi^2 is far from quadratic (a ridge of
+       correlated parameters bent by a ``max(...)`` form's kink: the M1 M1.10 C_mq peak freed
+       on stage-one data, scaled gradient 1e-6 against a promise of 0.47);
+    3. no step, the Gauss-Newton step inside the noise floor (the adaptive integrator's step
+       choices, ~1e-6 in chi^2, hide it): converged;
+    4. no step at all otherwise: stalled.
+    """
+    noise = options.noise_tol_sigma**2 * scale
+    small_gain = not accepted or decrease <= options.step_tol_sigma**2 * scale
+
+    def sig(x):
+        return math.sqrt(max(x / scale, 0.0))
+
+    if accepted and gn_decrease <= noise and small_gain:
+        return "converged", (f"converged to the integration noise floor: the remaining "
+                             f"Gauss-Newton step, {sig(gn_decrease):.1e} sigma, no longer "
+                             "reduces chi^2 beyond its numerical noise")
+    if small_gain and gradient <= noise < gn_decrease:
+        return "converged", (f"converged to a stationary point: no step reduces chi^2 beyond "
+                             f"its numerical noise and its scaled gradient is "
+                             f"{sig(gradient):.1e} sigma; the Gauss-Newton step's "
+                             f"{sig(gn_decrease):.1e} sigma lies along near-degenerate "
+                             "directions where chi^2 is not quadratic")
+    if not accepted and gn_decrease <= noise:
+        return "converged", (f"converged to the integration noise floor: the remaining "
+                             f"Gauss-Newton step, {sig(gn_decrease):.1e} sigma, reduces chi^2 "
+                             "by less than its numerical noise")
+    if not accepted:
+        return "stalled", (f"stalled at chi^2 = {chi2:.6g}: no step reduces it (the remaining "
+                           f"Gauss-Newton step is {math.sqrt(max(gn_decrease, 0)):.2e} in chi "
+                           "units); the model may not describe the data")
+    return None
+
+
 def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np.ndarray], *,
         options: FitOptions = FitOptions(), local_free: Sequence[np.ndarray] | None = None,
         extras: Sequence[Extra] = ()):
@@ -311,6 +359,12 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                 _, _, gn_decrease = _step(per, Ca, ga, ds, da, 1e-14, options.rcond)
             dof = max(n_obs - n_free, 1)
             scale = max(1.0, chi2 / dof)
+            # the scaled gradient's share of chi^2: what a small step along each unknown's
+            # own direction can gain (first-order optimality, insensitive to the
+            # ill-conditioning that can make the Gauss-Newton step promise much more)
+            gradient = float(sum(np.sum((g / d) ** 2) for (_, _, g), d in zip(per, ds,
+                                                                          strict=True))
+                             + np.sum((ga / da) ** 2))
             if gn_decrease <= options.step_tol_sigma**2 * scale:
                 status = "converged"
                 message = (f"converged: the remaining Gauss-Newton step is "
@@ -351,32 +405,12 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                     accepted = True
                     break
                 lam *= 10.0
-            if (accepted and gn_decrease <= options.noise_tol_sigma**2 * scale
-                    and chi2_before - chi2 <= options.step_tol_sigma**2 * scale):
-                # a step was taken but gained less than the convergence tolerance, with the
-                # Gauss-Newton step already inside the noise floor: the trial (prediction
-                # only) and the Jacobian evaluation integrate on different step sequences and
-                # differ by ~1e-5 in chi^2, so a heavily damped step can "win" on that
-                # difference alone, for ever (seen: 60 such iterations at a fixed chi^2)
-                status = "converged"
-                message = (f"converged to the integration noise floor: the remaining "
-                           f"Gauss-Newton step, {math.sqrt(max(gn_decrease / scale, 0.0)):.1e} "
-                           "sigma, no longer reduces chi^2 beyond its numerical noise")
-                break
-            if not accepted and gn_decrease <= options.noise_tol_sigma**2 * scale:
-                # the objective's own noise (the adaptive integrator's step choices, ~1e-6 in
-                # chi^2) hides a remaining step this small: that is convergence
-                status = "converged"
-                message = (f"converged to the integration noise floor: the remaining "
-                           f"Gauss-Newton step, {math.sqrt(max(gn_decrease / scale, 0.0)):.1e} "
-                           "sigma, reduces chi^2 by less than its numerical noise")
-                break
-            if not accepted:
-                status = "stalled"
-                message = (f"stalled at chi^2 = {chi2:.6g}: no step reduces it (the remaining "
-                           f"Gauss-Newton step is {math.sqrt(max(gn_decrease, 0)):.2e} in chi "
-                           "units); the model may not describe the data")
-                lam = options.lambda_start
+            stop = _stop_rule(accepted, chi2_before - chi2 if accepted else 0.0, chi2,
+                              gn_decrease, gradient, scale, options)
+            if stop is not None:
+                status, message = stop
+                if status == "stalled":
+                    lam = options.lambda_start
                 break
     finally:
         if bar is not None:
