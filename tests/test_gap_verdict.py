@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy import stats
 
@@ -143,6 +144,7 @@ def test_a_held_parameter_the_data_reject_is_flagged_with_the_parameters_it_move
     assert abs(a["size"][0] - (-1.0)) <= 2 * a["sigma"][0]
     assert a["held_value"] == 1.0
     assert "held CL_A2 = 1 is inconsistent with these data" in dg.verdict
+    assert dg.held_inconsistent == ("CL_A2",)
     names = [c.name for c in library(load_bundled_model("m2_m070"), [1], 0.7)]
     assert "held Cmq_A3" in names and "held CL_A2" not in names
 
@@ -174,3 +176,35 @@ def test_an_underdetermined_fit_is_not_diagnosed():
     fit = SimpleNamespace(dof=40, chi2=float("nan"), n_observations=67, n_free=27)
     with pytest.raises(ValueError, match="underdetermined"):
         diagnose_gap(fit, [])
+
+
+def test_a_freed_hold_that_leaves_a_misfit_standing_or_has_an_alias_is_not_blamed_alone():
+    """The verdict names a held value inconsistent only when freeing it leaves no misfit
+    standing and no other candidate explains as much (docs/gap.md, "Held parameters")."""
+    from types import SimpleNamespace
+
+    from cadra.gap.verdict import compose
+
+    def held(aliases=()):
+        return {"effect": "held Cmq_A2", "kind": "held", "params": ("Cmq_A2",),
+                "size": [1.17], "sigma": [0.18], "interval_2sigma": None,
+                "held_value": 3.24, "aliases": tuple(aliases), "moved": [("Cmq_A3", 11.0)],
+                "refit_status": "converged"}
+
+    quiet = pd.DataFrame({"family": ["global"], "significant": [False], "p_value": [0.4]})
+    fit = SimpleNamespace(param_names=(), reduced_chi2=1.02)
+    cell = {"station": 7, "channel": "theta", "n": 1, "mean_sigma": 9.0, "same_sign": True,
+            "p_adjusted": 1e-9}
+    a = held()
+    text, unexplained = compose([a], [], [], quiet, fit, "", 3.1, None)
+    assert not unexplained and a["held_verdict"] == "inconsistent"
+    assert "held Cmq_A2 = 3.24 is inconsistent with these data" in text
+    a = held()
+    text, unexplained = compose([a], [], [cell], quiet, fit, "", 3.1, None)
+    assert unexplained and a["held_verdict"] == "misfit_standing"
+    assert "is inconsistent" not in text and "not shown inconsistent" in text
+    assert "station 7 theta" in text
+    a = held(aliases=["Mach dependence of Cm"])
+    text, _ = compose([a], [], [], quiet, fit, "", 3.1, None)
+    assert a["held_verdict"] == "indistinguishable"
+    assert "either held Cmq_A2 = 3.24" in text and "Mach dependence of Cm" in text

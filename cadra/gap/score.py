@@ -77,6 +77,14 @@ class GapDiagnosis:
     #: where the fit as given misses (:func:`cadra.gap.where.where_analysis`), when asked
     where_tables: dict | None = field(default=None, repr=False)
 
+    @property
+    def held_inconsistent(self) -> tuple[str, ...]:
+        """The held parameters the verdict names inconsistent with the data: freed, no
+        misfit left standing, no other candidate explaining as much
+        (:func:`cadra.gap.verdict.held_verdict`)."""
+        return tuple(a["params"][0] for a in self.added if a["kind"] == "held"
+                     and a.get("held_verdict") == "inconsistent")
+
     def __repr__(self) -> str:
         added = ", ".join(a["effect"] for a in self.added) or "no effect added"
         return (f"<GapDiagnosis: {added}; chi^2/dof {self.reduced_chi2_before:.4g} -> "

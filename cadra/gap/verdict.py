@@ -195,17 +195,47 @@ def size_text(a: dict) -> str:
 
 
 
+#: what the verdict says of a freed held parameter (:func:`held_verdict`)
+HELD_VERDICTS = ("inconsistent", "indistinguishable", "misfit_standing")
+
+
+def held_verdict(a: dict, unexplained: bool) -> str:
+    """What the verdict may say of an added held-parameter effect ``a``: ``"inconsistent"``
+    only when freeing it leaves no misfit standing and no other candidate explains as much;
+    ``"indistinguishable"`` when another candidate does (its aliases); ``"misfit_standing"``
+    when a misfit no library effect explains stays (a localized, periodic or global one):
+    the freed value may then only be absorbing part of that misfit, so the hold is not
+    blamed (docs/gap.md, "Held parameters")."""
+    if unexplained:
+        return "misfit_standing"
+    return "indistinguishable" if a.get("aliases") else "inconsistent"
+
+
+def _held_text(a: dict) -> str:
+    name = a["params"][0]
+    held = f"held {name} = {a.get('held_value', math.nan):.4g}"
+    prefer = size_text(a).split(" = ", 1)[1]
+    how = a.get("held_verdict", "inconsistent")
+    if how == "misfit_standing":
+        return (f"freeing {held} lowers chi^2 (the data would put it at {prefer}), but a misfit "
+                "that no library effect explains stays: the hold is not shown inconsistent, "
+                "the freed value may only absorb part of that misfit")
+    if how == "indistinguishable":
+        text = (f"either {held} is inconsistent with these data (they prefer {prefer}) or "
+                f"{' / '.join(a['aliases'])}: these data cannot tell them apart")
+    else:
+        text = f"{held} is inconsistent with these data (the data prefer {prefer})"
+    moved = [n for n, _ in a.get("moved", [])][:4]
+    if moved:
+        text += (f"; the sigmas of {' and '.join(moved)} are not valid while it is held "
+                 f"(freeing it moves them by "
+                 + ", ".join(f"{s:+.1f}" for _, s in a["moved"][:4]) + " sigma)")
+    return text
+
+
 def _effect_text(a: dict) -> str:
     if a["kind"] == "held":
-        name = a["params"][0]
-        text = (f"held {name} = {a.get('held_value', math.nan):.4g} is inconsistent with "
-                f"these data (the data prefer {size_text(a).split(' = ', 1)[1]})")
-        moved = [n for n, _ in a.get("moved", [])][:4]
-        if moved:
-            text += (f"; the sigmas of {' and '.join(moved)} are not valid while it is held "
-                     f"(freeing it moves them by "
-                     + ", ".join(f"{s:+.1f}" for _, s in a["moved"][:4]) + " sigma)")
-        return text
+        return _held_text(a)
     text = a["effect"]
     if a.get("aliases"):
         text += f" (or, indistinguishable on these data, {' / '.join(a['aliases'])})"
@@ -252,10 +282,10 @@ def _finding_text(r) -> str:
 def compose(added: Sequence[dict], dropped: Sequence[dict], set_aside: Sequence[dict],
             ev: pd.DataFrame, fit: FitResult, base_note: str, rchi0: float,
             ranking: pd.DataFrame | None) -> tuple[str, bool]:
-    """The verdict sentence and whether a gap is left unexplained: the effects added, the
+    """The verdict sentence and whether a gap is left unexplained: the effects added (each
+    held-parameter one marked with its ``held_verdict``, :func:`held_verdict`), the
     misfits set aside (unexplained, where), what else the final residual's tests find, the
     effects that left a misfit standing, and how the fit given was continued."""
-    parts = [_effect_text(a) for a in added]
     unexplained_parts = ["unexplained, at " + _cell_text(c, fit) for c in set_aside]
     sig = ev[ev["significant"]]
     glob = sig[sig["family"] == "global"]
@@ -276,6 +306,10 @@ def compose(added: Sequence[dict], dropped: Sequence[dict], set_aside: Sequence[
         unexplained_parts.append(("unexplained patterns in the residual: " if not len(glob)
                                   else "also ") + "; ".join(others))
     unexplained = bool(unexplained_parts)
+    for a in added:
+        if a["kind"] == "held":
+            a["held_verdict"] = held_verdict(a, unexplained)
+    parts = [_effect_text(a) for a in added]
     text = "; ".join(parts + unexplained_parts)
     if added and not unexplained:
         text += f" (chi^2/dof {rchi0:.2f} -> {fit.reduced_chi2:.2f})"
@@ -295,5 +329,5 @@ def compose(added: Sequence[dict], dropped: Sequence[dict], set_aside: Sequence[
     return text, unexplained
 
 
-__all__ = ["MAX_LOCALIZED", "SHARES", "compose", "covers", "evidence", "localized_cells",
-           "offset_extras", "offset_name", "size_text"]
+__all__ = ["HELD_VERDICTS", "MAX_LOCALIZED", "SHARES", "compose", "covers", "evidence",
+           "held_verdict", "localized_cells", "offset_extras", "offset_name", "size_text"]

@@ -200,8 +200,11 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0):
     out.update({"seconds": t_fit + time.perf_counter() - t0, "verdict": dg.verdict,
                 "after_status": dg.fit_after.status if dg.fit_after is not None else "-"})
     first = dg.added[0] if dg.added else None
-    named = {a["effect"] for a in dg.added} | {x for a in dg.added for x in a["aliases"]}
-    out["held_flag"] = any(a["kind"] == "held" for a in dg.added)
+    # a freed hold the verdict does not blame (a misfit stands beside it) names nothing
+    blamed = [a for a in dg.added
+              if a["kind"] != "held" or a.get("held_verdict") != "misfit_standing"]
+    named = {a["effect"] for a in blamed} | {x for a in blamed for x in a["aliases"]}
+    out["held_flag"] = any(a["kind"] == "held" for a in blamed)
     if case in EXTENDED_CASES:
         return score_extended(case, out, dg, res, expected, truth, where, named, groups, sub,
                               first_sim, sid)
