@@ -62,8 +62,11 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "bench_simulator": ("The 6-DOF simulator's speed", "dynamics.md"),
     "bench_aero": ("The aerodynamic model's evaluation speed", "aero_models.md"),
     "hostile": ("Hostile inputs: image headers, option values, outputs over inputs", "cli.md"),
-    "validate_consider": ("Held values with an uncertainty: pulls with the consider sigma",
-                          "fitting.md"),
+    "validate_consider": ("Held values with an uncertainty: pulls with the consider sigma and "
+                          "the Bayesian fit's, the hold-one study against the linear "
+                          "prediction", "fitting.md"),
+    "validate_held_check": ("A hold at the truth beside misfits outside the library",
+                            "gap.md"),
     "validate_campaign": ("Seed 004's campaign end to end from images", "campaign.md"),
     "bench_campaign": ("Campaigns at scale on Dask: speed-up, memory, resuming", "campaign.md"),
     "bench_two_cores": ("This machine's two cores: the ceiling of a two-worker speed-up",

@@ -33,6 +33,10 @@ def _counts(summary: str) -> dict[str, int]:
     return {word: int(n) for n, word in re.findall(r"(\d+) (\w+)", summary)}
 
 
+#: lines of a failed run's log (from pytest's FAILURES section) printed with the result
+FAILURE_LINES = 300
+
+
 def fresh_runs(root, runs: int = 3, python: str = sys.executable, keep: bool = False,
                log=print) -> dict:
     """Clone ``root``'s HEAD into a new temporary folder, make a venv with ``python`` there
@@ -67,6 +71,11 @@ def fresh_runs(root, runs: int = 3, python: str = sys.executable, keep: bool = F
                         "failed_tests": [m.group(1) for line in lines
                                          if (m := _FAILED.match(line))]})
             log(f"  {seconds:.0f} s, exit {proc.returncode}: {summary}")
+            if proc.returncode != 0:
+                # the failures' text, kept in this tool's output even when the folder goes
+                start = next((i for i, line in enumerate(lines) if "= FAILURES =" in line
+                              or "= ERRORS =" in line), max(len(lines) - 60, 0))
+                log("\n".join(lines[start:start + FAILURE_LINES]))
     finally:
         if not keep:
             shutil.rmtree(work, ignore_errors=True)
