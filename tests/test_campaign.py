@@ -320,13 +320,13 @@ def test_the_local_workers_keep_the_allocators_adaptive_threshold(monkeypatch):
     leaves it unset, and a value the user exports is still what the workers get."""
     import os
 
-    from cadra.campaign.run import _client
+    from cadra.campaign.run import local_client
 
     def trim():
         return os.environ.get("MALLOC_TRIM_THRESHOLD_")
 
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
-    client, cluster = _client(None, 1)
+    client, cluster = local_client(None, 1)
     try:
         assert list(client.run(trim).values()) == [None]
     finally:
@@ -334,7 +334,7 @@ def test_the_local_workers_keep_the_allocators_adaptive_threshold(monkeypatch):
         cluster.close()
     assert trim() is None      # nor did the nanny set it in this process
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "131072")
-    client, cluster = _client(None, 1)
+    client, cluster = local_client(None, 1)
     try:
         assert list(client.run(trim).values()) == ["131072"]
     finally:

@@ -122,7 +122,10 @@ def _store(out: Path, o: Outcome) -> str:
     return rel
 
 
-def _client(scheduler: str | None, workers: int | None):
+def local_client(scheduler: str | None, workers: int | None):
+    """A Dask client of the scheduler at ``scheduler``, or of a new local cluster of
+    ``workers`` one-thread processes (default: the cores): ``(client, cluster or None)``;
+    the caller closes both."""
     import logging
 
     from distributed import Client, LocalCluster
@@ -258,7 +261,7 @@ class _Scheduler:
 
     def _submit(self, t: Task) -> None:
         if self.client is None:
-            self.client, self.cluster = _client(self.scheduler, self.workers)
+            self.client, self.cluster = local_client(self.scheduler, self.workers)
             self.summary.workers = len(self.client.scheduler_info(n_workers=-1)["workers"])
             from distributed import as_completed
 
@@ -351,4 +354,5 @@ def write_report(out: Path, name: str) -> Path:
                                overwrite=True)
 
 
-__all__ = ["CampaignError", "RunSummary", "prepare_folder", "run_campaign", "write_report"]
+__all__ = ["CampaignError", "RunSummary", "local_client", "prepare_folder", "run_campaign",
+           "write_report"]

@@ -39,6 +39,19 @@ def _fit_arguments(p) -> None:
                         "sigmas that carry the noise the data show when stage one's sigmas "
                         "are off; the factors are reported (default: off, stage one's "
                         "sigmas as they are)")
+    p.add_argument("--bootstrap", type=cli.number(int, 2), default=None, metavar="N",
+                   help="after a converged fit, N parametric bootstrap refits on Dask (the "
+                        "fit's prediction plus fresh noise, refitted): each parameter's "
+                        "bootstrap sigma against its covariance sigma, a 95 %% percentile "
+                        "interval, the bias; bootstrap.csv and bootstrap_samples.csv "
+                        "(docs/fitting.md, \"Bootstrap\")")
+    p.add_argument("--bootstrap-noise", choices=("white", "residuals"), default="white",
+                   help="the replicates' noise: 'white', each measurement's own sigma; "
+                        "'residuals', the fit's standardized residuals resampled in blocks "
+                        "of stations (their real scale and correlation)")
+    p.add_argument("--workers", type=cli.number(int, 0), default=None,
+                   help="Dask worker processes of the bootstrap (default: the cores; 0: in "
+                        "this process)")
     p.add_argument("--reference", default=None, metavar="MODEL|FIT_DIR",
                    help="compare with a reference: a model (bundled name or file: values "
                         "only) or an earlier cadra2 fit's output folder (values, sigmas and "
@@ -79,11 +92,27 @@ def run(args) -> int:
             shots = list(result.problem.shots)   # the rescaled sigmas the fit used
     except cli.REFUSED as exc:
         return cli.refused("cadra2 fit", exc)
+    boot = None
+    if args.bootstrap and result.converged:
+        from cadra.campaign.bootstrap import bootstrap
+
+        boot = bootstrap(result, args.bootstrap, noise=args.bootstrap_noise,
+                         workers=args.workers, progress=not cli.quiet(args))
+        notes.append(f"bootstrap ({boot.noise} noise): {boot.n_converged} of "
+                     f"{boot.n_requested} refits converged; per parameter the bootstrap "
+                     "sigma, its ratio to the covariance sigma, the bias and the 95 % "
+                     "percentile interval are in bootstrap.csv (SI), the refits in "
+                     "bootstrap_samples.csv")
+    elif args.bootstrap:
+        notes.append("no bootstrap: the fit did not converge")
     config = {k: (v if v is not None else "") for k, v in vars(args).items() if k != "func"}
     extra = {"model_fitted.toml": toml_text(result.model.to_dict(), "CADRA aerodynamic model "
                                             "(docs/aero_models.md): the fitted values, written "
                                             "by cadra2 fit"),
              "config.toml": toml_text(config, "cadra2 fit: the command's settings")}
+    if boot is not None:
+        extra["bootstrap.csv"] = boot.table.to_csv(index=False)
+        extra["bootstrap_samples.csv"] = boot.samples.to_csv(index=False)
     try:
         write_fit_outputs(result, shots, out, overwrite=args.overwrite,
                           plots=not args.no_plots, start_model=start, extra_files=extra,
@@ -94,7 +123,10 @@ def run(args) -> int:
               "above, nothing was written", file=sys.stderr)
         return 1
     print_result(result, args)
-    cli.say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/)")
+    if boot is not None and not cli.quiet(args):
+        print(boot.report())
+    cli.say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/"
+            + (", bootstrap.csv" if boot is not None else "") + ")")
     return 0 if result.converged else 1
 
 

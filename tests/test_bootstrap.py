@@ -1,0 +1,91 @@
+"""The parametric bootstrap of a fit (cadra.studies.bootstrap, cadra.campaign.bootstrap).
+
+One M2 M0.70 shot flown with the bundled model, read with film-level noise and fitted: on
+these near-linear data the bootstrap sigma must agree with the covariance sigma (the
+independent, analytic answer of linear least squares) within the scatter of 30 refits; a
+replicate is reproducible from its seed; the refits on a two-worker Dask cluster are the
+same numbers as here; the percentile figures and the non-Gaussian flag behave on samples of
+known shape; the residual resampling draws the fit's own standardized residuals.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cadra.campaign.bootstrap import bootstrap
+from cadra.fitting.solver import fit
+from cadra.flight.data import FILM_SIGMAS
+from cadra.studies.bootstrap import MIN_TO_FLAG, _figures, replicate, replicate_data
+from cadra.validation.stage2_bench import SINGLE, make_problem
+
+N_REFITS = 30
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    rng = np.random.default_rng([2024, 1, 1])
+    sds, _, _, start_model, starts = make_problem(SINGLE, rng, FILM_SIGMAS)
+    res = fit(sds, start_model, starts)
+    assert res.converged
+    return res
+
+
+@pytest.fixture(scope="module")
+def boot(fitted):
+    return bootstrap(fitted, N_REFITS, workers=0, seed=3)
+
+
+def test_bootstrap_sigmas_agree_with_the_covariance_on_near_linear_data(fitted, boot):
+    t = boot.table.set_index("parameter")
+    assert boot.n_converged == N_REFITS
+    assert list(t.index) == list(fitted.aero_names)
+    # a sample std of 30 scatters by ~13 %: each ratio within ~4 of that, their mean within 3
+    assert t["ratio"].between(0.5, 1.6).all(), t["ratio"]
+    assert 0.85 <= t["ratio"].mean() <= 1.15, t["ratio"]
+    # the bias is a fraction of a sigma, the interval brackets the value
+    assert (t["bias_sigma"].abs() < 0.8).all()
+    assert ((t["lower"] < t["value"]) & (t["value"] < t["upper"])).all()
+    assert t["non_gaussian"].isna().all()          # 30 refits: too few to judge
+    assert "too few to judge" in boot.report()
+
+
+def test_a_replicate_is_its_seeds_and_dask_gives_the_same_numbers(fitted, boot):
+    a, b = replicate(fitted, 11), replicate(fitted, 11)
+    assert a == b and a["status"] == "converged"
+    assert replicate(fitted, 12)["CD_A1"] != a["CD_A1"]
+    on_dask = bootstrap(fitted, 4, workers=2, seed=3)
+    here = boot.samples.iloc[:4].reset_index(drop=True)
+    num = [c for c in here.columns if c != "status"]
+    np.testing.assert_array_equal(on_dask.samples[num].to_numpy(float),
+                                  here[num].to_numpy(float))
+
+
+def test_the_residual_resampling_draws_the_fits_standardized_residuals(fitted):
+    sd = fitted.problem.shots[0]
+    pred = fitted.problem.predict()[0]
+    shot = replicate_data(fitted, 5, "residuals")[0]
+    r = fitted.residuals[fitted.residuals["channel"] == "theta"].sort_values("station")
+    pool = r["normalized"].to_numpy() / np.sqrt(1.0 - r["leverage"].to_numpy())
+    rows = np.nonzero(sd.mask[:, 3])[0]
+    drawn = (shot.meas[rows, 3] - pred[rows, 3]) / sd.sigma[rows, 3]
+    assert np.all(np.min(np.abs(drawn[:, None] - pool[None, :]), axis=1) < 1e-9)
+    assert np.array_equal(np.isnan(shot.meas), np.isnan(sd.meas))
+    with pytest.raises(ValueError, match="noise"):
+        replicate_data(fitted, 5, "pink")
+
+
+def test_percentile_figures_and_the_non_gaussian_flag_on_known_samples():
+    rng = np.random.default_rng(0)
+    n = 4 * MIN_TO_FLAG
+    g = _figures("g", 1.0, 0.1, 1.0 + 0.1 * rng.standard_normal(n))
+    assert g["ratio"] == pytest.approx(1.0, abs=0.08)
+    assert g["lower"] == pytest.approx(1.0 - 0.196, abs=0.02)
+    assert g["upper"] == pytest.approx(1.0 + 0.196, abs=0.02)
+    assert g["non_gaussian"] is False
+    # a skewed spread of the same sigma: its interval is lopsided, and flagged
+    skew = rng.exponential(0.1, n)
+    s = _figures("s", 1.0, 0.1, 1.0 + skew - skew.mean())
+    assert s["non_gaussian"] is True
+    assert (s["upper"] - 1.0) < (1.0 - s["lower"])     # the basic interval reflects the tail
+    assert _figures("few", 1.0, 0.1, rng.standard_normal(10))["non_gaussian"] is None
