@@ -31,10 +31,11 @@ import numpy as np
 import pandas as pd
 
 from cadra.fitting.result import FitResult
-from cadra.flight.data import CHANNELS
 from cadra.fitting.solver import FitOptions, fit
+from cadra.flight.data import CHANNELS
 
-__all__ = ["BLOCK_STATIONS", "MIN_TO_FLAG", "NOISE_MODELS", "BootstrapResult", "replicate", "summarize"]
+__all__ = ["BLOCK_STATIONS", "MIN_TO_FLAG", "NOISE_MODELS", "BootstrapResult", "replicate",
+           "replicate_data", "summarize"]
 
 #: the noise models of a replicate (module doc)
 NOISE_MODELS = ("white", "residuals")
