@@ -50,6 +50,18 @@ def test_bootstrap_sigmas_agree_with_the_covariance_on_near_linear_data(fitted, 
     assert "too few to judge" in boot.report()
 
 
+def test_a_derived_quantity_is_bootstrapped_from_each_refits_model(fitted, boot):
+    from cadra.studies.bootstrap import summarize
+
+    again = summarize(fitted, boot.samples.to_dict("records"),
+                      derived={"twice Cm_A1": lambda m: 2.0 * m.parameter("Cm_A1").value})
+    d = again.derived.set_index("parameter").loc["twice Cm_A1"]
+    t = boot.table.set_index("parameter").loc["Cm_A1"]
+    assert d["value"] == pytest.approx(2.0 * t["value"], rel=1e-12)
+    assert d["sigma_boot"] == pytest.approx(2.0 * t["sigma_boot"], rel=1e-9)
+    assert d["lower"] == pytest.approx(2.0 * t["lower"], rel=1e-9)
+
+
 def test_a_replicate_is_its_seeds_and_dask_gives_the_same_numbers(fitted, boot):
     a, b = replicate(fitted, 11), replicate(fitted, 11)
     assert a == b and a["status"] == "converged"

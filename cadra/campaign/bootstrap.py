@@ -11,11 +11,8 @@ started for the call (the campaign's own, :func:`cadra.campaign.run.local_client
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Mapping
-
-import numpy as np
 
 from cadra.fitting.result import FitResult
 from cadra.studies.bootstrap import BootstrapResult, replicate, summarize
@@ -95,12 +92,3 @@ def _on_dask(result, seeds, noise, workers, scheduler, client, bar) -> list[dict
             client.close()
             own.close()
 
-
-def speedup_figures(one: BootstrapResult, two: BootstrapResult) -> dict:
-    """The wall times of the same bootstrap on one and two workers and their ratio."""
-    return {"seconds_1_worker": one.seconds, "seconds_2_workers": two.seconds,
-            "speedup_2_workers": (one.seconds / two.seconds
-                                  if two.seconds > 0 else math.nan),
-            "same_samples": bool(np.allclose(
-                one.samples.select_dtypes("number").to_numpy(float),
-                two.samples.select_dtypes("number").to_numpy(float), equal_nan=True))}
