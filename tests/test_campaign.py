@@ -44,6 +44,10 @@ SPHERE = ('model = {{ kind = "sphere", d_cm = 2.0 }}, aero_model = "sphere", aim
           'q_deg_s = 500.0 }}')
 
 
+#: the group's bootstrap refits (its tasks run on the campaign's own workers)
+BOOTSTRAP = 6
+
+
 def manifest_text(speeds=(450.0, 700.0, -5.0), seeds=(11, 12, 13)) -> str:
     shots = "".join(f'[[shots]]\nid = "S-{k + 1}"\nspec = {{ {SPHERE.format(seed=s, speed=v)} }}\n'
                     for k, (v, s) in enumerate(zip(speeds, seeds, strict=True)))
@@ -52,7 +56,7 @@ def manifest_text(speeds=(450.0, 700.0, -5.0), seeds=(11, 12, 13)) -> str:
     shots += f'[[shots]]\nid = "C-1"\nrole = "sphere"\nspec = {{ {bad} }}\n'
 
     return (f'name = "spheres"\n{shots}\n[[groups]]\nname = "all spheres"\nmodel = "sphere"\n'
-            f'shots = ["S-1", "S-2", "S-3"]\n')
+            f'shots = ["S-1", "S-2", "S-3"]\nbootstrap = {BOOTSTRAP}\n')
 
 
 def write_manifest(folder: Path, **kw) -> Path:
@@ -75,6 +79,10 @@ def write_manifest(folder: Path, **kw) -> Path:
     ('[[shots]]\nspec = "s.toml"\n[[groups]]\nname = "g"\nmodel = "sphere"\nshots = ["b"]\n',
      "groups[0].shots"),
     ('[[shots]]\nspec = "s.toml"\n[settings]\nformation = "film"\n', "settings.formation"),
+    ('[[shots]]\nspec = "s.toml"\nid = "S"\n[[groups]]\nname = "g"\nmodel = "sphere"\n'
+     'shots = ["S"]\nbootstrap = 1\n', "groups[0].bootstrap"),
+    ('[[shots]]\nspec = "s.toml"\nid = "S"\n[[groups]]\nname = "g"\nmodel = "sphere"\n'
+     'shots = ["S"]\nbootstrap = 10\nbootstrap_noise = "pink"\n', "groups[0].bootstrap_noise"),
     ('[[shots]]\nspec = "s.toml"\nrole = "sphere"\n[[groups]]\nname = "g"\nmodel = "sphere"\n'
      'shots = ["S"]\n', "groups"),
 ])
@@ -97,9 +105,10 @@ def test_a_changed_shot_changes_the_keys_of_exactly_what_depends_on_it(tmp_path)
     assert set(base) == set(changed) == {
         "stage1:S-1", "stage1:S-2", "stage1:S-3", "stage1:C-1", "calibrate:spheres",
         "single:S-1", "single:S-2", "single:S-3", "multifit:all spheres",
-        "diagnose:all spheres"}
+        "diagnose:all spheres", "bootstrap:all spheres"}
     assert {k for k in base if base[k] != changed[k]} == {
-        "stage1:S-2", "single:S-2", "multifit:all spheres", "diagnose:all spheres"}
+        "stage1:S-2", "single:S-2", "multifit:all spheres", "diagnose:all spheres",
+        "bootstrap:all spheres"}
     # the manifest's folder or file name is not content: a copy elsewhere has the same keys
     assert _keys(write_manifest(tmp_path / "c" / "d")) == base
 
@@ -165,7 +174,7 @@ def campaign(tmp_path_factory):
 
 def test_every_task_runs_and_the_failed_shot_is_isolated(campaign):
     _, out, summary = campaign
-    assert summary.tasks == 10 and summary.ran == 10 and summary.reused == 0
+    assert summary.tasks == 11 and summary.ran == 11 and summary.reused == 0
     assert sorted(summary.failed) == ["calibrate:spheres", "single:S-3", "stage1:C-1",
                                       "stage1:S-3"]
     t = read_tables(out)
@@ -185,6 +194,23 @@ def test_every_task_runs_and_the_failed_shot_is_isolated(campaign):
     tasks = t["tasks"].set_index("name")
     assert set(t["tasks"]["status"]) == {"done", "failed"}
     assert tasks.loc["all spheres"]["worker"].str.startswith("tcp://").all()
+
+
+def test_the_groups_bootstrap_ran_on_the_workers_and_agrees_with_its_covariance(campaign):
+    _, out, _ = campaign
+    t = read_tables(out)
+    boot = t["bootstrap"].set_index("parameter")
+    coef = t["coefficients"]
+    group = coef[(coef["scope"] == "group") & (coef["vary"] == 1)].set_index("parameter")
+    assert set(boot.index) == set(group.index)
+    assert (boot["n"] == BOOTSTRAP).all() and (boot["noise"] == "white").all()
+    np.testing.assert_array_equal(boot.loc[group.index, "sigma_cov"], group["sigma"])
+    # six refits: a std scatters by ~30 %; far outside that would be a wrong replicate
+    assert boot["ratio"].between(0.3, 2.0).all(), boot["ratio"]
+    assert boot["non_gaussian"].isna().all()           # too few refits to judge
+    folder = next((out / "groups" / "all_spheres").glob("bootstrap-*"))
+    assert {"report.md", "bootstrap.csv", "bootstrap_samples.csv", "bootstrap.png"} <= {
+        p.name for p in folder.iterdir()}
 
 
 def test_the_group_recovers_the_truth_it_was_flown_with(campaign):
@@ -208,7 +234,7 @@ def test_a_rerun_does_nothing_and_a_changed_shot_reruns_only_its_tasks(campaign,
     again = run_campaign(manifest, copy, workers=1, progress=False)
     # what failed is tried again; what went on without it stands while it fails again
     failed = ["calibrate:spheres", "single:S-3", "stage1:C-1", "stage1:S-3"]
-    assert sorted(again.ran_ids) == failed and again.reused == 6
+    assert sorted(again.ran_ids) == failed and again.reused == 7
     assert not again.report_written
     before = read_tables(copy)["coefficients"]
     changed = write_manifest(tmp_path / "m2", seeds=(11, 99, 13))
@@ -216,8 +242,9 @@ def test_a_rerun_does_nothing_and_a_changed_shot_reruns_only_its_tasks(campaign,
     assert status["stage1:S-2"] == "stale" and status["stage1:S-1"] == "done"
     assert status["stage1:S-3"] == "failed"
     rerun = run_campaign(changed, copy, workers=1, progress=False)
-    assert sorted(rerun.ran_ids) == sorted(["diagnose:all spheres", "multifit:all spheres",
-                                            "single:S-2", "stage1:S-2", *failed])
+    assert sorted(rerun.ran_ids) == sorted(["bootstrap:all spheres", "diagnose:all spheres",
+                                            "multifit:all spheres", "single:S-2", "stage1:S-2",
+                                            *failed])
     assert rerun.report_written
     after = read_tables(copy)["coefficients"]
     s1 = [d[(d["name"] == "S-1")].drop(columns="task_key").reset_index(drop=True)
@@ -232,12 +259,12 @@ def test_status_and_export_from_the_command_line(campaign, tmp_path, capsys):
     _, out, _ = campaign
     assert cadra(["campaign", "status", str(out)]) == 0
     text = capsys.readouterr().out
-    assert text.splitlines()[0] == "tasks: 6 done, 4 failed"
+    assert text.splitlines()[0] == "tasks: 7 done, 4 failed"
     assert "failed      stage1:S-3: SpecError" in text
     dest = tmp_path / "export"
     assert cadra(["campaign", "export", str(out), "-o", str(dest), "-q"]) == 0
     db = read_tables(out)
-    for name in ("shots", "coefficients", "fits", "curves", "gap_verdicts"):
+    for name in ("shots", "coefficients", "fits", "curves", "gap_verdicts", "bootstrap"):
         from_csv = pd.read_csv(dest / f"{name}.csv")
         from_parquet = pd.read_parquet(dest / f"{name}.parquet")
         assert len(from_csv) == len(from_parquet) == len(db[name]) > 0
@@ -298,9 +325,9 @@ def test_a_real_scheduler_and_workers_give_the_same_database(campaign, tmp_path)
             client.wait_for_workers(2, timeout=120)
         there = tmp_path / "out"
         summary = run_campaign(manifest, there, scheduler=address, progress=False)
-        assert summary.workers == 2 and summary.ran == 10
+        assert summary.workers == 2 and summary.ran == 11
         local, remote = read_tables(out), read_tables(there)
-        for name in ("shots", "coefficients", "fits", "curves", "gap_verdicts"):
+        for name in ("shots", "coefficients", "fits", "curves", "gap_verdicts", "bootstrap"):
             pd.testing.assert_frame_equal(local[name], remote[name], check_exact=True)
         used = set(remote["tasks"]["worker"].dropna())
         assert len(used) == 2        # both workers took tasks
@@ -320,7 +347,7 @@ def test_the_local_workers_keep_the_allocators_adaptive_threshold(monkeypatch):
     leaves it unset, and a value the user exports is still what the workers get."""
     import os
 
-    from cadra.campaign.run import local_client
+    from cadra.campaign.cluster import local_client
 
     def trim():
         return os.environ.get("MALLOC_TRIM_THRESHOLD_")

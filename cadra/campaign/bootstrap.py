@@ -5,7 +5,7 @@ The refits are :func:`cadra.studies.bootstrap.replicate` calls, shipped in batch
 per task keeps Dask's per-task cost small against a refit's ~0.3-3 s); each task runs on one
 core (:func:`cadra.cores.limit`), so the fit's own threads give way to the workers. The fit is
 scattered to the workers once. Without a scheduler a local cluster of one-thread processes is
-started for the call (the campaign's own, :func:`cadra.campaign.run.local_client`);
+started for the call (the campaign's own, :func:`cadra.campaign.cluster.local_client`);
 ``workers=0`` runs the refits here, one after another.
 """
 
@@ -70,7 +70,7 @@ def bootstrap(result: FitResult, n: int, *, noise: str = "white", seed: int = 0,
 def _on_dask(result, seeds, noise, workers, scheduler, client, bar) -> list[dict]:
     from distributed import as_completed
 
-    from cadra.campaign.run import local_client
+    from cadra.campaign.cluster import local_client
 
     own = None
     if client is None:

@@ -50,12 +50,16 @@ SCHEMA: dict[str, dict[str, str]] = {
     "gap_verdicts": {"group_name": "TEXT", "verdict": "TEXT", "best_effect": "TEXT",
                      "best_p": "REAL", "chi2nu_before": "REAL", "chi2nu_after": "REAL",
                      "summary": "TEXT"},
+    "bootstrap": {"group_name": "TEXT", "parameter": "TEXT", "value": "REAL",
+                  "sigma_cov": "REAL", "sigma_boot": "REAL", "ratio": "REAL", "bias_sigma": "REAL",
+                  "lower": "REAL", "upper": "REAL", "non_gaussian": "INTEGER", "n": "INTEGER",
+                  "noise": "TEXT"},
     "file_hashes": {"path": "TEXT PRIMARY KEY", "size": "INTEGER", "mtime_ns": "INTEGER",
                     "sha256": "TEXT"},
 }
 #: the tables that hold results (each row carries its task's key)
 RESULT_TABLES = ("shots", "coefficients", "fits", "curves", "hold_study", "station_biases",
-                 "gap_verdicts")
+                 "gap_verdicts", "bootstrap")
 #: what export writes and the report reads
 PUBLIC_TABLES = ("tasks", *RESULT_TABLES)
 #: each table's rows in a fixed order (a run finishes tasks in any order)
@@ -64,6 +68,7 @@ ORDER = {"campaign": "key", "tasks": "rowid", "shots": "shot_id",
          "curves": "group_name, coefficient, angle, angle_deg",
          "hold_study": "group_name, parameter, held_value",
          "station_biases": "facility, station", "gap_verdicts": "group_name",
+         "bootstrap": "group_name, parameter",
          "file_hashes": "path"}
 
 

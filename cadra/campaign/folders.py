@@ -48,6 +48,10 @@ def _draw(kind: str, name: str, value, out: Path) -> bool:
         from cadra.report.studies import write_hold_one
 
         write_hold_one(value, str(value["held"].iloc[0]) if len(value) else "held", out)
+    elif kind == "bootstrap":
+        from cadra.report.studies import write_bootstrap
+
+        write_bootstrap(value, name, out)
     elif kind == "diagnose":
         from cadra.report.gap import write_diagnosis
 

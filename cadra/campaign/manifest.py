@@ -25,6 +25,8 @@ A manifest is a TOML file::
     hold = ["Cmq_A2=3.65"]                         # optional, as cadra2 fit --hold takes them
     hold_study = { parameter = "Cmq_A2", values = [2.0, 3.0, 4.0] }   # optional (Fig. 15)
     diagnose = true                                # the gap diagnosis (default true)
+    bootstrap = 200                                # optional: parametric bootstrap refits
+    bootstrap_noise = "white"                      # or "residuals" (docs/fitting.md)
 
 Paths are relative to the manifest's folder. A shot's id is its ``id``, else its
 specification's ``shot_id``, else its shot file's. Every test shot (``role = "test"``, the
@@ -46,7 +48,8 @@ ROLES = ("test", "sphere")
 #: the manifest's top-level keys, a shot's and a group's
 _TOP = ("name", "settings", "shots", "groups", "facility")
 _SHOT = ("id", "spec", "shot", "role")
-_GROUP = ("name", "model", "shots", "hold", "free", "hold_study", "diagnose")
+_GROUP = ("name", "model", "shots", "hold", "free", "hold_study", "diagnose", "bootstrap",
+          "bootstrap_noise")
 _SETTINGS = ("max_iterations", "formation", "bias_significance", "single_model")
 
 
@@ -95,6 +98,8 @@ class Group:
     free: tuple[str, ...] = ()
     hold_study: HoldStudy | None = None
     diagnose: bool = True
+    bootstrap: int = 0                   # parametric bootstrap refits (0: none)
+    bootstrap_noise: str = "white"
 
 
 @dataclass(frozen=True)
@@ -210,8 +215,14 @@ def _group(raw, k: int, base: Path, ids: set[str]) -> Group:
     diagnose = raw.get("diagnose", True)
     if not isinstance(diagnose, bool):
         raise _F.fail(f"{where}.diagnose", "expected true or false")
+    boot = raw.get("bootstrap", 0)
+    if isinstance(boot, bool) or not isinstance(boot, int) or not (boot == 0 or boot >= 2):
+        raise _F.fail(f"{where}.bootstrap", "expected a number of refits, 2 or more (0: none)")
+    noise = raw.get("bootstrap_noise", "white")
+    if noise not in ("white", "residuals"):
+        raise _F.fail(f"{where}.bootstrap_noise", "expected \"white\" or \"residuals\"")
     return Group(name=name, model=model, shots=tuple(shots), hold_study=study,
-                 diagnose=diagnose, **lists)
+                 diagnose=diagnose, bootstrap=boot, bootstrap_noise=noise, **lists)
 
 
 def _settings(raw) -> Settings:

@@ -11,7 +11,8 @@ twice, and a changed input reruns exactly the tasks downstream of it (docs/campa
 Tasks (their ids ``kind:name``): ``stage1:<shot>`` for every shot; ``calibrate:spheres``
 from the sphere shots' stage one; ``single:<shot>`` for every test shot (after the
 calibration, when there is one); per group ``multifit:<group>``, and from it
-``holdone:<group>`` (when the group asks for a hold study) and ``diagnose:<group>``.
+``holdone:<group>`` (when the group asks for a hold study), ``diagnose:<group>`` and
+``bootstrap:<group>`` (when the group asks for one).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from cadra.campaign.manifest import Manifest, ShotEntry
 #: per kind, bumped when that kind's code changes what it returns for the same inputs (a
 #: change to one kind reruns it and what takes its results, not the campaign's stage one)
 TASK_VERSIONS = {"stage1": "2", "calibrate": "2", "single": "2", "multifit": "3",
-                 "holdone": "3", "diagnose": "2"}
+                 "holdone": "3", "diagnose": "2", "bootstrap": "1"}
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,9 @@ def plan(manifest: Manifest, hasher: Callable[[Path], str] = file_sha256) -> lis
                  **fit_settings})
         if g.diagnose:
             add("diagnose", g.name, {"group": g}, [fit.id], {})
+        if g.bootstrap:
+            add("bootstrap", g.name, {"n": g.bootstrap, "noise": g.bootstrap_noise},
+                [fit.id], {"n": g.bootstrap, "noise": g.bootstrap_noise})
     return list(tasks.values())
 
 

@@ -44,7 +44,8 @@ def _rel(path: Path | None, out: Path) -> str:
 def record(db: CampaignDB, manifest: Manifest, out: Path, o: Outcome) -> None:
     """Write ``o``'s folder (when it has one) and its database rows."""
     {"stage1": _stage1, "calibrate": _calibrate, "single": _single, "multifit": _multifit,
-     "holdone": _holdone, "diagnose": _diagnose}[o.kind](db, manifest, out, o)
+     "holdone": _holdone, "diagnose": _diagnose, "bootstrap": _bootstrap}[o.kind](
+        db, manifest, out, o)
 
 
 def _stage1(db, manifest, out, o):
@@ -189,6 +190,21 @@ def _diagnose(db, manifest, out, o):
         "best_p": None if best is None else best.get("p_value"),
         "chi2nu_before": dg.reduced_chi2_before, "chi2nu_after": dg.reduced_chi2_after,
         "summary": dg.verdict}], o.key)
+
+
+def _bootstrap(db, manifest, out, o):
+    where = {"group_name": o.name}
+    if not o.ok:
+        db.replace("bootstrap", where, [], o.key)
+        return
+    boot = o.value
+    ensure(task_folder(out, "bootstrap", o.name, o.key), o.kind, o.name, boot, o.folder)
+    rows = [{"group_name": o.name, "noise": boot.noise,
+             **{k: r[k] for k in ("parameter", "value", "sigma_cov", "sigma_boot", "ratio",
+                                  "bias_sigma", "lower", "upper", "n")},
+             "non_gaussian": None if r["non_gaussian"] is None else int(r["non_gaussian"])}
+            for r in boot.table.to_dict("records")]
+    db.replace("bootstrap", where, rows, o.key)
 
 
 __all__ = ["KEY_CHARS", "record", "slug", "task_folder"]

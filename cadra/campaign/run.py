@@ -25,6 +25,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from cadra.atomic import OUTPUT_MARKER, atomic_write_bytes, output_kind
+from cadra.campaign.cluster import local_client
 from cadra.campaign.database import CampaignDB, read_tables
 from cadra.campaign.folders import run_drawn
 from cadra.campaign.manifest import Manifest, load_manifest
@@ -37,8 +38,6 @@ KIND = "campaign"
 #: the report page, a view of the database rewritten by every run that changed something
 REPORT = "report.html"
 LOCK = ".campaign.lock"
-#: Dask's configuration of the environment its nanny gives a worker process at its start
-PRE_SPAWN = "distributed.nanny.pre-spawn-environ"
 
 
 class CampaignError(RuntimeError):
@@ -120,33 +119,6 @@ def _store(out: Path, o: Outcome) -> str:
         atomic_write_bytes(out / rel, pickle.dumps(replace(o, folder=None),
                                                    protocol=pickle.HIGHEST_PROTOCOL))
     return rel
-
-
-def local_client(scheduler: str | None, workers: int | None):
-    """A Dask client of the scheduler at ``scheduler``, or of a new local cluster of
-    ``workers`` one-thread processes (default: the cores): ``(client, cluster or None)``;
-    the caller closes both."""
-    import logging
-
-    from distributed import Client, LocalCluster
-
-    if scheduler:
-        return Client(scheduler, timeout="30s"), None
-    import dask
-
-    from cadra import cores
-
-    n = workers or cores.available()
-    # Dask's nanny starts each worker with MALLOC_TRIM_THRESHOLD_=65536. Setting that
-    # threshold turns off glibc's adaptive mmap threshold, so every large array (an image, a
-    # blurred copy) is mapped and unmapped afresh, its pages zeroed each time: stage one ran
-    # 27 % slower on a worker than in a plain process (8.0 s against 6.3 s a shot,
-    # docs/campaign.md, "On Dask"). The local cluster's workers keep glibc's default; a
-    # threshold set in the environment is still inherited.
-    with dask.config.set({f"{PRE_SPAWN}.MALLOC_TRIM_THRESHOLD_": None}):
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", silence_logs=logging.ERROR)
-    return Client(cluster), cluster
 
 
 def _peak_rss_mb() -> float:
@@ -354,5 +326,4 @@ def write_report(out: Path, name: str) -> Path:
                                overwrite=True)
 
 
-__all__ = ["CampaignError", "RunSummary", "local_client", "prepare_folder", "run_campaign",
-           "write_report"]
+__all__ = ["CampaignError", "RunSummary", "prepare_folder", "run_campaign", "write_report"]

@@ -247,6 +247,27 @@ def diagnose(payload: dict, fitted: Outcome):
     return cadra.diagnose(result)
 
 
+def bootstrap(payload: dict, fitted: Outcome):
+    """The group's parametric bootstrap (:mod:`cadra.campaign.bootstrap`) from its converged
+    multi-fit: its refits as further tasks on the campaign's own cluster (this task waits
+    for them off its worker's slot), or here when it runs outside a worker."""
+    from cadra.campaign.bootstrap import bootstrap as run_bootstrap
+
+    if not fitted.ok:
+        raise UpstreamFailed(f"the group's multi-fit failed: {fitted.error}")
+    result = fitted.value["result"]
+    if not result:
+        raise UpstreamFailed(f"the group's multi-fit did not converge ({result.status}): the "
+                             "bootstrap resamples a converged fit")
+    try:
+        from distributed import worker_client
+
+        with worker_client() as client:
+            return run_bootstrap(result, payload["n"], noise=payload["noise"], client=client)
+    except ValueError:       # not on a Dask worker
+        return run_bootstrap(result, payload["n"], noise=payload["noise"], workers=0)
+
+
 _KINDS = {
     "stage1": lambda p, *up: stage_one(p["entry"], p["formation"]),
     "calibrate": lambda p, *up: calibrate(list(up)),
@@ -254,6 +275,7 @@ _KINDS = {
     "multifit": lambda p, *up: multifit(p, *up),
     "holdone": lambda p, *up: holdone(p, up[0]),
     "diagnose": lambda p, *up: diagnose(p, up[0]),
+    "bootstrap": lambda p, *up: bootstrap(p, up[0]),
 }
 #: the kinds, in the order a campaign runs them
 KINDS = tuple(_KINDS)

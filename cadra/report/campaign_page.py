@@ -86,6 +86,8 @@ COLUMNS: dict[str, tuple[str, ...]] = {
     "fits": ("scope", "name", "model", "status", "converged", "chi2nu", "dof", "n_shots",
              "shots", "note", "report"),
     "curves": ("group_name", "coefficient", "angle", "angle_deg", "mach", "value", "sigma"),
+    "bootstrap": ("group_name", "parameter", "value", "sigma_cov", "sigma_boot", "ratio",
+                  "bias_sigma", "lower", "upper", "non_gaussian", "n", "noise"),
     "hold_study": ("group_name", "parameter", "held_value", "status", "converged",
                    "reduced_chi2", "theta_rms_deg", "psi_rms_deg"),
     "station_biases": ("facility", "station", "x_m", "sigma_x_m", "y_m", "sigma_y_m", "z_m",
@@ -521,6 +523,19 @@ def _fits_section(t, groups) -> str:
                     ((r.parameter, _pm(r.value, r.sigma) if _flag(r.vary) == "yes"
                       else f"{_text(r.value)} (held)", _flag(r.vary, "free", "held"))
                      for r in c.itertuples(index=False)), numeric=(1,)))
+        b = t["bootstrap"]
+        b = None if b is None else b[b["group_name"].astype(str) == g]
+        if b is not None and len(b):
+            out.append(f"<p>Bootstrap: {int(b['n'].max())} refits ({_esc(b['noise'].iloc[0])} "
+                       "noise); σ boot / σ: the bootstrap sigma over the covariance sigma, "
+                       "the interval the 95 % basic percentile one.</p>")
+            out.append(_html_table(
+                ("parameter", "value ± σ", "σ boot", "σ boot / σ", "bias / σ", "95 % interval",
+                 "non-Gaussian"),
+                ((r.parameter, _pm(r.value, r.sigma_cov), _text(r.sigma_boot, 3),
+                  _text(r.ratio, 3), _text(r.bias_sigma, 2),
+                  f"[{_text(r.lower)}, {_text(r.upper)}]", _flag(r.non_gaussian))
+                 for r in b.itertuples(index=False)), numeric=(1, 2, 3, 4)))
     out.append("<h3>Single fits</h3>")
     sfits = None if fits is None else fits[fits["scope"] == "single"]
     if sfits is None or not len(sfits):
@@ -620,8 +635,8 @@ def campaign_page_html(tables: Mapping[str, pd.DataFrame], *, title: str) -> str
     ----------
     tables : the campaign database's tables by name (``"shots"``, ``"coefficients"``,
         ``"fits"``, ``"curves"``, ``"hold_study"``, ``"station_biases"``, ``"gap_verdicts"``,
-        ``"tasks"``; docs/campaign.md's columns). Any may be missing or empty: its section
-        then says "none". Other keys are ignored.
+        ``"bootstrap"``, ``"tasks"``; docs/campaign.md's columns). Any may be missing or
+        empty: its section then says "none". Other keys are ignored.
     title : the campaign's name (the page's title and heading).
 
     Returns

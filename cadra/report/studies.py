@@ -16,6 +16,7 @@ from cadra.aero import AeroModel
 from cadra.atomic import atomic_output_dir
 from cadra.numfmt import pm
 from cadra.report import figures, markdown
+from cadra.studies.bootstrap import MIN_TO_FLAG
 from cadra.studies.single import check_single_fits, quasi_linear_summary
 
 
@@ -194,5 +195,63 @@ def single_fits_lines(table: pd.DataFrame, model: AeroModel, verbose: bool = Fal
     return lines
 
 
-__all__ = ["plot_hold_one", "plot_quasi_linear", "single_fits_lines", "write_hold_one",
-           "write_single_fits"]
+
+
+
+def bootstrap_markdown(boot, title: str) -> str:
+    """A bootstrap's report (:class:`cadra.studies.bootstrap.BootstrapResult`): per parameter
+    value ± covariance sigma, the bootstrap sigma and the ratio, the bias in sigmas, the 95 %
+    percentile interval and the flag (SI)."""
+    judged = boot.n_converged >= MIN_TO_FLAG
+    lines = [f"# Bootstrap: {title}", "",
+             f"{boot.n_converged} of {boot.n_requested} refits converged ({boot.noise} noise: "
+             + ("each measurement's own sigma" if boot.noise == "white" else
+                "the fit's standardized residuals resampled in blocks of stations")
+             + "). Values SI; the interval is the 95 % basic percentile interval"
+             + ("." if judged else f"; fewer than {MIN_TO_FLAG} refits: whether an interval is "
+                "Gaussian is not judged."), ""]
+    lines += markdown.table(
+        ("parameter", "value ± σ (covariance)", "σ bootstrap", "ratio", "bias / σ",
+         "95 % interval", "non-Gaussian"),
+        ((r.parameter, pm(r.value, r.sigma_cov), f"{r.sigma_boot:.3g}", f"{r.ratio:.3f}",
+          f"{r.bias_sigma:+.2f}", f"[{r.lower:.6g}, {r.upper:.6g}]",
+          {True: "**yes**", False: "no"}.get(r.non_gaussian, "—"))
+         for r in boot.table.itertuples(index=False)))
+    return "\n".join(lines) + "\n"
+
+
+def plot_bootstrap(boot, title: str):
+    """Bootstrap sigma over covariance sigma per parameter, with the band a sample std of
+    that many refits scatters in (±2 standard errors about 1)."""
+    t = boot.table
+    fig, ax = figures.subplots(figsize=(7.0, 0.35 * len(t) + 1.5))
+    y = np.arange(len(t))
+    ax.plot(t["ratio"], y, "o", color="C0")
+    n = max(boot.n_converged, 2)
+    se = 1.0 / np.sqrt(2.0 * (n - 1))
+    ax.axvspan(1 - 2 * se, 1 + 2 * se, color="0.85", zorder=0,
+               label=f"±2 standard errors of a std of {n}")
+    ax.axvline(1.0, color="0.4", lw=0.8)
+    ax.set_yticks(y, t["parameter"])
+    ax.invert_yaxis()
+    ax.set_xlabel("σ bootstrap / σ covariance")
+    ax.set_title(f"Bootstrap: {title}")
+    ax.legend(loc="lower right", fontsize="small")
+    return fig
+
+
+def write_bootstrap(boot, title: str, out_dir: str | os.PathLike, *,
+                    overwrite: bool = False) -> Path:
+    """``report.md``, ``bootstrap.csv`` (per parameter), ``bootstrap_samples.csv`` (per
+    refit) and ``bootstrap.png`` (:func:`plot_bootstrap`) in ``out_dir``, atomically."""
+    out_dir = Path(out_dir)
+    with atomic_output_dir(out_dir, overwrite=overwrite, kind="bootstrap") as tmp:
+        (tmp / "report.md").write_text(bootstrap_markdown(boot, title), encoding="utf-8")
+        boot.table.to_csv(tmp / "bootstrap.csv", index=False)
+        boot.samples.to_csv(tmp / "bootstrap_samples.csv", index=False)
+        figures.save(plot_bootstrap(boot, title), tmp / "bootstrap.png")
+    return out_dir
+
+
+__all__ = ["bootstrap_markdown", "plot_bootstrap", "plot_hold_one", "plot_quasi_linear",
+           "single_fits_lines", "write_bootstrap", "write_hold_one", "write_single_fits"]
