@@ -24,7 +24,8 @@ def test_every_figure_names_a_known_section():
 
 def test_a_recorded_figure_reaches_both_pages(tmp_path):
     (tmp_path / "docs").mkdir()
-    (tmp_path / "README.md").write_text(f"# x\n\n{figures.README_BEGIN}\nold\n"
+    # the old block's text: a marker no figure's label contains ("old" is in "hold")
+    (tmp_path / "README.md").write_text(f"# x\n\n{figures.README_BEGIN}\nOLD-BLOCK-TEXT\n"
                                         f"{figures.README_END}\n\nmore\n", encoding="utf-8")
     path = record("bench_cadra1", {"capsule_ref_rms_px": 0.00193769, "sigma_ratio_min": 0.9415,
                                    "sigma_ratio_max": [0.97, 0.99]}, tmp_path,
@@ -40,7 +41,8 @@ def test_a_recorded_figure_reaches_both_pages(tmp_path):
     assert "| reported sigma / actual error, highest | 0.97 / 0.99 | 0.8–1.25 |" in page
     assert "python tools/bench_cadra1.py --quick" in page
     readme = (tmp_path / "README.md").read_text()
-    assert readme.startswith("# x\n") and readme.endswith("\n\nmore\n") and "old" not in readme
+    assert readme.startswith("# x\n") and readme.endswith("\n\nmore\n")
+    assert "OLD-BLOCK-TEXT" not in readme
     assert "| capsule reference point error rms (px) | 0.001938 |" in readme
     assert "not run" in readme                        # a headline no run has made yet
 
