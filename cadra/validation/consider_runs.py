@@ -14,7 +14,9 @@ the range as a uniform spread (width / sqrt 12); the same fits' consider sigmas 
 read as +-1 sigma (0.75, :data:`HALF_RANGE_SIGMA`) are reported too.
 
 The Bayesian alternative (:mod:`cadra.fitting.priors`) fits the same data with the peak free
-under a Gaussian prior 3.65 ± 0.43; its pulls are counted the same way. In the first
+under a Gaussian prior 3.65 ± 0.43 (with :data:`BAYES_ITERATIONS` iterations: the peak free
+lies on a curved ridge, and how many converge within the default 60 is counted too); its
+pulls are counted the same way. In the first
 ``holdone_sets`` sets, seed 004's hold-one study (:func:`cadra.studies.holdone.hold_one_study`,
 the peak held at :data:`HOLD_VALUES`) checks the linear consider prediction of each free
 parameter's shift (:func:`cadra.fitting.consider.linear_hold_prediction`) wherever the refit's
@@ -40,6 +42,8 @@ HALF_RANGE_SIGMA = (PEAK_RANGE[1] - PEAK_RANGE[0]) / 2.0
 SHOTS_PER_SET = 3
 #: the hold-one study's held values across the range (the bundled hold, 3.65, among them)
 HOLD_VALUES = (2.9, 3.275, 3.65, 4.025, 4.4)
+#: the Bayesian fit's iteration budget (the default is 60: :class:`FitOptions`)
+BAYES_ITERATIONS = 200
 
 
 def trial(k: int, seed: int = 0, holdone: bool = False) -> dict:
@@ -52,7 +56,7 @@ def trial(k: int, seed: int = 0, holdone: bool = False) -> dict:
     from cadra import cores
     from cadra.aero import load_bundled_model
     from cadra.fitting.priors import holds_as_priors
-    from cadra.fitting.solver import fit
+    from cadra.fitting.solver import FitOptions, fit
     from cadra.synthetic.simulate import simulate_shot
     from cadra.validation.gap_measure import measure
 
@@ -74,12 +78,15 @@ def trial(k: int, seed: int = 0, holdone: bool = False) -> dict:
         res = fit(data, model, states)
         seconds = time.perf_counter() - t0
         ca = res.consider if res else None
-        bayes = fit(data, holds_as_priors(model), states)
+        # the peak free lies on a curved ridge: Gauss-Newton steps there realize ~10 % of
+        # what they promise, and some fits need more than the default 60 iterations
+        bayes = fit(data, holds_as_priors(model), states,
+                    options=FitOptions(max_iterations=BAYES_ITERATIONS))
         shifts = _hold_one_shifts(data, res) if holdone and res else []
     out = {"trial": k, "peak": peak, "shots": names, "status": res.status,
            "reduced_chi2": res.reduced_chi2, "seconds": seconds,
            "params": {}, "bayes_status": bayes.status, "bayes_params": {},
-           "holdone_shifts": shifts}
+           "holdone_shifts": shifts, "bayes_iterations": bayes.iterations}
     if bayes:
         for n, v, s in zip(bayes.aero_names, bayes.aero_values, bayes.aero_sigma, strict=True):
             out["bayes_params"][n] = {"value": float(v), "truth": truth.parameter(n).value,
@@ -193,6 +200,11 @@ def run(trials: int, seed: int = 0, workers: int = 2, progress: bool = True,
             "consider_half_range": (_pull_figures(ok, "sigma_consider_half_range") if ok
                                     else {}),
             "bayes_converged": len(bayes),
+            "bayes_iterations_budget": BAYES_ITERATIONS,
+            "bayes_converged_within_60": sum(r["bayes_iterations"] <= 60 for r in bayes),
+            "bayes_iterations_median": (float(np.median([r["bayes_iterations"]
+                                                         for r in bayes])) if bayes
+                                        else math.nan),
             "bayes": _pull_figures(bayes, "sigma", "bayes_params") if bayes else {},
             "linear_vs_holdone": _linear_figures(rows),
             "fit_seconds_median": float(np.median([r["seconds"] for r in rows])),
