@@ -101,3 +101,18 @@ def test_percentile_figures_and_the_non_gaussian_flag_on_known_samples():
     assert s["non_gaussian"] is True
     assert (s["upper"] - 1.0) < (1.0 - s["lower"])     # the basic interval reflects the tail
     assert _figures("few", 1.0, 0.1, rng.standard_normal(10))["non_gaussian"] is None
+
+
+def test_a_campaigns_bootstrap_task_outside_a_worker_runs_its_refits_here(fitted):
+    from cadra.campaign.tasks import Outcome, UpstreamFailed
+    from cadra.campaign.tasks import bootstrap as bootstrap_task
+
+    done = Outcome(kind="multifit", name="g", key="k", ok=True, value={"result": fitted})
+    b = bootstrap_task({"n": 3, "noise": "white"}, done)
+    num = [c for c in b.samples.columns if c != "status"]
+    here = bootstrap(fitted, 3, workers=0)
+    np.testing.assert_array_equal(b.samples[num].to_numpy(float),
+                                  here.samples[num].to_numpy(float))
+    with pytest.raises(UpstreamFailed, match="failed"):
+        bootstrap_task({"n": 3, "noise": "white"},
+                       Outcome(kind="multifit", name="g", key="k", ok=False, error="boom"))

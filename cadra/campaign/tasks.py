@@ -259,13 +259,14 @@ def bootstrap(payload: dict, fitted: Outcome):
     if not result:
         raise UpstreamFailed(f"the group's multi-fit did not converge ({result.status}): the "
                              "bootstrap resamples a converged fit")
-    try:
-        from distributed import worker_client
+    from distributed import get_worker, worker_client
 
-        with worker_client() as client:
-            return run_bootstrap(result, payload["n"], noise=payload["noise"], client=client)
-    except ValueError:       # not on a Dask worker
+    try:
+        get_worker()
+    except ValueError:       # not on a Dask worker: the refits run here
         return run_bootstrap(result, payload["n"], noise=payload["noise"], workers=0)
+    with worker_client() as client:
+        return run_bootstrap(result, payload["n"], noise=payload["noise"], client=client)
 
 
 _KINDS = {
