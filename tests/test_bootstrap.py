@@ -116,3 +116,29 @@ def test_a_campaigns_bootstrap_task_outside_a_worker_runs_its_refits_here(fitted
     with pytest.raises(UpstreamFailed, match="failed"):
         bootstrap_task({"n": 3, "noise": "white"},
                        Outcome(kind="multifit", name="g", key="k", ok=False, error="boom"))
+
+
+def test_the_cmq_peak_is_the_forms_largest_value_over_the_flown_angles(fitted, boot):
+    """The derived C_mq peak (height and angle) against the numpy reference evaluator of the
+    model's form (cadra.aero.evaluate, independent of the compiled program), on the angles
+    and Mach of the fit's own histories; and bootstrapped from every refit."""
+    import pandas as pd
+
+    from cadra.aero.evaluate import evaluate_tree
+    from cadra.fitting.histories import fitted_histories
+    from cadra.studies.bootstrap import peak_quantities, summarize
+
+    q = peak_quantities(fitted)
+    assert set(q) == {"Cmq peak", "Cmq peak alpha (deg)"}
+    h = pd.concat(list(fitted_histories(fitted).values()))
+    alpha = np.radians(np.linspace(h["alpha_deg"].min(), h["alpha_deg"].max(), 201))
+    m = fitted.model
+    ref = evaluate_tree(m.tree("Cmq"), {"alpha": alpha, "mach": h["mach"].mean()},
+                        {p.name: p.value for p in m.parameters})
+    ref = np.broadcast_to(ref, alpha.shape)
+    assert q["Cmq peak"](m) == pytest.approx(float(ref.max()), rel=1e-12)
+    assert q["Cmq peak alpha (deg)"](m) == pytest.approx(np.degrees(alpha[ref.argmax()]))
+    again = summarize(fitted, boot.samples.to_dict("records"), derived=q)
+    d = again.derived.set_index("parameter")
+    assert d.loc["Cmq peak", "n"] == N_REFITS and d.loc["Cmq peak", "sigma_boot"] > 0
+    assert "(derived)" in again.report()

@@ -261,12 +261,17 @@ def bootstrap(payload: dict, fitted: Outcome):
                              "bootstrap resamples a converged fit")
     from distributed import get_worker, worker_client
 
+    from cadra.studies.bootstrap import peak_quantities
+
+    derived = peak_quantities(result)     # e.g. the C_mq peak, its height and angle
     try:
         get_worker()
     except ValueError:       # not on a Dask worker: the refits run here
-        return run_bootstrap(result, payload["n"], noise=payload["noise"], workers=0)
+        return run_bootstrap(result, payload["n"], noise=payload["noise"], workers=0,
+                             derived=derived)
     with worker_client() as client:
-        return run_bootstrap(result, payload["n"], noise=payload["noise"], client=client)
+        return run_bootstrap(result, payload["n"], noise=payload["noise"], client=client,
+                             derived=derived)
 
 
 _KINDS = {

@@ -95,9 +95,11 @@ def run(args) -> int:
     boot = None
     if args.bootstrap and result.converged:
         from cadra.campaign.bootstrap import bootstrap
+        from cadra.studies.bootstrap import peak_quantities
 
         boot = bootstrap(result, args.bootstrap, noise=args.bootstrap_noise,
-                         workers=args.workers, progress=not cli.quiet(args))
+                         workers=args.workers, progress=not cli.quiet(args),
+                         derived=peak_quantities(result))
         notes.append(f"bootstrap ({boot.noise} noise): {boot.n_converged} of "
                      f"{boot.n_requested} refits converged; per parameter the bootstrap "
                      "sigma, its ratio to the covariance sigma, the bias and the 95 % "
@@ -113,6 +115,8 @@ def run(args) -> int:
     if boot is not None:
         extra["bootstrap.csv"] = boot.table.to_csv(index=False)
         extra["bootstrap_samples.csv"] = boot.samples.to_csv(index=False)
+        if len(boot.derived):
+            extra["bootstrap_derived.csv"] = boot.derived.to_csv(index=False)
     try:
         write_fit_outputs(result, shots, out, overwrite=args.overwrite,
                           plots=not args.no_plots, start_model=start, extra_files=extra,

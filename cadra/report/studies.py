@@ -217,6 +217,13 @@ def bootstrap_markdown(boot, title: str) -> str:
           f"{r.bias_sigma:+.2f}", f"[{r.lower:.6g}, {r.upper:.6g}]",
           {True: "**yes**", False: "no"}.get(r.non_gaussian, "—"))
          for r in boot.table.itertuples(index=False)))
+    if len(boot.derived):
+        lines += ["", "Derived quantities, from each refit's model (σ bootstrap is their only "
+                  "sigma; bias in that sigma):", ""]
+        lines += markdown.table(
+            ("quantity", "value", "σ bootstrap", "bias / σ", "95 % interval"),
+            ((r.parameter, f"{r.value:.6g}", f"{r.sigma_boot:.3g}", f"{r.bias_sigma:+.2f}",
+              f"[{r.lower:.6g}, {r.upper:.6g}]") for r in boot.derived.itertuples(index=False)))
     return "\n".join(lines) + "\n"
 
 
@@ -249,6 +256,8 @@ def write_bootstrap(boot, title: str, out_dir: str | os.PathLike, *,
         (tmp / "report.md").write_text(bootstrap_markdown(boot, title), encoding="utf-8")
         boot.table.to_csv(tmp / "bootstrap.csv", index=False)
         boot.samples.to_csv(tmp / "bootstrap_samples.csv", index=False)
+        if len(boot.derived):
+            boot.derived.to_csv(tmp / "bootstrap_derived.csv", index=False)
         figures.save(plot_bootstrap(boot, title), tmp / "bootstrap.png")
     return out_dir
 

@@ -35,7 +35,7 @@ from cadra.fitting.solver import FitOptions, fit
 from cadra.flight.data import CHANNELS
 
 __all__ = ["BLOCK_STATIONS", "MIN_TO_FLAG", "NOISE_MODELS", "BootstrapResult", "replicate",
-           "replicate_data", "summarize"]
+           "peak_quantities", "replicate_data", "summarize"]
 
 #: the noise models of a replicate (module doc)
 NOISE_MODELS = ("white", "residuals")
@@ -155,6 +155,10 @@ class BootstrapResult:
             lines.append(f"{r.parameter:12s} {pm(r.value, r.sigma_cov):>24s} "
                          f"{r.sigma_boot:>11.3g} {r.ratio:>6.3f} {r.bias_sigma:>10.3f}  "
                          f"[{r.lower:.6g}, {r.upper:.6g}]{flag}")
+        for r in self.derived.itertuples(index=False):
+            lines.append(f"{r.parameter:12s} {r.value:>24.6g} {r.sigma_boot:>11.3g} "
+                         f"{'':>6s} {r.bias_sigma:>10.3f}  [{r.lower:.6g}, {r.upper:.6g}]"
+                         "  (derived)")
         return "\n".join(lines)
 
 
@@ -224,6 +228,36 @@ def _derived(result: FitResult, ok: pd.DataFrame, derived: Mapping[str, Callable
         f.pop("ratio")
         rows.append(f)
     return pd.DataFrame(rows)
+
+
+def peak_quantities(result: FitResult, coefficient: str = "Cmq", n_points: int = 201
+                    ) -> dict[str, Callable]:
+    """Derived quantities a range engineer reads off a fitted form: the largest value of
+    ``coefficient`` over the angles the flights covered (the total angle for a total-angle
+    model, alpha otherwise), at their mean Mach, and the angle (deg) where it lies; e.g. seed
+    004's C_mq peak. The angles and Mach are the fit's own histories
+    (:func:`cadra.fitting.histories.fitted_histories`). Empty when the model has no such
+    coefficient or its form does not vary over those angles."""
+    from cadra.fitting.histories import fitted_histories
+
+    model = result.model
+    if coefficient not in model.coefficients or result.problem is None:
+        return {}
+    h = pd.concat(list(fitted_histories(result).values()), ignore_index=True)
+    angle = "sigma" if model.angle_plane == "sigma" else "alpha"
+    grid = np.radians(np.linspace(h[f"{angle}_deg"].min(), h[f"{angle}_deg"].max(), n_points))
+    zeros = np.zeros_like(grid)
+    mach = float(h["mach"].mean())
+
+    def curve(m):
+        return np.asarray(m.evaluate(grid, zeros, grid if angle == "sigma" else None,
+                                     mach)[coefficient], dtype=float)
+
+    if np.ptp(curve(model)) <= 1e-12 * max(1.0, float(np.max(np.abs(curve(model))))):
+        return {}
+    return {f"{coefficient} peak": lambda m: float(np.max(curve(m))),
+            f"{coefficient} peak {angle} (deg)": lambda m: float(np.degrees(
+                grid[int(np.argmax(curve(m)))]))}
 
 
 def derived_values(model, derived: Mapping[str, Callable]) -> dict:
