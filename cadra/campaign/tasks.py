@@ -187,30 +187,26 @@ def multifit(payload: dict, calibration: Outcome | None, *members: Outcome) -> d
 def coefficient_curve_table(result, shots, n_points: int = 61) -> pd.DataFrame:
     """The fitted coefficients and their 1-sigma along the angles the flights covered, at
     the flights' mean Mach (the points of seed 004 Figs. 9-14's curves), the angles and Mach
-    from the fit's own forward model (:func:`cadra.fitting.histories.fitted_histories`):
+    from the fit's own forward model (:func:`cadra.fitting.histories.flown_angles`):
     ``coefficient``, ``angle`` (``alpha`` or ``sigma``), ``angle_deg``, ``mach``, ``value``,
     ``sigma`` (with the held values' own uncertainty where the model gives them one: the
     consider covariance, :mod:`cadra.fitting.consider`)."""
-    from cadra.fitting.histories import fitted_histories
+    from cadra.fitting.histories import flown_angles
     from cadra.report.fit_plots import coefficient_curves
 
-    model = result.model
-    angle = "sigma" if model.angle_plane == "sigma" else "alpha"
-    h = pd.concat(list(fitted_histories(result, shots).values()), ignore_index=True)
-    mach = float(h["mach"].mean())
-    grid = np.radians(np.linspace(h[f"{angle}_deg"].min(), h[f"{angle}_deg"].max(), n_points))
-    zeros = np.zeros_like(grid)
+    flown = flown_angles(result, shots, n_points)
+    grid = flown.grid_rad
     na = len(result.aero_names)
     ca = result.consider
     cov = result.covariance if ca is None else ca.covariance   # same order: param_names
-    curves = coefficient_curves(model, result.aero_names, cov[:na, :na], grid,
-                                zeros, grid if angle == "sigma" else None, mach)
+    curves = coefficient_curves(result.model, result.aero_names, cov[:na, :na],
+                                *flown.path(), flown.mach)
     rows = []
     for c, (v, s) in curves.items():
         v = np.broadcast_to(np.asarray(v, dtype=float), grid.shape)
         s = np.broadcast_to(np.asarray(s, dtype=float), grid.shape)
-        rows.append(pd.DataFrame({"coefficient": c, "angle": angle,
-                                  "angle_deg": np.degrees(grid), "mach": mach,
+        rows.append(pd.DataFrame({"coefficient": c, "angle": flown.angle,
+                                  "angle_deg": np.degrees(grid), "mach": flown.mach,
                                   "value": v, "sigma": s}))
     return pd.concat(rows, ignore_index=True) if rows else pd.DataFrame()
 

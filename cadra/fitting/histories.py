@@ -10,6 +10,7 @@ fitted (docs/fitting.md). Plain data in, tables out: :mod:`cadra.report.fit` and
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -62,4 +63,30 @@ def fitted_histories(result: FitResult, shots: Sequence[ShotData] | None = None,
     return out
 
 
-__all__ = ["fitted_histories"]
+class FlownAngles(NamedTuple):
+    """The angles a fit's flights covered (:func:`flown_angles`)."""
+
+    angle: str              # "sigma" for a total-angle model, "alpha" otherwise
+    grid_rad: np.ndarray    # from the smallest to the largest angle flown
+    mach: float             # the flights' mean Mach
+
+    def path(self) -> tuple:
+        """``(alpha, beta, sigma)`` along the grid, as :meth:`cadra.aero.AeroModel.evaluate`
+        takes them (beta 0; sigma None for an alpha-beta model: it follows alpha)."""
+        return (self.grid_rad, np.zeros_like(self.grid_rad),
+                self.grid_rad if self.angle == "sigma" else None)
+
+
+def flown_angles(result: FitResult, shots: Sequence[ShotData] | None = None,
+                 n_points: int = 61) -> FlownAngles:
+    """The angles ``result``'s flights covered (the total angle for a total-angle model,
+    alpha otherwise), ``n_points`` from the smallest to the largest, and their mean Mach,
+    from the fit's own histories (:func:`fitted_histories`): where seed 004 draws its
+    coefficient curves (Figs. 9-14) and reads the C_mq peak."""
+    angle = "sigma" if result.model.angle_plane == "sigma" else "alpha"
+    h = pd.concat(list(fitted_histories(result, shots).values()), ignore_index=True)
+    grid = np.radians(np.linspace(h[f"{angle}_deg"].min(), h[f"{angle}_deg"].max(), n_points))
+    return FlownAngles(angle, grid, float(h["mach"].mean()))
+
+
+__all__ = ["FlownAngles", "fitted_histories", "flown_angles"]

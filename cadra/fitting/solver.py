@@ -34,7 +34,7 @@ from cadra.aero import AeroModel
 from cadra.channels import residual
 from cadra.dynamics.integrate import MAX_ADAPTIVE_EVALS
 from cadra.fitting.extras import Extra
-from cadra.fitting.priors import prior_terms
+from cadra.fitting.priors import prior_chi2, prior_terms
 from cadra.fitting.problem import FitProblem, default_local_free
 from cadra.fitting.sensitivity import LOCAL_NAMES, N_LOCAL, Integration, apply_local
 from cadra.flight.data import ShotData
@@ -265,10 +265,6 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     shared_at = {int(i): k for k, i in enumerate(aero_idx)}
     p_col = np.array([shared_at.get(int(i), -1) for i in p_idx], dtype=int)
 
-    def chi2_prior(p):
-        z = (p[p_idx] - p_mean) / p_sig
-        return float(z @ z)
-
     def with_priors(Ca, ga, p, blocked=None):
         for c, i, m, s in zip(p_col, p_idx, p_mean, p_sig, strict=True):
             if c >= 0 and (blocked is None or not blocked[c]):
@@ -298,7 +294,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             st.pred, st.jac = pred, jac
         if not all(np.all(np.isfinite(st.jac[st.mask])) for st in states):
             return math.inf
-        return _chi2(states, [st.pred for st in states]) + chi2_prior(p)
+        return _chi2(states, [st.pred for st in states]) + prior_chi2(model, p)
 
     def evaluate(p, xv, ys):
         return problem.predict_from(p, xv, ys)
@@ -382,7 +378,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                     u[st.local_free] = dl
                     ys.append(apply_local(st.y_nom, u))
                 try:
-                    chi2_try = _chi2(states, evaluate(p_try, x_try, ys)) + chi2_prior(p_try)
+                    chi2_try = _chi2(states, evaluate(p_try, x_try, ys)) + prior_chi2(model, p_try)
                 except (FloatingPointError, ZeroDivisionError):
                     chi2_try = math.inf
                 if chi2_try < chi2:

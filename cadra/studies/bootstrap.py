@@ -238,26 +238,22 @@ def peak_quantities(result: FitResult, coefficient: str = "Cmq", n_points: int =
     004's C_mq peak. The angles and Mach are the fit's own histories
     (:func:`cadra.fitting.histories.fitted_histories`). Empty when the model has no such
     coefficient or its form does not vary over those angles."""
-    from cadra.fitting.histories import fitted_histories
+    from cadra.fitting.histories import flown_angles
 
     model = result.model
     if coefficient not in model.coefficients or result.problem is None:
         return {}
-    h = pd.concat(list(fitted_histories(result).values()), ignore_index=True)
-    angle = "sigma" if model.angle_plane == "sigma" else "alpha"
-    grid = np.radians(np.linspace(h[f"{angle}_deg"].min(), h[f"{angle}_deg"].max(), n_points))
-    zeros = np.zeros_like(grid)
-    mach = float(h["mach"].mean())
+    flown = flown_angles(result, n_points=n_points)
 
     def curve(m):
-        return np.asarray(m.evaluate(grid, zeros, grid if angle == "sigma" else None,
-                                     mach)[coefficient], dtype=float)
+        return np.asarray(m.evaluate(*flown.path(), flown.mach)[coefficient], dtype=float)
 
-    if np.ptp(curve(model)) <= 1e-12 * max(1.0, float(np.max(np.abs(curve(model))))):
+    c = curve(model)
+    if np.ptp(c) <= 1e-12 * max(1.0, float(np.max(np.abs(c)))):
         return {}
     return {f"{coefficient} peak": lambda m: float(np.max(curve(m))),
-            f"{coefficient} peak {angle} (deg)": lambda m: float(np.degrees(
-                grid[int(np.argmax(curve(m)))]))}
+            f"{coefficient} peak {flown.angle} (deg)": lambda m: float(np.degrees(
+                flown.grid_rad[int(np.argmax(curve(m)))]))}
 
 
 def derived_values(model, derived: Mapping[str, Callable]) -> dict:
