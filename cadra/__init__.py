@@ -11,7 +11,8 @@ uncertainties, and a diagnosis of why a fit does not match the data (docs/api.md
     print(result.report())
 
 The calls of the whole job (:mod:`cadra.pipeline`): :func:`simulate`, :func:`measure` (and
-:func:`measure_view` for one image), :func:`fit`, :func:`diagnose`, :func:`calibrate`; the
+:func:`measure_view` for one image), :func:`fit`, :func:`diagnose`, :func:`calibrate`,
+:func:`plan` (what to fire next); the
 readers :func:`load_model`, :func:`load_shot_data`, :func:`load_shots`. They are imported
 when first used, so ``import cadra`` stays light.
 
@@ -29,7 +30,7 @@ _configure_numba_cache()
 _LAZY = {
     "simulate": "cadra.pipeline", "measure": "cadra.pipeline",
     "measure_view": "cadra.pipeline", "fit": "cadra.pipeline", "diagnose": "cadra.pipeline",
-    "calibrate": "cadra.pipeline",
+    "calibrate": "cadra.pipeline", "plan": "cadra.pipeline",
     "load_shot_data": "cadra.flight", "load_shots": "cadra.flight", "ShotData": "cadra.flight",
     "FitResult": "cadra.fitting", "load_model": "cadra.aero",
 }

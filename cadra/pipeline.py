@@ -157,4 +157,26 @@ def calibrate(shots, *, facility: str = "") -> StationBiasEstimate:
     return estimate_station_biases(data, facility=facility)
 
 
-__all__ = ["ViewResult", "calibrate", "diagnose", "fit", "measure", "measure_view", "simulate"]
+def plan(result: FitResult, ranges: dict, *, targets: Iterable[str] = (),
+         criterion: str | None = None, free: Iterable[str] = (), template: str | None = None,
+         candidates: int = 1000, refine: int = 3, seed: int = 0, progress: bool = False):
+    """What to fire next (docs/design.md): candidate shots built from one of the fit's shots
+    (``template``, default the one with the most stations), launched within ``ranges``
+    (dimension -> ``(low, high)`` or one value: ``angle_deg``, ``rate_deg_s``, ``mach``,
+    ``roll_deg``, ``cg_shift_mm``, ``stations``; the rest stay at the template's), ranked by
+    how much they would reduce the sigmas of ``targets`` (or the whole covariance:
+    ``criterion`` "A" or "D"). ``free``: held parameters to treat as unknown ("could more
+    shots fix it?"). ``candidates`` are sampled, then the best ``refine`` improved by a
+    bounded search. Returns the :class:`cadra.studies.design.PlanResult`; its ``report()``
+    is what ``cadra2 plan`` prints."""
+    from cadra.studies.candidates import CandidateSpace
+    from cadra.studies.design import planner
+
+    p = planner(result, targets=tuple(targets), criterion=criterion, free=tuple(free),
+                template=template)
+    return p.plan(CandidateSpace(p.template.base, dict(ranges)), candidates, refine=refine,
+                  seed=seed, progress=progress)
+
+
+__all__ = ["ViewResult", "calibrate", "diagnose", "fit", "measure", "measure_view", "plan",
+           "simulate"]

@@ -23,7 +23,8 @@ from cadra.studies.single import SINGLE_FIT_CHI2_WARN, check_single_fits
 from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
 
 SPECS = Path("sample_shots/specs")
-SUBCOMMANDS = ("fit", "single", "holdone", "diagnose", "calibrate", "simulate", "models")
+SUBCOMMANDS = ("fit", "single", "holdone", "plan", "diagnose", "calibrate", "simulate",
+               "models")
 
 
 def option_blocks(text: str) -> dict[str, str]:
@@ -106,7 +107,7 @@ def test_every_subcommand_has_a_description_and_shows_defaults(capsys, name):
         assert len(block.split()) > 2, f"{name} {opt}: no help"
         assert "(default" in block or "(required)" in block, \
             f"{name} {opt}: default not shown: {block}"
-    if name in ("fit", "single", "holdone", "diagnose", "calibrate"):
+    if name in ("fit", "single", "holdone", "plan", "diagnose", "calibrate"):
         flat = " ".join(text.split())
         assert "--max-iterations MAX_ITERATIONS most Levenberg-Marquardt" in flat
         assert "(default: 60)" in flat and "(required)" in flat
@@ -140,6 +141,7 @@ def test_models_lists_the_bundled_models(capsys):
 _MINIMAL = {"fit": ["t.csv", "--model", "m", "-o", "o"], "single": ["t.csv", "-o", "o"],
             "holdone": ["t.csv", "--model", "m", "--param", "p", "--values", "1", "-o", "o"],
             "diagnose": ["t.csv", "--model", "m", "-o", "o"], "calibrate": ["t.csv", "-o", "o"],
+            "plan": ["t.csv", "--model", "m", "-o", "o"],
             "simulate": ["spec.toml", "-o", "o"], "models": []}
 
 

@@ -71,7 +71,7 @@ def _refused(run, argv, culprit: str, capsys, work: Path, code: int) -> str:
 
 # -- cadra2: an output that is or holds an input -------------------------------------------
 
-ALL = ["fit", "single", "holdone", "calibrate", "diagnose"]
+ALL = ["fit", "single", "holdone", "plan", "calibrate", "diagnose"]
 
 
 @pytest.mark.parametrize("command", ALL)

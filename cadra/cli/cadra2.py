@@ -4,6 +4,8 @@
   (:mod:`cadra.cli.fit`, docs/fitting.md);
 * ``cadra2 single`` / ``cadra2 holdone`` — seed 004's single fits with quasi-linear trends and
   its Fig. 15 hold-one study (:mod:`cadra.cli.studies`);
+* ``cadra2 plan`` — what to fire next: candidate shots ranked by the information they add
+  (:mod:`cadra.cli.plan`, docs/design.md);
 * ``cadra2 calibrate`` — sphere calibration and the station history
   (:mod:`cadra.cli.calibrate`, docs/calibration.md);
 * ``cadra2 diagnose`` — the gap diagnosis (:mod:`cadra.cli.diagnose`, docs/gap.md);
@@ -31,7 +33,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cadra.cli import calibrate, diagnose, fit, motion, roll, simulate, studies
+from cadra.cli import calibrate, diagnose, fit, motion, plan, roll, simulate, studies
 from cadra.cli._format import (
     HelpFormatter,
     add_verbosity,
@@ -54,7 +56,7 @@ NUMBER_LIST_OPTIONS = ("--values",)
 
 
 #: the subcommands, in the order of ``cadra2 --help``
-MODULES = (fit, studies, diagnose, calibrate, motion, roll, simulate)
+MODULES = (fit, studies, plan, diagnose, calibrate, motion, roll, simulate)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -79,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
 #: --overwrite a command replaces only an output of its own kind
 OUTPUT_KINDS = {"simulate": "shot", "fit": "fit", "single": "single fits",
                 "holdone": "hold-one study", "calibrate": "calibration",
-                "diagnose": "diagnosis", "motion": "motion", "roll": "roll"}
+                "diagnose": "diagnosis", "motion": "motion", "roll": "roll", "plan": "plan"}
 
 
 def main(argv: list[str] | None = None) -> int:
