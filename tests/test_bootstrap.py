@@ -142,3 +142,23 @@ def test_the_cmq_peak_is_the_forms_largest_value_over_the_flown_angles(fitted, b
     d = again.derived.set_index("parameter")
     assert d.loc["Cmq peak", "n"] == N_REFITS and d.loc["Cmq peak", "sigma_boot"] > 0
     assert "(derived)" in again.report()
+
+
+def test_the_profile_interval_sits_beside_the_percentile_interval(fitted, boot):
+    """On these near-linear data chi^2 is quadratic: the 95 % profile-likelihood interval is
+    the covariance's value +- 1.96 sigma (the analytic answer; the profile's level scales
+    with a reduced chi^2 above 1, so the sigma does too here), and it is reported beside the
+    bootstrap's percentile interval."""
+    from cadra.studies.bootstrap import with_profiles
+
+    names = ("Cm_A1", "Cnr_A1")
+    prof = with_profiles(boot, fitted, names=names)
+    t = prof.table.set_index("parameter")
+    for n in names:
+        v = fitted.value(n)
+        s = fitted.sigma(n) * np.sqrt(max(1.0, fitted.reduced_chi2))
+        assert t.loc[n, "profile_lower"] == pytest.approx(v - 1.96 * s, abs=0.05 * s)
+        assert t.loc[n, "profile_upper"] == pytest.approx(v + 1.96 * s, abs=0.05 * s)
+        assert t.loc[n, "profile_unsettled"] == 0
+    assert t.drop(list(names))["profile_lower"].isna().all()
+    assert "profile [" in prof.report()

@@ -49,6 +49,10 @@ def _fit_arguments(p) -> None:
                    help="the replicates' noise: 'white', each measurement's own sigma; "
                         "'residuals', the fit's standardized residuals resampled in blocks "
                         "of stations (their real scale and correlation)")
+    p.add_argument("--bootstrap-profile", action="store_true",
+                   help="beside each percentile interval, the parameter's 95 %% "
+                        "profile-likelihood interval (about 10-20 held refits of the whole "
+                        "fit per parameter; default: off)")
     p.add_argument("--workers", type=cli.number(int, 0), default=None,
                    help="Dask worker processes of the bootstrap (default: the cores; 0: in "
                         "this process)")
@@ -100,6 +104,10 @@ def run(args) -> int:
         boot = bootstrap(result, args.bootstrap, noise=args.bootstrap_noise,
                          workers=args.workers, progress=not cli.quiet(args),
                          derived=peak_quantities(result))
+        if args.bootstrap_profile:
+            from cadra.studies.bootstrap import with_profiles
+
+            boot = with_profiles(boot, result)
         notes.append(f"bootstrap ({boot.noise} noise): {boot.n_converged} of "
                      f"{boot.n_requested} refits converged; per parameter the bootstrap "
                      "sigma, its ratio to the covariance sigma, the bias and the 95 % "

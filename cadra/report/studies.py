@@ -210,12 +210,15 @@ def bootstrap_markdown(boot, title: str) -> str:
              + "). Values SI; the interval is the 95 % basic percentile interval"
              + ("." if judged else f"; fewer than {MIN_TO_FLAG} refits: whether an interval is "
                 "Gaussian is not judged."), ""]
+    profiled = "profile_lower" in boot.table
     lines += markdown.table(
         ("parameter", "value ± σ (covariance)", "σ bootstrap", "ratio", "bias / σ",
-         "95 % interval", "non-Gaussian"),
+         "95 % interval") + (("95 % profile-likelihood interval",) if profiled else ())
+        + ("non-Gaussian",),
         ((r.parameter, pm(r.value, r.sigma_cov), f"{r.sigma_boot:.3g}", f"{r.ratio:.3f}",
-          f"{r.bias_sigma:+.2f}", f"[{r.lower:.6g}, {r.upper:.6g}]",
-          {True: "**yes**", False: "no"}.get(r.non_gaussian, "—"))
+          f"{r.bias_sigma:+.2f}", f"[{r.lower:.6g}, {r.upper:.6g}]")
+         + ((f"[{r.profile_lower:.6g}, {r.profile_upper:.6g}]",) if profiled else ())
+         + ({True: "**yes**", False: "no"}.get(r.non_gaussian, "—"),)
          for r in boot.table.itertuples(index=False)))
     if len(boot.derived):
         lines += ["", "Derived quantities, from each refit's model (σ bootstrap is their only "

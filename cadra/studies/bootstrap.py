@@ -34,8 +34,8 @@ from cadra.fitting.result import FitResult
 from cadra.fitting.solver import FitOptions, fit
 from cadra.flight.data import CHANNELS
 
-__all__ = ["BLOCK_STATIONS", "MIN_TO_FLAG", "NOISE_MODELS", "BootstrapResult", "replicate",
-           "peak_quantities", "replicate_data", "summarize"]
+__all__ = ["BLOCK_STATIONS", "MIN_TO_FLAG", "NOISE_MODELS", "PROFILE_LEVEL", "BootstrapResult",
+           "peak_quantities", "replicate", "replicate_data", "summarize", "with_profiles"]
 
 #: the noise models of a replicate (module doc)
 NOISE_MODELS = ("white", "residuals")
@@ -49,6 +49,8 @@ NON_GAUSSIAN = 0.20
 MIN_TO_FLAG = 200
 #: the central coverage of the percentile interval
 COVERAGE = 0.95
+#: the profile likelihood's chi^2 rise at the same coverage (one parameter: 1.96^2)
+PROFILE_LEVEL = 1.959963984540054 ** 2
 
 
 def _block_resample(z: np.ndarray, rng: np.random.Generator, block: int) -> np.ndarray:
@@ -150,11 +152,14 @@ class BootstrapResult:
                     f"; too few to judge whether an interval is Gaussian (< {MIN_TO_FLAG})")]
         lines.append(f"{'parameter':12s} {'value ± sigma':>24s} {'sigma boot':>11s} "
                      f"{'ratio':>6s} {'bias/sigma':>10s}  95 % percentile interval")
+        profiled = "profile_lower" in self.table
         for r in self.table.itertuples(index=False):
             flag = "  NON-GAUSSIAN" if r.non_gaussian is True else ""
+            prof = (f"  profile [{r.profile_lower:.6g}, {r.profile_upper:.6g}]" if profiled
+                    else "")
             lines.append(f"{r.parameter:12s} {pm(r.value, r.sigma_cov):>24s} "
                          f"{r.sigma_boot:>11.3g} {r.ratio:>6.3f} {r.bias_sigma:>10.3f}  "
-                         f"[{r.lower:.6g}, {r.upper:.6g}]{flag}")
+                         f"[{r.lower:.6g}, {r.upper:.6g}]{prof}{flag}")
         for r in self.derived.itertuples(index=False):
             lines.append(f"{r.parameter:12s} {r.value:>24.6g} {r.sigma_boot:>11.3g} "
                          f"{'':>6s} {r.bias_sigma:>10.3f}  [{r.lower:.6g}, {r.upper:.6g}]"
@@ -212,6 +217,31 @@ def _figures(name: str, value: float, sigma: float, x: np.ndarray) -> dict:
             "ratio": sb / sigma if sigma > 0 else math.nan, "bias": bias,
             "bias_sigma": bias / sigma if sigma > 0 else math.nan, "lower": float(lower),
             "upper": float(upper), "non_gaussian": non_gauss, "n": int(x.size)}
+
+
+def with_profiles(boot: BootstrapResult, result: FitResult,
+                  names: Sequence[str] | None = None) -> BootstrapResult:
+    """``boot`` with each parameter's profile-likelihood interval at the same coverage
+    (:func:`cadra.fitting.profile.profile_parameter`, chi^2 rise :data:`PROFILE_LEVEL`) beside
+    its percentile interval: columns ``profile_lower``, ``profile_upper`` (+-inf where the
+    profile never rose that far) and ``profile_unsettled`` (held fits that did not converge:
+    the interval may then be too narrow). One profile is ~10-20 held fits of the whole fit;
+    ``names`` (default: every parameter) limits them (the others get NaN)."""
+    from cadra.fitting.profile import profile_parameter
+
+    shots = list(result.problem.shots)
+    rows = []
+    for name in boot.table["parameter"]:
+        if names is not None and name not in names:
+            rows.append((math.nan, math.nan, 0))
+            continue
+        pr = profile_parameter(result, shots, name, level=PROFILE_LEVEL)
+        rows.append((pr.lower, pr.upper, pr.n_unsettled))
+    table = boot.table.copy()
+    table["profile_lower"] = [r[0] for r in rows]
+    table["profile_upper"] = [r[1] for r in rows]
+    table["profile_unsettled"] = [r[2] for r in rows]
+    return replace(boot, table=table)
 
 
 def _derived(result: FitResult, ok: pd.DataFrame, derived: Mapping[str, Callable]
