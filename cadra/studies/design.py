@@ -120,7 +120,7 @@ class Planner:
         return replace(self, info=info, sigma_now=covariance_sigmas(info)[1])
 
     def plan(self, space: CandidateSpace, n_candidates: int = 1000, *, refine: int = 3,
-             refine_evaluations: int = 60, n_best: int = 5, seed: int = 0,
+             refine_evaluations: int = 120, n_best: int = 5, seed: int = 0,
              progress: bool = False) -> PlanResult:
         """Rank ``n_candidates`` candidates from ``space`` (a Latin-hypercube sample), then
         search from the best ``refine`` of them with bounded Powell (at most ``refine_evaluations``
