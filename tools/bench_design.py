@@ -34,7 +34,9 @@ def _headline(out: dict) -> dict:
     cov = out.get("coverage", {})
     return {"bootstrap_sigma_ratio_min": get("bootstrap", "ratio_min"),
             "bootstrap_sigma_ratio_max": get("bootstrap", "ratio_max"),
-            "percentile_coverage": cov.get("percentile", {}).get("rate"),
+            "percentile_coverage": cov.get("basic", {}).get("rate"),
+            "plain_percentile_coverage": cov.get("percentile", {}).get("rate"),
+            "peak_percentile_coverage": cov.get("peak", {}).get("basic", {}).get("rate"),
             "covariance_coverage": cov.get("covariance", {}).get("rate"),
             "plan_realised_over_predicted_min": get("plan", "realised_over_predicted_min"),
             "plan_realised_over_predicted_max": get("plan", "realised_over_predicted_max"),
