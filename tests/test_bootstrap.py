@@ -162,3 +162,57 @@ def test_the_profile_interval_sits_beside_the_percentile_interval(fitted, boot):
         assert t.loc[n, "profile_unsettled"] == 0
     assert t.drop(list(names))["profile_lower"].isna().all()
     assert "profile [" in prof.report()
+
+
+def test_the_sommer_tobak_sum_is_seed_004s_equation_1(fitted, boot):
+    """C_D - C_L_alpha + C_mq m d^2 / I_yy over the flown angles, against the numpy reference
+    evaluator of the model's forms (C_L_alpha by a central difference); bootstrapped."""
+    import pandas as pd
+
+    from cadra.aero.evaluate import evaluate_tree
+    from cadra.fitting.histories import fitted_histories
+    from cadra.studies.bootstrap import sommer_tobak_quantities, summarize
+
+    q = sommer_tobak_quantities(fitted)
+    h = pd.concat(list(fitted_histories(fitted).values()))
+    alpha = np.radians(np.linspace(h["alpha_deg"].min(), h["alpha_deg"].max(), 201))
+    m = fitted.model
+    values = {p.name: p.value for p in m.parameters}
+
+    def ev(name, a):
+        return np.broadcast_to(evaluate_tree(m.tree(name), {"alpha": a, "mach": h["mach"].mean()},
+                                             values), a.shape)
+
+    d = 1e-6
+    rigid = fitted.problem.shots[0].rigid
+    ratio = rigid.mass_kg * rigid.d_m ** 2 / rigid.inertia_body_kg_m2[1, 1]
+    ref = (ev("CD", alpha) - (ev("CL", alpha + d) - ev("CL", alpha - d)) / (2 * d)
+           + ev("Cmq", alpha) * ratio)
+    (k_max, f_max), (k_at, f_at) = q.items()
+    assert f_max(m) == pytest.approx(float(ref.max()), rel=1e-7)
+    assert f_at(m) == pytest.approx(np.degrees(alpha[ref.argmax()]))
+    again = summarize(fitted, boot.samples.to_dict("records"), derived=q)
+    assert again.derived.set_index("parameter").loc[k_max, "sigma_boot"] > 0
+
+
+def test_the_m1_models_sommer_tobak_terms_are_seed_004s():
+    """Seed 004 on its M1 models at M 1.10 (the text under Eq. 1): m d^2 / I_yy is about 15
+    and C_D - C_L_alpha about 2.6, so C_mq must be below about -0.17 for stability. The
+    bundled Table 4 model and the sample shots' mass properties give the same."""
+    from cadra.aero import load_bundled_model
+    from cadra.synthetic.simulate import rigid_body
+    from cadra.validation.gap_cases import M1_SHOTS, shot_spec
+
+    ratios = []
+    for name in M1_SHOTS:
+        r = rigid_body(shot_spec(name))
+        ratios.append(r.mass_kg * r.d_m ** 2 / r.inertia_body_kg_m2[1, 1])
+    assert np.allclose(ratios, 15.0, rtol=0.07), ratios
+    m = load_bundled_model("m1_m110")
+    s = np.radians(np.linspace(5.0, 15.0, 11))
+    h = 1e-20
+    c = m.evaluate(s + 1j * h, 0.0, s + 1j * h, 1.10)
+    cd_minus_cla = np.real(c["CD"]) - np.imag(c["CL"]) / h
+    threshold = -cd_minus_cla / np.mean(ratios)
+    assert np.all((cd_minus_cla > 2.3) & (cd_minus_cla < 2.9)), cd_minus_cla
+    assert np.all((threshold > -0.20) & (threshold < -0.15)), threshold

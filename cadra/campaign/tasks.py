@@ -257,9 +257,10 @@ def bootstrap(payload: dict, fitted: Outcome):
                              "bootstrap resamples a converged fit")
     from distributed import get_worker, worker_client
 
-    from cadra.studies.bootstrap import peak_quantities
+    from cadra.studies.bootstrap import peak_quantities, sommer_tobak_quantities
 
-    derived = peak_quantities(result)     # e.g. the C_mq peak, its height and angle
+    # the C_mq peak (its height and angle) and seed 004's Eq. (1) where the model has them
+    derived = {**peak_quantities(result), **sommer_tobak_quantities(result)}
     try:
         get_worker()
     except ValueError:       # not on a Dask worker: the refits run here

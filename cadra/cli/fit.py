@@ -99,11 +99,12 @@ def run(args) -> int:
     boot = None
     if args.bootstrap and result.converged:
         from cadra.campaign.bootstrap import bootstrap
-        from cadra.studies.bootstrap import peak_quantities
+        from cadra.studies.bootstrap import peak_quantities, sommer_tobak_quantities
 
         boot = bootstrap(result, args.bootstrap, noise=args.bootstrap_noise,
                          workers=args.workers, progress=not cli.quiet(args),
-                         derived=peak_quantities(result))
+                         derived={**peak_quantities(result),
+                                  **sommer_tobak_quantities(result)})
         if args.bootstrap_profile:
             from cadra.studies.bootstrap import with_profiles
 

@@ -35,7 +35,8 @@ from cadra.fitting.solver import FitOptions, fit
 from cadra.flight.data import CHANNELS
 
 __all__ = ["BLOCK_STATIONS", "MIN_TO_FLAG", "NOISE_MODELS", "PROFILE_LEVEL", "BootstrapResult",
-           "peak_quantities", "replicate", "replicate_data", "summarize", "with_profiles"]
+           "peak_quantities", "replicate", "replicate_data", "sommer_tobak_quantities",
+           "summarize", "with_profiles"]
 
 #: the noise models of a replicate (module doc)
 NOISE_MODELS = ("white", "residuals")
@@ -283,6 +284,36 @@ def peak_quantities(result: FitResult, coefficient: str = "Cmq", n_points: int =
         return {}
     return {f"{coefficient} peak": lambda m: float(np.max(curve(m))),
             f"{coefficient} peak {flown.angle} (deg)": lambda m: float(np.degrees(
+                flown.grid_rad[int(np.argmax(curve(m)))]))}
+
+
+def sommer_tobak_quantities(result: FitResult, n_points: int = 201) -> dict[str, Callable]:
+    """Seed 004's Eq. (1), the Sommer-Tobak criterion of a planar oscillation in a range:
+    ``C_D - C_L_alpha + C_mq m d^2 / I_yy``, negative where the oscillation is dynamically
+    stable. Evaluated over the angles the flights covered at their mean Mach (as
+    :func:`peak_quantities`), ``C_L_alpha`` the slope of C_L against that angle (per rad, by
+    complex step), ``m d^2 / I_yy`` the mean of the fit's shots'; the derived quantities are
+    its largest value (the least stable angle flown) and the angle where it lies. Empty when
+    the model lacks C_D, C_L or C_mq."""
+    from cadra.fitting.histories import flown_angles
+
+    model = result.model
+    if not {"CD", "CL", "Cmq"} <= set(model.coefficients) or result.problem is None:
+        return {}
+    flown = flown_angles(result, n_points=n_points)
+    ratio = float(np.mean([sd.rigid.mass_kg * sd.rigid.d_m ** 2
+                           / sd.rigid.inertia_body_kg_m2[1, 1]
+                           for sd in result.problem.shots]))
+    h = 1e-20
+
+    def curve(m):
+        a, b, sg = flown.path()
+        c = m.evaluate(a + 1j * h, b, None if sg is None else sg + 1j * h, flown.mach)
+        return (np.real(c["CD"]) - np.imag(c["CL"]) / h
+                + np.real(c["Cmq"]) * ratio).astype(float)
+
+    return {"Sommer-Tobak sum, largest": lambda m: float(np.max(curve(m))),
+            f"Sommer-Tobak sum, largest at {flown.angle} (deg)": lambda m: float(np.degrees(
                 flown.grid_rad[int(np.argmax(curve(m)))]))}
 
 
