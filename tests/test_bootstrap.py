@@ -99,7 +99,10 @@ def test_percentile_figures_and_the_non_gaussian_flag_on_known_samples():
     skew = rng.exponential(0.1, n)
     s = _figures("s", 1.0, 0.1, 1.0 + skew - skew.mean())
     assert s["non_gaussian"] is True
-    assert (s["upper"] - 1.0) < (1.0 - s["lower"])     # the basic interval reflects the tail
+    # the percentile interval follows the tail: the centred exponential's own 2.5 and
+    # 97.5 % quantiles, 0.1 (-ln 0.975 - 1) and 0.1 (ln 40 - 1)
+    assert s["lower"] - 1.0 == pytest.approx(0.1 * (-np.log(0.975) - 1.0), abs=0.01)
+    assert s["upper"] - 1.0 == pytest.approx(0.1 * (np.log(40.0) - 1.0), abs=0.03)
     assert _figures("few", 1.0, 0.1, rng.standard_normal(10))["non_gaussian"] is None
 
 

@@ -528,7 +528,7 @@ def _fits_section(t, groups) -> str:
         if b is not None and len(b):
             out.append(f"<p>Bootstrap: {int(b['n'].max())} refits ({_esc(b['noise'].iloc[0])} "
                        "noise); σ boot / σ: the bootstrap sigma over the covariance sigma, "
-                       "the interval the 95 % basic percentile one.</p>")
+                       "the interval the 95 % percentile one.</p>")
             out.append(_html_table(
                 ("parameter", "value ± σ", "σ boot", "σ boot / σ", "bias / σ", "95 % interval",
                  "non-Gaussian"),

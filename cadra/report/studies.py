@@ -207,7 +207,7 @@ def bootstrap_markdown(boot, title: str) -> str:
              f"{boot.n_converged} of {boot.n_requested} refits converged ({boot.noise} noise: "
              + ("each measurement's own sigma" if boot.noise == "white" else
                 "the fit's standardized residuals resampled in blocks of stations")
-             + "). Values SI; the interval is the 95 % basic percentile interval"
+             + "). Values SI; the interval is the 95 % percentile interval"
              + ("." if judged else f"; fewer than {MIN_TO_FLAG} refits: whether an interval is "
                 "Gaussian is not judged."), ""]
     profiled = "profile_lower" in boot.table

@@ -174,9 +174,10 @@ def summarize(result: FitResult, rows: Sequence[dict], noise: str = "white",
     """The bootstrap's figures from its replicate ``rows`` (converged ones only), per free
     parameter: the fit's value and covariance sigma, the bootstrap sigma (std of the
     replicates) and their ratio, the bias (replicates' mean minus the fit's value) in
-    sigmas, the :data:`COVERAGE` percentile interval (the basic bootstrap's, reflected about
-    the fit's value: ``2 v - q_hi, 2 v - q_lo``), and ``non_gaussian``: a half-width that
-    differs from 1.96 covariance sigma, or from the other half-width, by more than
+    sigmas, the :data:`COVERAGE` percentile interval (the refits' own quantiles ``q_lo,
+    q_hi``: on a fit whose chi^2 is not quadratic it covered the truth more often than the
+    basic interval reflected about the value, docs/fitting.md), and ``non_gaussian``: a
+    half-width that differs from 1.96 covariance sigma, or from the other half-width, by more than
     :data:`NON_GAUSSIAN` (None, not judged, below :data:`MIN_TO_FLAG` converged refits).
     ``derived``: name -> function of a fitted model (an
     :class:`~cadra.aero.AeroModel`) giving a quantity a range engineer reads (a C_mq peak);
@@ -205,8 +206,7 @@ def _figures(name: str, value: float, sigma: float, x: np.ndarray) -> dict:
                 "ratio": math.nan, "bias": math.nan, "bias_sigma": math.nan,
                 "lower": math.nan, "upper": math.nan, "non_gaussian": None, "n": int(x.size)}
     sb = float(np.std(x, ddof=1))
-    q_lo, q_hi = np.quantile(x, [a, 1.0 - a])
-    lower, upper = 2.0 * value - q_hi, 2.0 * value - q_lo
+    lower, upper = np.quantile(x, [a, 1.0 - a])
     half = 1.959963984540054 * sigma
     lo_w, hi_w = value - lower, upper - value
     non_gauss = None if x.size < MIN_TO_FLAG else bool(

@@ -240,6 +240,15 @@ class CandidateSpace:
         u = qmc.LatinHypercube(len(names), seed=seed).random(n)
         return [self.at(dict(zip(names, row, strict=True))) for row in u]
 
+    def corners(self) -> list[Candidate]:
+        """The corners of the varied ranges (2^d candidates): an information criterion's
+        optimum often lies on the boundary, at the most extreme conditions allowed."""
+        import itertools
+
+        names = self.varied
+        return [self.at(dict(zip(names, u, strict=True)))
+                for u in itertools.product((0.0, 1.0), repeat=len(names))]
+
     def grid(self, points: int) -> list[Candidate]:
         """A regular grid with ``points`` values along each varied dimension (station counts
         at the integers they round to, duplicates dropped)."""

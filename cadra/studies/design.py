@@ -17,10 +17,11 @@ unknown's sigma now (its value's magnitude where the group does not determine it
 - ``"A"``: the same over every shared unknown (A-optimal, scale-free);
 - ``"D"``: ``det(scaled covariance)^(1/n)``, the geometric mean (D-optimal).
 
-The search (:meth:`Planner.plan`): a Latin-hypercube sample of the candidate space, then a
-bounded Powell search (scipy) from the best few over the continuous dimensions at their
-station count. :func:`sequence` chooses several shots one after another, each scored with
-the ones before it added.
+The search (:meth:`Planner.plan`): a Latin-hypercube sample of the candidate space and its
+corners (an information criterion's optimum often lies at the most extreme conditions
+allowed), then a bounded Powell search (scipy) from the best few over the continuous
+dimensions at their station count. :func:`sequence` chooses several shots one after
+another, each scored with the ones before it added.
 """
 
 from __future__ import annotations
@@ -122,15 +123,18 @@ class Planner:
     def plan(self, space: CandidateSpace, n_candidates: int = 1000, *, refine: int = 3,
              refine_evaluations: int = 120, n_best: int = 5, seed: int = 0,
              progress: bool = False) -> PlanResult:
-        """Rank ``n_candidates`` candidates from ``space`` (a Latin-hypercube sample), then
-        search from the best ``refine`` of them with bounded Powell (at most ``refine_evaluations``
+        """Rank ``n_candidates`` candidates from ``space`` (a Latin-hypercube sample) and the
+        range's corners (when they are at most a quarter as many), then search from the best
+        ``refine`` of them with bounded Powell (at most ``refine_evaluations``
         evaluations each); the best ``n_best`` distinct candidates of all that were scored."""
         from tqdm import tqdm
 
         t0 = time.perf_counter()
-        rows = [{**self.evaluate(c), "source": "sample"}
-                for c in tqdm(space.sample(n_candidates, seed), desc="plan: candidates",
-                              unit="shot", disable=not progress)]
+        drawn = space.sample(n_candidates, seed)
+        corners = space.corners() if 2 ** len(space.varied) <= n_candidates // 4 else []
+        rows = [{**self.evaluate(c), "source": "sample" if k < len(drawn) else "corner"}
+                for k, c in enumerate(tqdm(drawn + corners, desc="plan: candidates",
+                                           unit="shot", disable=not progress))]
         t_sample = time.perf_counter() - t0
         table = pd.DataFrame(rows).sort_values("objective", kind="stable")
         refined = []

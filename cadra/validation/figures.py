@@ -114,7 +114,7 @@ def fmt(value, spec: str = ".3g") -> str:
     if isinstance(value, int | float):
         return format(int(value) if spec == "d" else value, spec)
     if isinstance(value, list | tuple):
-        return " / ".join(fmt(v, spec) for v in value)
+        return " / ".join(fmt(v, spec) for v in value) if value else "none"
     if isinstance(value, dict):
         return ", ".join(f"{k} {fmt(v, spec)}" for k, v in value.items())
     return str(value)
