@@ -51,8 +51,8 @@ def _fit_arguments(p) -> None:
                         "of stations (their real scale and correlation)")
     p.add_argument("--bootstrap-profile", action="store_true",
                    help="beside each percentile interval, the parameter's 95 %% "
-                        "profile-likelihood interval (about 10-20 held refits of the whole "
-                        "fit per parameter; default: off)")
+                        "profile-likelihood interval, about 10-20 held refits of the whole "
+                        "fit per parameter (default: off)")
     p.add_argument("--workers", type=cli.number(int, 0), default=None,
                    help="Dask worker processes of the bootstrap (default: the cores; 0: in "
                         "this process)")
