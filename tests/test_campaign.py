@@ -272,6 +272,32 @@ def test_status_and_export_from_the_command_line(campaign, tmp_path, capsys):
     assert cadra(["campaign", "export", str(out), "-o", str(dest), "-q"]) == 1   # no overwrite
 
 
+def test_a_groups_next_shot_is_planned_from_its_stored_fit(campaign, tmp_path, capsys):
+    """cadra campaign plan: the group's stored multi-fit (the very result the database's
+    coefficients come from), candidates at other speeds, each adding information."""
+    from cadra.campaign import group_fit
+
+    _, out, _ = campaign
+    result = group_fit(out, "all spheres")
+    coef = read_tables(out)["coefficients"]
+    assert set(result.aero_names) <= set(coef[coef["name"] == "all spheres"]["parameter"])
+    dest = tmp_path / "plan"
+    argv = ["campaign", "plan", str(out), "--group", "all spheres", "-o", str(dest),
+            "--mach", "1.2:3.5", "--candidates", "8", "--refine", "1", "-q"]
+    assert cadra(argv) == 0
+    best = pd.read_csv(dest / "best.csv")
+    assert (best["objective"] < 1.0).all()          # any further shot adds information
+    assert best["mach"].between(1.2, 3.5).all()
+    sig = pd.read_csv(dest / "sigmas.csv").set_index("parameter")
+    for n, s in zip(result.aero_names, result.aero_sigma, strict=True):
+        assert sig.loc[n, "sigma_now"] == pytest.approx(s, rel=1e-6)
+    capsys.readouterr()
+    assert cadra([*argv[:3], "--group", "nope", "-o", str(tmp_path / "x"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "no group 'nope'" in err and "all spheres" in err
+    assert cadra([*argv[:5], "-o", str(out), "-q"]) == 1      # never over the campaign
+
+
 def test_the_report_holds_the_campaigns_numbers_in_a_browser(campaign, browser, open_page):
     _, out, _ = campaign
     page, errors = open_page(browser, (out / "report.html").as_uri())

@@ -37,6 +37,35 @@ def _held(out: Path) -> bool:
     return False
 
 
+def group_fit(folder: str | os.PathLike, group: str, manifest=None):
+    """The multi-fit (:class:`~cadra.fitting.result.FitResult`) of ``group`` that the
+    campaign in ``folder`` stored for the manifest as it is now (default: the one the folder
+    last ran); ``ValueError`` naming the groups or the task's state when there is none."""
+    from cadra.campaign.run import _load
+
+    out = Path(folder)
+    if not (out / FILENAME).is_file():
+        raise FileNotFoundError(f"{out}: no campaign here (no {FILENAME})")
+    db = CampaignDB(out)
+    try:
+        m = load_manifest(manifest or db.get("manifest"))
+        tasks = {t.id: t for t in plan(m, hasher=db.hasher(file_sha256))}
+        t = tasks.get(f"multifit:{group}")
+        if t is None:
+            names = [g.name for g in m.groups]
+            raise ValueError(f"no group {group!r} in the campaign (groups: "
+                             f"{', '.join(names) or 'none'})")
+        if not db.done(t.key):
+            raise ValueError(f"group {group!r}: its multi-fit is not done for the manifest as "
+                             "it is now (cadra campaign status says why; run it first)")
+    finally:
+        db.close()
+    o = _load(out, f"results/{t.key}.pkl")
+    if o is None or not o.ok:
+        raise ValueError(f"group {group!r}: no stored multi-fit result in {out}/results")
+    return o.value["result"]
+
+
 def campaign_status(folder: str | os.PathLike, manifest=None) -> pd.DataFrame:
     """One row per task of the manifest (default: the one the folder last ran): ``task``
     (kind:name), ``kind``, ``name``, ``state`` (:data:`STATES`), ``seconds``, ``worker``,

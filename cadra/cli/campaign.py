@@ -4,7 +4,9 @@
   resumes) the campaign into DIR: stage one of every shot, the sphere calibration, single
   fits, each group's multi-fit, hold study and gap diagnosis, the report page;
 * ``cadra campaign status DIR`` says what is done, failed, interrupted, stale or to do;
-* ``cadra campaign export DIR [-o OUT]`` writes the database's tables as CSV and Parquet.
+* ``cadra campaign export DIR [-o OUT]`` writes the database's tables as CSV and Parquet;
+* ``cadra campaign plan DIR --group NAME -o OUT [ranges]`` ranks candidate shots for a group
+  by the information they would add to its stored multi-fit (docs/design.md).
 
 Exit status: 0 success (run: every task done), 1 refused input, a folder in use or a task
 failed (the others ran; ``status`` names it), 2 usage error, 130 interrupted, 143 terminated
@@ -63,6 +65,19 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the export folder (default: FOLDER/export)")
     ex.add_argument("--overwrite", action="store_true", help="replace an earlier export")
     add_verbosity(ex, top=False)
+    pl = sub.add_parser("plan", help="what to fire next for a group of a campaign",
+                        description="Rank candidate shots for a group by the information "
+                                    "they would add to its stored multi-fit (as cadra2 plan "
+                                    "does from trajectory files; docs/design.md).",
+                        formatter_class=HelpFormatter)
+    pl.add_argument("folder", help="the campaign folder")
+    pl.add_argument("--group", required=True, help="the group whose multi-fit to plan from")
+    pl.add_argument("-o", "--output", required=True, help="the plan's folder (must not exist)")
+    pl.add_argument("--overwrite", action="store_true", help="replace an earlier plan")
+    from cadra.cli.plan import add_plan_options
+
+    add_plan_options(pl)
+    add_verbosity(pl, top=False)
     return parser
 
 
@@ -110,6 +125,21 @@ def _export(args) -> int:
     return 0
 
 
+def _plan(args) -> int:
+    from cadra.atomic import UnsafeOutputError, check_output_dir
+    from cadra.campaign import ManifestError, group_fit
+    from cadra.cli.plan import plan_and_write
+
+    try:
+        check_output_dir(args.output, [args.folder], kind="plan")
+        result = group_fit(args.folder, args.group)
+    except (UnsafeOutputError, ManifestError, FileNotFoundError, ValueError) as exc:
+        print(f"cadra campaign plan: {exc}", file=sys.stderr)
+        return 1
+    return plan_and_write(result, args, f"group {args.group} of {args.folder}",
+                          "cadra campaign plan")
+
+
 def main(argv: list[str] | None = None) -> int:
     """The ``cadra`` console script (module doc); returns the exit status."""
     return console_main("cadra", _main, argv)
@@ -117,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv) -> int:
     args = build_parser().parse_args(sys.argv[1:] if argv is None else list(argv))
-    return {"run": _run, "status": _status, "export": _export}[args.command](args)
+    return {"run": _run, "status": _status, "export": _export,
+            "plan": _plan}[args.command](args)
 
 
 if __name__ == "__main__":

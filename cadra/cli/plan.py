@@ -44,6 +44,12 @@ def _range(text: str) -> tuple[float, float]:
 def _plan_arguments(p) -> None:
     cli.add_data_options(p)
     p.add_argument("--model", required=True, help="aero model (bundled name or file)")
+    add_plan_options(p)
+
+
+def add_plan_options(p) -> None:
+    """The candidates' ranges and the plan's settings (``cadra2 plan``, ``cadra campaign
+    plan``)."""
     for name in DIMENSIONS:
         p.add_argument(f"--{name.replace('_', '-')}", type=_range, default=None,
                        metavar="LO:HI", help=_RANGE_HELP[name] + " (default: the template's)")
@@ -73,12 +79,7 @@ def run(args) -> int:
     """``cadra2 plan`` (module doc); returns the exit status."""
     from cadra.fitting import FitOptions, fit_shots
     from cadra.flight.starts import start_estimates
-    from cadra.report.design import write_plan
-    from cadra.studies.candidates import CandidateSpace
-    from cadra.studies.design import planner, sequence
 
-    out = Path(args.output)
-    ranges = {n: getattr(args, n) for n in DIMENSIONS if getattr(args, n) is not None}
     try:
         model = cli.model_of(args)
         free = set(model.free_names()) | set(args.plan_free or ())
@@ -93,15 +94,29 @@ def run(args) -> int:
         if not result:
             raise ValueError(f"the fit did not converge ({result.message}); a plan needs the "
                              "group's converged fit")
+    except cli.REFUSED as exc:
+        return cli.refused("cadra2 plan", exc)
+    return plan_and_write(result, args, f"{model.name}, {len(shots)} shot(s)", "cadra2 plan")
+
+
+def plan_and_write(result, args, title: str, prog: str) -> int:
+    """Plan from the fit ``result`` with ``args``'s options (:func:`add_plan_options`),
+    write it to ``args.output``, print its report; the exit status."""
+    from cadra.report.design import write_plan
+    from cadra.studies.candidates import CandidateSpace
+    from cadra.studies.design import planner, sequence
+
+    out = Path(args.output)
+    ranges = {n: getattr(args, n) for n in DIMENSIONS if getattr(args, n) is not None}
+    try:
         p = planner(result, targets=tuple(args.target or ()), criterion=args.criterion,
                     free=tuple(args.plan_free or ()), template=args.template)
         plans = sequence(p, CandidateSpace(p.template.base, ranges), args.shots,
                          n_candidates=args.candidates, refine=args.refine, seed=args.seed,
                          progress=not cli.quiet(args))
     except cli.REFUSED as exc:
-        return cli.refused("cadra2 plan", exc)
-    title = f"{model.name}, {len(shots)} shot(s)"
-    write_plan(plans, title, out, overwrite=args.overwrite)
+        return cli.refused(prog, exc)
+    write_plan(plans, title, out, overwrite=getattr(args, "overwrite", False))
     if not cli.quiet(args):
         print(plans[0].report())
     if len(plans) > 1:
@@ -131,4 +146,4 @@ COMMANDS = (
 )
 
 
-__all__ = ["COMMANDS"]
+__all__ = ["COMMANDS", "add_plan_options", "plan_and_write"]
