@@ -5,10 +5,10 @@ the percentile interval's coverage on a nonlinear single shot, a plan over 1,000
 the gain over random and grid candidates), and seed 004's decision (docs/design.md). Last
 printed line: a JSON object.
 
-Usage: python tools/bench_design.py [--refits 200] [--speedup-refits 100] [--draws 50]
+Usage: python tools/bench_design.py [--refits 200] [--speedup-refits 100] [--draws 80]
        [--draw-refits 100] [--reps 10] [--candidates 1000] [--sections a,b,...]
 
-Sections: bootstrap, speedup, coverage, plan, seed004 (default: all; about 40 min on two
+Sections: bootstrap, speedup, coverage, plan, seed004 (default: all; about 50 min on two
 cores). A run of some sections keeps the others' figures from the recorded results, each
 section stamped with the commit and date it was measured at (``--sections ""`` only
 recomputes the headline figures from them).
@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--refits", type=int, default=200)
     ap.add_argument("--speedup-refits", type=int, default=100)
-    ap.add_argument("--draws", type=int, default=50)
+    ap.add_argument("--draws", type=int, default=80)
     ap.add_argument("--draw-refits", type=int, default=100)
     ap.add_argument("--reps", type=int, default=10)
     ap.add_argument("--candidates", type=int, default=1000)
