@@ -23,23 +23,13 @@ import numpy as np
 
 from cadra.fitting.priors import prior_rows
 from cadra.fitting.problem import FitProblem
+from cadra.fitting.solver import FitOptions, _psolve
 
 __all__ = ["RCOND", "covariance_sigmas", "problem_information", "shot_information"]
 
-#: relative eigenvalue cut-off: directions with less information are "not determined"
-RCOND = 1e-12
-
-
-def _psolve(M: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``M^+ B`` for a symmetric positive semi-definite ``M`` (eigen-decomposition)."""
-    if M.size == 0:
-        return np.zeros_like(B)
-    w, V = np.linalg.eigh(0.5 * (M + M.T))
-    top = max(float(w[-1]), 0.0)
-    keep = w > RCOND * top if top > 0 else np.zeros(w.size, dtype=bool)
-    inv = np.zeros_like(w)
-    inv[keep] = 1.0 / w[keep]
-    return V @ ((V.T @ B) * inv[:, None])
+#: relative eigenvalue cut-off: directions with less information are "not determined" (the
+#: solver's own)
+RCOND = FitOptions.rcond
 
 
 def shot_information(jac: np.ndarray, sigma: np.ndarray, mask: np.ndarray,
@@ -56,7 +46,7 @@ def shot_information(jac: np.ndarray, sigma: np.ndarray, mask: np.ndarray,
     if not n_local:
         return C
     A, B = Jl.T @ Jl, Jl.T @ Js
-    return C - B.T @ _psolve(A, B)
+    return C - B.T @ _psolve(A, B, RCOND)
 
 
 def problem_information(problem: FitProblem, jacobians=None) -> np.ndarray:
@@ -85,6 +75,8 @@ def covariance_sigmas(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     w, V = np.linalg.eigh(0.5 * (S + S.T))
     top = max(float(w[-1]), 0.0)
     keep = w > RCOND * top if top > 0 else np.zeros(n, dtype=bool)
+    # the solver's pseudo-inverse (cadra.fitting.result), with the eigenvectors it drops kept
+    # here: an unknown with a share in one of them is one no data reach
     cov = (V[:, keep] / w[keep]) @ V[:, keep].T / np.outer(d, d)
     sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
     reached = (np.abs(V[:, ~keep]) > 1e-6).any(axis=1) if (~keep).any() else np.zeros(n, bool)
