@@ -276,9 +276,8 @@ class PlanResult:
                  f"{self.n_refine} scored by the search ({self.seconds_refine:.1f} s) from "
                  f"template {p.template.shot.shot_id}, to reduce {what}; objective now "
                  f"{p.objective_now:.4g} (a variance ratio: 1 = no gain)"]
-        dims = [n for n in DIMENSIONS]
         for i, r in self.best.iterrows():
-            desc = ", ".join(f"{n} {r[n]:.4g}" for n in dims)
+            desc = ", ".join(f"{n} {r[n]:.4g}" for n in DIMENSIONS)
             moved = ", ".join(f"{n} -{100 * d:.0f} %" for n, d in self.moves(r)) or "nothing"
             lines.append(f"  {i + 1}. objective {r['objective']:.4g}: {desc}; its motion "
                          f"sweeps {r['flown_min_deg']:.1f}-{r['flown_max_deg']:.1f} deg")

@@ -279,6 +279,7 @@ def plan_figures(reps: int, candidates: int, seed: int = 0, progress: bool = Tru
 def seed004_figures(candidates: int = 300, seed: int = 0, max_shots: int = 8) -> dict:
     """Seed 004's decision (module doc): the M1 M1.10 peak freed and the M2 M0.70 C_mq
     parameters, planned on the bundled groups at film level."""
+    from cadra.studies.candidates import CandidateSpace
     from cadra.studies.design import planner, sequence
 
     out = {}
@@ -296,8 +297,6 @@ def seed004_figures(candidates: int = 300, seed: int = 0, max_shots: int = 8) ->
     m1["rel_sigma_without_low"] = float(ph.sigma_now[ph.names.index("Cmq_A2")] / peak)
     b = ph.template.base
     for label, angles in (("in_10_20", SEED004_ANGLES), ("in_0_40", ANGLE_RANGE)):
-        from cadra.studies.candidates import CandidateSpace
-
         space = CandidateSpace(b, {"angle_deg": angles, "rate_deg_s": RATE_RANGE})
         seq = sequence(ph, space, max_shots, n_candidates=candidates, refine=1,
                        refine_evaluations=30, seed=seed, n_best=1)
@@ -310,10 +309,9 @@ def seed004_figures(candidates: int = 300, seed: int = 0, max_shots: int = 8) ->
     out["m1_m110"] = m1
     res2 = _fit(M2_SET, seed)
     p2 = planner(res2, targets=M2_TARGETS)
-    plan = p2.plan(_m2_space(p2), candidates, seed=seed)
-    best = plan.best.iloc[0]
-    restricted = p2.plan(replace(_m2_space(p2), ranges={**_m2_space(p2).ranges,
-                                                        "angle_deg": SEED004_ANGLES}),
+    space2 = _m2_space(p2)
+    best = p2.plan(space2, candidates, seed=seed).best.iloc[0]
+    restricted = p2.plan(replace(space2, ranges={**space2.ranges, "angle_deg": SEED004_ANGLES}),
                          candidates, seed=seed).best.iloc[0]
     out["m2_m070"] = {
         "group_flown_deg": [float(min(np.degrees(h["air"]["sigma_rad"]).min()
