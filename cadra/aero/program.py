@@ -147,6 +147,22 @@ class AeroProgram:
         """Readable listing of the program (one op a line)."""
         return disassemble(self.ops, self.args, self.starts, self.param_names)
 
+    def variables_read(self) -> frozenset[str]:
+        """Names of the :data:`VARIABLES` the program reads (the flight variables its
+        coefficients depend on)."""
+        names = set()
+        for op, a in zip(self.ops, self.args, strict=True):
+            op = int(op)
+            if op < ADD and SOURCES[op % 4] == "V":
+                names.add(VARIABLES[int(a)])
+            elif PMUL_VV <= op < HEADER:
+                k = (op - PMUL_VV) % 9
+                for src, j in ((PAIR_SOURCES[k // 3], int(a) % PAIR),
+                               (PAIR_SOURCES[k % 3], int(a) // PAIR)):
+                    if src == "V":
+                        names.add(VARIABLES[j])
+        return frozenset(names)
+
 
 def disassemble(ops, args, starts, param_names=()) -> str:
     """Readable listing of a program: mnemonic and operand per line, sections labelled."""

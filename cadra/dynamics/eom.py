@@ -18,6 +18,7 @@ from cadra.aero.program import eval_coefficients
 from cadra.dynamics.layout import (
     P_CG_OFFSET,
     P_D,
+    P_FRAME,
     P_G,
     P_MASS,
     P_MU,
@@ -191,22 +192,25 @@ def derivative(y, phys, I, Iinv, ops, args, starts, params, plane, R, v_b, varia
     for i in range(3):
         dy[3 + i] = (R[i, 0] * F_b[0] + R[i, 1] * F_b[1] + R[i, 2] * F_b[2]) / m
     dy[5] -= phys[P_G]
-    # rotation: I w' = M - w x (I w)
+    # rotation: I w' = M - W x (I w), with W the angular velocity of the axes the rates are
+    # taken in: the body's own (W = w), or the non-rolling frame's (W = (0, q, r); exact for
+    # a body of revolution, whose inertia is the same in both; docs/dynamics.md)
+    pf = p if phys[P_FRAME].real < 0.5 else 0.0 * p
     hx = I[0, 0] * p + I[0, 1] * q + I[0, 2] * r
     hy = I[1, 0] * p + I[1, 1] * q + I[1, 2] * r
     hz = I[2, 0] * p + I[2, 1] * q + I[2, 2] * r
     tx = M_b[0] - (q * hz - r * hy)
-    ty = M_b[1] - (r * hx - p * hz)
-    tz = M_b[2] - (p * hy - q * hx)
+    ty = M_b[1] - (r * hx - pf * hz)
+    tz = M_b[2] - (pf * hy - q * hx)
     dy[10] = Iinv[0, 0] * tx + Iinv[0, 1] * ty + Iinv[0, 2] * tz
     dy[11] = Iinv[1, 0] * tx + Iinv[1, 1] * ty + Iinv[1, 2] * tz
     dy[12] = Iinv[2, 0] * tx + Iinv[2, 1] * ty + Iinv[2, 2] * tz
-    # attitude: q' = 1/2 q (x) (0, w)
+    # attitude: q' = 1/2 q (x) (0, W)
     qw, qx, qy, qz = y[6], y[7], y[8], y[9]
-    dy[6] = -0.5 * (qx * p + qy * q + qz * r)
-    dy[7] = 0.5 * (qw * p + qy * r - qz * q)
-    dy[8] = 0.5 * (qw * q + qz * p - qx * r)
-    dy[9] = 0.5 * (qw * r + qx * q - qy * p)
+    dy[6] = -0.5 * (qx * pf + qy * q + qz * r)
+    dy[7] = 0.5 * (qw * pf + qy * r - qz * q)
+    dy[8] = 0.5 * (qw * q + qz * pf - qx * r)
+    dy[9] = 0.5 * (qw * r + qx * q - qy * pf)
     # a wind-tunnel mount replaces the rotational and translational equations
     # (cadra.dynamics.modes); free flight: unchanged
     constrain(y, phys, R, F_b, M_b, dy)

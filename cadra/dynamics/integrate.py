@@ -144,8 +144,20 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
             out[j, i] = y[i]
 
 
-#: work limit of one adaptive run: ~50 times what a 16-station shot needs at tolerance 1e-8
+#: work limit of one adaptive run: at least ~50 times what a 16-station shot needs at
+#: tolerance 1e-8, and :data:`EVALS_PER_SECOND` per second of the record it spans, so the
+#: budget grows with the record and only a runaway integration meets it
 MAX_ADAPTIVE_EVALS = 150_000
+EVALS_PER_SECOND = 3_000_000
+
+
+@njit(cache=True)
+def adaptive_budget(t0, t_out):
+    """The derivative evaluations one adaptive run from ``t0`` to ``t_out`` may take."""
+    span = 0.0
+    if t_out.shape[0] > 0:
+        span = max(t_out[-1], t0) - min(t_out[0], t0)
+    return max(MAX_ADAPTIVE_EVALS, int(EVALS_PER_SECOND * span))
 
 
 @njit(cache=True)
@@ -183,7 +195,7 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
     where the dynamics are rough, e.g. at the kinks of Table 4's ``max(...)`` pitch-damping
     forms, where fixed-step RK4 loses its order (docs/dynamics.md).
 
-    A run that needs more than ``MAX_ADAPTIVE_EVALS`` derivative evaluations (a tumbling or
+    A run that needs more than :func:`adaptive_budget` derivative evaluations (a tumbling or
     diverging trajectory, e.g. from absurd starting values) or meets a non-finite state stops;
     its remaining outputs are NaN, so a caller sees a failed prediction, never a hang.
 
@@ -196,6 +208,7 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
     y2 = np.empty(N_STATE, dtype=y0.dtype)
     n_out = t_out.shape[0]
     n_eval = 0
+    budget = adaptive_budget(t0, t_out)
     split = 0
     while split < n_out and t_out[split] < t0:
         split += 1
@@ -228,7 +241,7 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
                           plane, scratch, coef, stack, k1, k2, k3, k4, tmp)
                 n_eval += 12
                 err = _doubling_error(y1, y2, tol_pos, tol_ang, tau)
-                if n_eval > MAX_ADAPTIVE_EVALS or not np.isfinite(err):
+                if n_eval > budget or not np.isfinite(err):
                     for jj in range(n_out):
                         for i in range(N_STATE):
                             out[jj, i] = np.nan

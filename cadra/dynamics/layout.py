@@ -31,11 +31,18 @@ index    meaning
 23-25    cg offset from the aerodynamic moment reference point, body axes, m [effect]
 26       test mode code (``MODE_*`` below; :mod:`cadra.dynamics.modes`)
 27-29    pivot (gimbal centre, pivot or bearing axis point) minus the nominal cg, body axes, m
+30       attitude frame code (``FRAME_*`` below): what the quaternion and the rates' axes are
 =======  ===================================================================================
 
 The aerodynamic model's moment coefficients are about the moment reference point, which is the
 nominal cg of the shot file; a non-zero cg offset (the "lateral cg offset" effect) moves the true
 cg away from it and adds ``-offset x F`` to the moment about the cg.
+
+The attitude frame (docs/dynamics.md, "The non-rolling frame"): with ``FRAME_BODY`` the
+quaternion is the body's own and (p, q, r) are about its axes. With ``FRAME_NONROLLING`` (a
+body of revolution whose physics does not depend on its roll angle) the quaternion is that of a
+frame whose x axis is the body's axis but which does not roll with it: it turns at (0, q, r),
+and (p, q, r) are the body's rates along that frame's axes. The body's spin p then sets no step.
 """
 
 from __future__ import annotations
@@ -60,7 +67,8 @@ P_RHO_GRAD = 22
 P_CG_OFFSET = 23
 P_MODE = 26
 P_PIVOT = 27
-N_PHYS = 30
+P_FRAME = 30
+N_PHYS = 31
 
 #: angle-plane codes of an aerodynamic model (see docs/conventions.md)
 PLANE_ALPHA_BETA = 0
@@ -73,3 +81,7 @@ MODE_FREE = 0
 MODE_GIMBAL = 1
 MODE_PITCH = 2
 MODE_ROLL = 3
+
+#: attitude-frame codes (``phys[P_FRAME]``): the body's own axes, or the non-rolling frame
+FRAME_BODY = 0
+FRAME_NONROLLING = 1

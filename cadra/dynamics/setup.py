@@ -16,10 +16,13 @@ from cadra.conventions import G0, body_to_facility_matrix
 from cadra.dynamics.effects import Effects
 from cadra.dynamics.integrate import propagate
 from cadra.dynamics.layout import (
+    FRAME_BODY,
+    FRAME_NONROLLING,
     N_PHYS,
     N_STATE,
     P_CG_OFFSET,
     P_D,
+    P_FRAME,
     P_G,
     P_INERTIA,
     P_MASS,
@@ -46,6 +49,12 @@ DT_MAX_DEFAULT = 2.0e-4
 DT_MAX_TRUTH = 2.5e-5
 
 _PLANES = {"alpha_beta": PLANE_ALPHA_BETA, "sigma": PLANE_SIGMA}
+#: attitude frames (docs/dynamics.md, "The non-rolling frame")
+FRAMES = {"body": FRAME_BODY, "non_rolling": FRAME_NONROLLING}
+#: flight variables whose value depends on where the body's roll puts its transverse axes
+ROLL_VARIABLES = frozenset({"alpha", "beta", "phi", "q_hat", "r_hat"})
+#: relative tolerance of "the same in every transverse direction" (inertia, offsets)
+_AXISYMMETRIC_RTOL = 1e-9
 
 
 def plane_code(angle_plane: str) -> int:
@@ -72,6 +81,9 @@ class RigidBody:
     effects : optional unmodelled physics (:class:`cadra.dynamics.effects.Effects`).
     mode : how the model is tested (:class:`cadra.dynamics.modes.TestMode`): free flight in a
         range (default) or a tunnel's stream, or on a gimbal, pitch pivot or roll bearing.
+    attitude_frame : ``"body"`` (default: the state's quaternion and rates are the body's) or
+        ``"non_rolling"`` (a body of revolution integrated in a frame that does not roll with
+        it, so its spin sets no step; :func:`non_rolling_obstacle` says when that is exact).
     """
 
     mass_kg: float
@@ -84,8 +96,12 @@ class RigidBody:
     gravity_m_s2: float = G0
     effects: Effects = field(default_factory=Effects)
     mode: TestMode = field(default_factory=TestMode)
+    attitude_frame: str = "body"
 
     def __post_init__(self):
+        if self.attitude_frame not in FRAMES:
+            raise ValueError(f"attitude_frame must be one of {sorted(FRAMES)}, got "
+                             f"{self.attitude_frame!r}")
         I = np.asarray(self.inertia_body_kg_m2, dtype=float)
         if I.shape != (3, 3) or not np.allclose(I, I.T, rtol=1e-12, atol=0):
             raise ValueError("inertia_body_kg_m2 must be a symmetric 3x3 tensor")
@@ -126,11 +142,64 @@ class RigidBody:
         p[P_CG_OFFSET:P_CG_OFFSET + 3] = e.cg_offset_body_m
         p[P_MODE] = self.mode.code
         p[P_PIVOT:P_PIVOT + 3] = self.mode.pivot_from_cg_body_m
+        p[P_FRAME] = FRAMES[self.attitude_frame]
         return p
+
+    def with_frame(self, attitude_frame: str) -> RigidBody:
+        """The same body and air integrated in another attitude frame."""
+        return RigidBody(**{**self.__dict__, "attitude_frame": attitude_frame})
 
     def ref_from_cg_body_m(self) -> np.ndarray:
         """Body reference point minus the TRUE cg (nominal cg + cg-offset effect), body axes."""
         return -(self.cg_from_ref_body_m + np.asarray(self.effects.cg_offset_body_m))
+
+
+def non_rolling_obstacle(phys, program, phys_dirs=(), ref_from_cg_body_m=None) -> str:
+    """Why the non-rolling frame would not be exact for these physics, or "" when it is.
+
+    The frame drops the body's roll from the attitude, which is exact when nothing depends on
+    where the roll puts the body's transverse axes: a free flight (no mount), an inertia
+    tensor the same about every transverse axis (no products), no lateral cg offset (nor a
+    lateral reference point, ``ref_from_cg_body_m``), a total-angle (sigma) aerodynamic model
+    that reads none of :data:`ROLL_VARIABLES`, and no ``phys_dirs`` (sensitivity directions,
+    e.g. a gap candidate's lateral cg offset) that would change any of that.
+    """
+    rows = [np.asarray(phys).real] + [np.abs(np.asarray(d, dtype=float)) for d in phys_dirs]
+    ph = rows[0]
+    if program.angle_plane != "sigma":
+        return "the aerodynamic model is not a total-angle (sigma) model"
+    roll_vars = sorted(program.variables_read() & ROLL_VARIABLES)
+    if roll_vars:
+        return f"the aerodynamic model reads {', '.join(roll_vars)}"
+    if int(round(ph[P_MODE])) != 0:
+        return "the model is held by a mount"
+    I = ph[P_INERTIA:P_INERTIA + 9].reshape(3, 3)
+    tol = _AXISYMMETRIC_RTOL * abs(I[1, 1])
+    if (np.abs(I - np.diag(np.diag(I))).max() > tol or abs(I[1, 1] - I[2, 2]) > tol
+            or any(np.any(d[P_INERTIA:P_INERTIA + 9] != 0) for d in rows[1:])):
+        return "the inertia tensor is not that of a body of revolution"
+    if any(np.any(row[P_CG_OFFSET + 1:P_CG_OFFSET + 3] != 0) for row in rows):
+        return "the cg is off the axis"
+    if ref_from_cg_body_m is not None and np.any(
+            np.abs(np.asarray(ref_from_cg_body_m, dtype=float)[1:]) > 1e-12):
+        return "the reference point is off the axis"
+    return ""
+
+
+#: largest roll per step |p| h at which the simulator keeps the body's own frame
+SPIN_STEP_LIMIT = 0.05
+
+
+def simulation_frame(rigid: RigidBody, program, spin_rad_s: float, step_s: float,
+                     roll_needed: bool) -> RigidBody:
+    """``rigid`` in the frame a simulation integrates in: the non-rolling frame where the
+    body's spin would limit the step (|p| h > :data:`SPIN_STEP_LIMIT`), nothing needs its roll
+    angle (``roll_needed``: e.g. a finned outline to render) and the frame is exact
+    (:func:`non_rolling_obstacle`); else the body's own."""
+    if (roll_needed or abs(spin_rad_s) * step_s <= SPIN_STEP_LIMIT
+            or non_rolling_obstacle(rigid.phys(), program, (), rigid.ref_from_cg_body_m())):
+        return rigid
+    return rigid.with_frame("non_rolling")
 
 
 def rigid_body_from_mass(mass_kg: float, cg_model_m, inertia_model_kg_m2, d_m: float,
@@ -181,6 +250,8 @@ def propagate_states(y0, t0: float, times, phys, program, params,
                          f"{y0.shape}, {phys.shape}")
     if not (dt_max > 0):
         raise ValueError("dt_max must be positive")
+    if phys.real[P_FRAME] >= 0.5 and (why := non_rolling_obstacle(phys, program)):
+        raise ValueError(f"the non-rolling frame is not exact here: {why}")
     dtype = (np.complex128 if any(np.iscomplexobj(a) for a in (y0, phys, params))
              else np.float64)
     order = np.argsort(times, kind="stable")

@@ -102,7 +102,9 @@ def truth_table(times, states, body: RigidBody, stations=None) -> pd.DataFrame:
             "x_m": obs["x_m"][k], "y_m": obs["y_m"][k], "z_m": obs["z_m"][k],
             "theta_deg": np.degrees(obs["theta_rad"][k]),
             "psi_deg": np.degrees(obs["psi_rad"][k]),
-            "phi_deg": np.degrees(obs["phi_rad"][k]),
+            # the non-rolling frame does not carry the body's roll angle
+            "phi_deg": (np.nan if body.attitude_frame == "non_rolling"
+                        else np.degrees(obs["phi_rad"][k])),
             "q0": y[6], "q1": y[7], "q2": y[8], "q3": y[9],
             "x_cg_m": y[0], "y_cg_m": y[1], "z_cg_m": y[2],
             "vx_m_s": y[3], "vy_m_s": y[4], "vz_m_s": y[5],

@@ -36,7 +36,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cadra.aero import AeroModel
+from cadra.dynamics.layout import FRAME_BODY, FRAME_NONROLLING, P_FRAME
 from cadra.dynamics.observe import air_angles, observe
+from cadra.dynamics.setup import FRAMES, non_rolling_obstacle
 from cadra.fitting.extras import (
     Extra,
     add_station_terms,
@@ -163,6 +165,7 @@ class FitProblem:
         object.__setattr__(self, "epoch_states", tuple(states))
         object.__setattr__(self, "extras", extras)
         object.__setattr__(self, "local_free", lf)
+        object.__setattr__(self, "_frames", tuple(self._frame_of(k) for k in range(len(shots))))
 
     # ------------------------------------------------------------------ layout
 
@@ -258,12 +261,32 @@ class FitProblem:
 
     # ------------------------------------------------------------------ physics
 
+    def _frame_of(self, k: int) -> int:
+        """Shot k's attitude frame: the non-rolling one where the fit does not use the
+        body's roll (its roll neither measured nor fitted) and the frame is exact for its
+        physics and every physics extra that applies to it (docs/dynamics.md, "The
+        non-rolling frame"); else the body's own."""
+        sd = self.shots[k]
+        if sd.has_roll or LOCAL_NAMES.index("rot_x_rad") in self.local_free[k]:
+            return FRAME_BODY
+        dirs = [e.phys_direction for e in self.extras if e.is_phys and e.applies(sd.shot_id)]
+        why = non_rolling_obstacle(sd.rigid.phys(), self.model.compile(), dirs,
+                                   sd.rigid.ref_from_cg_body_m())
+        return FRAME_BODY if why else FRAME_NONROLLING
+
+    @property
+    def frames(self) -> tuple[str, ...]:
+        """Each shot's attitude frame, ``"body"`` or ``"non_rolling"``."""
+        names = {v: k for k, v in FRAMES.items()}
+        return tuple(names[f] for f in self._frames)
+
     def held_physics(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Shot k's physics and reference point with the held extras on (the nominal point
         of the free extras)."""
         sd = self.shots[k]
         held = self.held_extras
         phys0 = sd.rigid.phys()
+        phys0[P_FRAME] = self._frames[k]
         phys_held = shot_phys(phys0, held, [e.value for e in held], sd.shot_id)
         return phys_held, shot_ref(sd.rigid.ref_from_cg_body_m(), phys0, phys_held)
 
@@ -364,6 +387,9 @@ class FitProblem:
             n_more = 0 if more is None else len(more)
             if n_more:
                 dirs += list(more)
+                if phys[P_FRAME] != FRAME_BODY and non_rolling_obstacle(phys, program, more):
+                    phys = phys.copy()
+                    phys[P_FRAME] = FRAME_BODY     # e.g. a gap candidate's lateral cg offset
             pred, jac, y = predict_with_jacobian(
                 initial_states[k], self.epochs[k], sd.t_s, phys, program, params, ref, lf,
                 aero_idx, self.integration, phys_dirs=np.array(dirs) if dirs else None,

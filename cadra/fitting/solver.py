@@ -32,7 +32,7 @@ import numpy as np
 
 from cadra.aero import AeroModel
 from cadra.channels import residual
-from cadra.dynamics.integrate import MAX_ADAPTIVE_EVALS
+from cadra.dynamics.integrate import EVALS_PER_SECOND, MAX_ADAPTIVE_EVALS
 from cadra.fitting.extras import Extra
 from cadra.fitting.priors import prior_chi2, prior_terms
 from cadra.fitting.problem import FitProblem, default_local_free
@@ -74,6 +74,21 @@ class _ShotState:
     mask: np.ndarray             # (n, N_CHANNELS)
     pred: np.ndarray | None = None
     jac: np.ndarray | None = None
+
+
+def _frame_note(problem) -> str:
+    """Why a fast-spinning shot's steps are short: it integrates in its body frame (its roll
+    measured or fitted, or physics the non-rolling frame cannot carry), or ""."""
+    from cadra.dynamics.setup import non_rolling_obstacle
+
+    for sd, y, frame in zip(problem.shots, problem.epoch_states, problem.frames, strict=True):
+        if frame == "body" and abs(y[10]) * problem.integration.h_max_s > 1.0:
+            why = (non_rolling_obstacle(sd.rigid.phys(), problem.model.compile(), (),
+                                        sd.rigid.ref_from_cg_body_m())
+                   or "its roll is measured or fitted")
+            return (f" (shot {sd.shot_id} spins at {y[10]:.4g} rad/s and is integrated in "
+                    f"its body frame because {why}, so its spin sets the step)")
+    return ""
 
 
 def _weighted(st: _ShotState, pred: np.ndarray) -> np.ndarray:
@@ -316,11 +331,12 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
             return build_result(problem, params, states, "failed", message, history,
                                 warnings, iterations, t_start, options, lam, xvals)
         if not math.isfinite(chi2):
-            message = ("the starting point gives a non-finite prediction or Jacobian (the "
-                       "trajectory diverges or tumbles, or a run needs more than "
-                       f"{MAX_ADAPTIVE_EVALS:,} derivative evaluations: a long record at a "
-                       f"small Integration.h_max_s, here {options.integration.h_max_s:g} s); "
-                       "better starting values, or a larger h_max_s, are needed"
+            message = ("the starting point gives a non-finite prediction or Jacobian: the "
+                       "trajectory diverges or tumbles, or a run needs more derivative "
+                       f"evaluations than its budget ({MAX_ADAPTIVE_EVALS:,}, or "
+                       f"{EVALS_PER_SECOND:,} per second of the record if more), i.e. steps "
+                       "far below the motion's time scales"
+                       + _frame_note(problem) + "; better starting values are needed"
                        + model.nonfinite_note(params))
             return build_result(problem, params, states, status, message, history,
                                 warnings, iterations, t_start, options, lam, xvals)

@@ -35,6 +35,7 @@ from cadra.dynamics.setup import (
     RigidBody,
     propagate_states,
     rigid_body_from_mass,
+    simulation_frame,
 )
 from cadra.dynamics.trajectory import Launch, crossing_times, truth_table
 from cadra.facility import Facility
@@ -223,6 +224,9 @@ def simulate_shot(spec: ShotSpec, facility: Facility | None = None) -> Simulated
             raise SpecError(f"aero_values: {exc}") from None
     program = model.compile()
     params = model.values()
+    # a fast-spinning body of revolution flies in the non-rolling frame (docs/dynamics.md)
+    rigid = simulation_frame(rigid, program, spec.launch.p_rad_s, spec.dt_max_s,
+                             roll_needed=body.kind == "finner")
     stations = facility.stations[: spec.n_stations] if spec.n_stations else facility.stations
     ids = [s.id for s in stations]
     for station in spec.station_biases:
