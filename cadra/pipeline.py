@@ -25,7 +25,7 @@ from cadra.aero import AeroModel, resolve_model
 from cadra.calibration.sphere import StationBiasEstimate, estimate_station_biases
 from cadra.fitting import FitOptions, FitResult, fit_shots
 from cadra.fitting.inputs import apply_holds
-from cadra.flight.data import ShotData
+from cadra.flight.data import ShotData, with_launch_spin
 from cadra.flight.starts import start_estimates
 from cadra.gap.score import GapDiagnosis, diagnose_gap
 from cadra.gap.where import where_analysis
@@ -93,7 +93,9 @@ def fit(shots, model: AeroModel | str | os.PathLike, *, hold: Iterable[str] | No
         prior: Iterable[str] | None = None,
         start: str = "auto", auto_start: bool = True, max_iterations: int = 60,
         variance_components: bool = False, options: FitOptions | None = None,
-        progress: bool = False) -> FitResult:
+        progress: bool = False, spin_rad_s: float | None = None,
+        twist_m_per_turn: float | None = None,
+        muzzle_velocity_m_s: float | None = None) -> FitResult:
     """Stage two: fit ``model``'s free parameters and each shot's initial state.
 
     ``shots``: one shot or several (a multi-fit), each a :class:`ShotData` or a stage-one
@@ -105,16 +107,21 @@ def fit(shots, model: AeroModel | str | os.PathLike, *, hold: Iterable[str] | No
     starting values come from (``"auto"``, ``"linear"`` or ``"epicyclic"``,
     :func:`cadra.flight.starts.start_estimates`); ``auto_start=False`` starts from the
     model's own values. ``variance_components``: rescale each channel's sigmas by what its
-    residuals ask for and refit. Returns the :class:`FitResult` (``bool(result)`` is True
-    only when it converged)."""
+    residuals ask for and refit. ``spin_rad_s`` or ``twist_m_per_turn`` (with
+    ``muzzle_velocity_m_s``): the spin every shot was launched at, which no station shows
+    (default: each shot's own, from its shot file's ``[gun]``); the start then puts aliased
+    yaw arms in the spin's frequency bands (docs/spark_range.md). Returns the
+    :class:`FitResult` (``bool(result)`` is True only when it converged)."""
     items = [shots] if isinstance(shots, ShotData | Stage1Result) else list(shots)
-    data = [_shot_data(s) for s in items]
+    data = [with_launch_spin(_shot_data(s), spin_rad_s=spin_rad_s,
+                             twist_m_per_turn=twist_m_per_turn,
+                             muzzle_velocity_m_s=muzzle_velocity_m_s) for s in items]
     if not isinstance(model, AeroModel):
         model = resolve_model(model)
     model = apply_holds(model, hold, free, bound, prior)
     if options is None:
         options = FitOptions(max_iterations=max_iterations, progress=progress)
-    estimates = start_estimates(data, start) if auto_start else None
+    estimates = start_estimates(data, start, model) if auto_start else None
     result, _ = fit_shots(data, model, options=options, auto_start=auto_start,
                           variance_components=variance_components, estimates=estimates)
     return result

@@ -2,7 +2,9 @@
 
 :func:`runs_of_sign` is the Wald-Wolfowitz runs test of a residual sequence's signs (seed 003
 reads runs of sign as evidence of unmodelled terms): the segmented roll fit's segment table
-and the gap diagnosis's sequence tests both use it.
+and the gap diagnosis's sequence tests both use it. :func:`chi2_p_value` and
+:data:`POOR_MINIMUM_P` say when a converged fit (the 6-DOF fit, the classic reduction, the
+roll fit) is far above its noise: converged to a poor minimum.
 """
 
 from __future__ import annotations
@@ -12,6 +14,18 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
+
+#: p-value of chi^2 below which a converged fit is said to have converged to a poor minimum:
+#: noise of the stated sigmas alone leaves residuals this large less than once in a million
+POOR_MINIMUM_P = 1e-6
+
+
+def chi2_p_value(chi2: float, dof: int) -> float:
+    """P(X >= ``chi2``) for X chi^2-distributed with ``dof`` degrees of freedom (NaN without
+    degrees of freedom or a finite chi^2)."""
+    if dof <= 0 or not math.isfinite(chi2):
+        return math.nan
+    return float(stats.chi2.sf(chi2, dof))
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ import numpy as np
 PA_PER_TORR = 101325.0 / 760.0  # 133.32236842...
 M_PER_CM = 1e-2
 M_PER_MM = 1e-3
+M_PER_IN = 0.0254  # the international inch, exactly
 KG_PER_G = 1e-3
 KG_M2_PER_G_CM2 = 1e-7  # 1 g cm^2 = 1e-3 kg * 1e-4 m^2
 S_PER_US = 1e-6
@@ -60,6 +61,7 @@ UNITS = _table(
     Unit("cm", "length", M_PER_CM),
     Unit("mm", "length", M_PER_MM),
     Unit("um", "length", 1e-6, 1e6),
+    Unit("in", "length", M_PER_IN),
     Unit("kg", "mass", 1.0),
     Unit("g", "mass", KG_PER_G),
     Unit("kg_m2", "inertia", 1.0),

@@ -84,14 +84,55 @@ def add_data_options(p, *, model: bool = True) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
 
 
+def add_gun_options(parser) -> None:
+    """--spin, --twist, --muzzle-velocity: the spin a shot was launched at, which no station
+    shows (docs/spark_range.md); they override the shot file's ``[gun]`` table."""
+    parser.add_argument("--spin", action="append", type=number(float), metavar="RAD_S",
+                        help="the spin at launch, rad/s, right-handed about the nose: one for "
+                             "every shot or one per trajectory (default: the shot file's "
+                             "[gun] table)")
+    parser.add_argument("--twist", action="append", type=number(float), metavar="IN_PER_TURN",
+                        help="the gun's rifling twist, inches per turn (negative: left-hand): "
+                             "the spin is 2 pi V / twist at the muzzle velocity; one for every "
+                             "shot or one per trajectory")
+    parser.add_argument("--muzzle-velocity", action="append", type=number(float, 0.0),
+                        metavar="M_S",
+                        help="the muzzle velocity for --twist, m/s (default: the shot file's, "
+                             "else the speed measured in the range)")
+
+
+def with_gun(args, shots: list) -> list:
+    """``shots`` with the spin that --spin or --twist (and --muzzle-velocity) give (the shot
+    files' own otherwise); a count that matches neither one nor the shots is refused."""
+    from cadra.flight.data import with_launch_spin
+    from cadra.units import M_PER_IN
+
+    def per_shot(name):
+        vals = getattr(args, name, None)
+        if not vals:
+            return [None] * len(shots)
+        if len(vals) not in (1, len(shots)):
+            raise ValueError(f"--{name.replace('_', '-')}: give one value for every shot or "
+                             f"one per trajectory ({len(shots)}), not {len(vals)}")
+        return list(vals) * len(shots) if len(vals) == 1 else list(vals)
+
+    spins, twists, speeds = per_shot("spin"), per_shot("twist"), per_shot("muzzle_velocity")
+    return [with_launch_spin(sd, spin_rad_s=p, twist_m_per_turn=None if tw is None
+                             else tw * M_PER_IN, muzzle_velocity_m_s=v)
+            for sd, p, tw, v in zip(shots, spins, twists, speeds, strict=True)]
+
+
 def add_start_option(parser) -> None:
+    add_gun_options(parser)
     parser.add_argument(
         "--start", choices=("auto", "linear", "epicyclic"), default="auto",
         help="where the starting values come from: 'linear', damped sines fitted to theta "
              "and psi (one frequency); 'epicyclic', the epicyclic fit's two arms and the "
              "spin they imply (a spinning body; the sign of C_m_alpha of a gyroscopically "
              "stable one); 'auto', the arms for a shot whose arms show a spin, the damped "
-             "sines otherwise (docs/fitting.md, \"Starting values\")")
+             "sines otherwise; a shot whose spin is known (--spin, --twist or the shot "
+             "file's [gun]) starts from the arms put in the spin's frequency bands "
+             "(docs/fitting.md, \"Starting values\")")
 
 
 def model_of(args):
@@ -115,6 +156,7 @@ def shots_of(args):
     out = load_shots(args.trajectories, args.shot, sigma_time_s=args.sigma_time_s,
                      min_sigma_position_m=args.min_sigma_position_m,
                      min_sigma_angle_deg=args.min_sigma_angle_deg)
+    out = (with_gun(args, out[0]), out[1])
     for name in sorted({s.facility for s in out[0] if s.facility}):
         try:
             found = resolve_facility_path(name).is_file()

@@ -36,7 +36,7 @@ def run(args) -> int:
         shots, trajs = cli.shots_of(args)
         # a fit short of convergence is still diagnosed: diagnose_gap continues it with more
         # budget and, if it still falls short, runs from its best point and says so
-        result, _ = fit_shots(shots, model, estimates=start_estimates(shots, args.start),
+        result, _ = fit_shots(shots, model, estimates=start_estimates(shots, args.start, model),
                               options=FitOptions(max_iterations=args.max_iterations))
         dg = diagnose_gap(result, shots, model, alpha=args.alpha, progress=not cli.quiet(args))
         stage_one = {}

@@ -87,7 +87,7 @@ def run(args) -> int:
             from cadra.fitting.reference import load_reference
 
             reference = load_reference(args.reference)   # before the fit: fail early
-        estimates = None if args.no_auto_start else start_estimates(shots, args.start)
+        estimates = None if args.no_auto_start else start_estimates(shots, args.start, model)
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start,
                                   variance_components=args.variance_components,
@@ -140,7 +140,7 @@ def run(args) -> int:
         print(boot.report())
     cli.say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/"
             + (", bootstrap.csv" if boot is not None else "") + ")")
-    return 0 if result.converged else 1
+    return 0 if result.converged and not result.poor_minimum else 1
 
 
 def print_result(result, args, full: bool = False) -> None:
@@ -148,12 +148,16 @@ def print_result(result, args, full: bool = False) -> None:
     also under -q), then unless -q (or if ``full``) the result's report
     (:meth:`FitResult.report`)."""
     line = result.status_line()
-    if result.converged:
+    if result.poor_minimum:
+        print(f"cadra2 fit: CONVERGED TO A POOR MINIMUM: {line} (not a result to use: a wrong "
+              "minimum, a start in the wrong alias band, or physics the model lacks; cadra2 "
+              "diagnose asks which)", file=sys.stderr)
+    elif result.converged:
         print(line)
     else:
         print(f"cadra2 fit: NOT CONVERGED: {line} (the best point reached is written, marked "
               "as not converged)", file=sys.stderr)
-    if result.converged and result.reduced_chi2 > CHI2_WARN:
+    if result.converged and not result.poor_minimum and result.reduced_chi2 > CHI2_WARN:
         warn("cadra2 fit", f"chi^2/nu = {result.reduced_chi2:.3g} > {CHI2_WARN:g}: the sigmas "
              "or the model do not describe the data; use the scaled or coloured sigmas "
              "(report.md)")
@@ -171,7 +175,8 @@ COMMANDS = (
             "fit, several a multi-fit. Data finer than film level are fitted in two phases (first "
             "with the sigmas floored at 0.1 mm and 0.1 deg, then with stage one's own), each with "
             "its own progress bar. Writes the coefficient table, covariances, residuals, report "
-            "and plots (docs/fitting.md). Exit status 1 if the fit did not converge.",
+            "and plots (docs/fitting.md). Exit status 1 if the fit did not converge, or "
+            "converged to a poor minimum (p(chi^2) < 1e-6).",
             _fit_arguments),
 )
 

@@ -5,6 +5,7 @@ each shot, written and printed by :mod:`cadra.report.motion`.
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 from pathlib import Path
@@ -14,17 +15,29 @@ from cadra.cli._format import number, warn
 from cadra.cli._inputs import Command
 
 PROG = "cadra2 motion"
+RATES = ("d/2V", "d/V")
 
 
 def _motion_arguments(p) -> None:
     cli.add_data_options(p, model=False)
     p.add_argument("--variable", choices=("distance", "time"), default="distance",
                    help="the fit's independent variable")
-    p.add_argument("--spin", action="append", type=number(float), metavar="RAD_S",
-                   help="the model's roll rate p, rad/s, right-handed about the nose (stage "
-                        "one does not see roll): one value for every shot or one per "
-                        "trajectory; gives the tricyclic fit (trim arm at p) and C_mp_alpha "
-                        "(default: none, epicyclic fit)")
+    cli.add_gun_options(p)
+    p.add_argument("--trim", action=argparse.BooleanOptionalAction, default=None,
+                   help="the tricyclic trim arm at the spin (default: with --spin, not with "
+                        "--twist or a shot file's [gun]: a gun-launched body of revolution "
+                        "has no trim, and on a spark range the arm aliases onto the others)")
+    p.add_argument("--curvature", action="store_true",
+                   help="the 12-constant form: each arm's frequency changes linearly along "
+                        "the record (p / V grows along a long bullet record)")
+    p.add_argument("--rates", choices=tuple(RATES), default=None,
+                   help="the rate normalisation of the damping and Magnus coefficients "
+                        "written: CADRA's d/2V (rates q d / 2V, p d / 2V) or McCoy's and "
+                        "BRL's d/V (half the d/2V values); default: the --model's, else d/2V")
+    p.add_argument("--model", default=None,
+                   help="an aero model (bundled name or file) whose C_m_alpha tells apart "
+                        "frequency bands of equal sum and whose rate normalisation is the "
+                        "default of --rates (optional)")
     p.add_argument("--offset", action="store_true",
                    help="fit a constant angle too (a fixed trim)")
     p.add_argument("--nonrolling", action="store_true",
@@ -54,6 +67,9 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from cadra.flight.classic import analyse_shot
+    from cadra.flight.data import launch_spin
+    from cadra.flight.estimates import estimate_motion
+    from cadra.flight.starts import cm_alpha_of
     from cadra.motion import MotionFitError
     from cadra.report.motion import console_lines, write_outputs
 
@@ -62,35 +78,64 @@ def run(args) -> int:
         if args.path_degree < 1:
             raise ValueError(f"--path-degree: at least 1, got {args.path_degree}")
         shots, _ = cli.shots_of(args)
-        spins = _spins(args, len(shots))
+        given = _spins(args, len(shots))
+        model, rates = _model_and_rates(args)
+        guess = None if model is None else cm_alpha_of(model)
         results = []
-        for shot, spin in tqdm(list(zip(shots, spins, strict=True)), desc="motion",
+        for shot, spin in tqdm(list(zip(shots, given, strict=True)), desc="motion",
                                disable=cli.quiet(args) or len(shots) < 2, file=sys.stderr,
                                leave=False):
             if not shot.has_angles:
                 raise ValueError(f"{shot.source.get('trajectory_file', shot.shot_id)}: no "
                                  "measured angles (theta, psi): nothing to reduce")
+            trim = args.trim if args.trim is not None else spin is not None
+            if spin is None:          # --twist or the shot file's [gun]
+                known = launch_spin(shot, estimate_motion(shot).speed_m_s)
+                spin = known if math.isfinite(known) else None
             try:
                 results.append(analyse_shot(
                     shot, variable=args.variable, spin=spin, offset=args.offset,
                     nonrolling=args.nonrolling, degree=args.path_degree, window=args.window,
-                    step=args.step))
+                    step=args.step, trim=trim and spin is not None,
+                    curvature=args.curvature, cm_alpha_guess=guess))
             except MotionFitError as exc:
                 raise ValueError(f"{shot.shot_id}: {exc}") from None
     except cli.REFUSED as exc:
         return cli.refused(PROG, exc)
-    files = write_outputs(results, out, overwrite=args.overwrite, command=vars(args))
+    files = write_outputs(results, out, overwrite=args.overwrite, command=vars(args),
+                          rates=rates)
     for r in results:
         for w in r.warnings:
             warn(PROG, w)
     if not cli.quiet(args):
-        print("\n".join(console_lines(results, verbose=cli.verbose(args))))
+        print("\n".join(console_lines(results, verbose=cli.verbose(args), rates=rates)))
     n_kb = sum(r.kb is not None for r in results)
     print(f"motion: {len(results)} shot(s) reduced ({results[0].fit.variable}); "
           f"linear-theory coefficients for {sum(r.coefficients is not None for r in results)}, "
           f"K-B reduction for {n_kb}")
     cli.say(args, f"wrote {out}/ ({', '.join(files)})")
+    from cadra.stats import POOR_MINIMUM_P
+
+    poor = [r.shot_id for r in results if r.fit.chi2_p_value < POOR_MINIMUM_P]
+    if poor:
+        print(f"{PROG}: POOR MINIMUM: the arms of {', '.join(poor)} leave residuals far above "
+              f"the angle sigmas (p(chi^2) < {POOR_MINIMUM_P:g}; the warnings say where): not "
+              "a reduction to use", file=sys.stderr)
+        return 1
     return 0
+
+
+def _model_and_rates(args):
+    """The --model (or None) and the rate normalisation: --rates, else the model's own
+    (a model whose reference says its rates are d / V, as the m80's), else d/2V."""
+    if args.model is None:
+        return None, args.rates or "d/2V"
+    from cadra.aero import resolve_model
+
+    model = resolve_model(args.model)
+    own = str(model.reference.get("rate_normalisation", "")) if model.reference else ""
+    default = "d/V" if "d / V" in own and "d / 2V" not in own else "d/2V"
+    return model, args.rates or default
 
 
 #: the subcommands this module runs

@@ -90,7 +90,7 @@ def run(args) -> int:
         shots, _ = cli.shots_of(args)
         result, _ = fit_shots(shots, model, options=FitOptions(
             max_iterations=args.max_iterations, progress=not cli.quiet(args)),
-            estimates=start_estimates(shots, "auto"))
+            estimates=start_estimates(shots, "auto", model))
         if not result:
             raise ValueError(f"the fit did not converge ({result.message}); a plan needs the "
                              "group's converged fit")

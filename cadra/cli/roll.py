@@ -78,7 +78,11 @@ def run(args) -> int:
     write_roll(fit, tables, records, alpha, out, overwrite=args.overwrite)
     for note in fit.notes:
         print(f"{PROG}: warning: {note}", file=sys.stderr)
-    if res.converged and res.reduced_chi2 > CHI2_WARN:
+    if res.poor_minimum:
+        print(f"{PROG}: CONVERGED TO A POOR MINIMUM: p(chi^2) = {res.chi2_p_value:.2g}: the "
+              f"residuals are far above the roll sigmas ({res.worst_residual()}); not a "
+              "result to use", file=sys.stderr)
+    elif res.converged and res.reduced_chi2 > CHI2_WARN:
         print(f"{PROG}: warning: chi^2/nu = {res.reduced_chi2:.3g} > {CHI2_WARN:g}: the roll "
               "sigmas or the model do not describe the record (sigmas too small?); the "
               "coefficients' sigmas are not to be trusted as they stand", file=sys.stderr)
@@ -90,7 +94,8 @@ def run(args) -> int:
     if not cli.quiet(args):
         print(f"wrote {out}/ (report.md, table2, table3, paper_table3, segments, steady_spins "
               "(.csv, .md), roll_fit.png)")
-    return 0 if res.converged else 1        # the best point is written, marked so
+    # the best point is written, marked so
+    return 0 if res.converged and not res.poor_minimum else 1
 
 
 #: the subcommands this module runs

@@ -11,6 +11,7 @@ Public API (the measurements it fits, :class:`~cadra.flight.data.ShotData`, are
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -74,6 +75,13 @@ def fit_shots(shots: Sequence[ShotData], model: AeroModel, *,
     return result, start
 
 
+def _finest(shot: ShotData, channels) -> float:
+    """The smallest sigma of the measured entries of ``channels`` (inf: none measured);
+    a channel the shot does not measure has no sigma and is not looked at."""
+    sig = shot.sigma[:, channels][shot.mask[:, channels]]
+    return float(sig.min()) if sig.size else math.inf
+
+
 def _fit_shots(shots, model, *, options, auto_start, initial, continuation, local_free,
                extras, estimates=None):
     """:func:`fit_shots` without the variance components."""
@@ -81,11 +89,16 @@ def _fit_shots(shots, model, *, options, auto_start, initial, continuation, loca
     shots = list(shots)
     check_one_body(shots)          # at once, not after the starting values
     staged = continuation is not None and any(
-        np.nanmin(s.sigma[:, POSITION]) < continuation["position_m"]
-        or (s.has_angles and np.nanmin(s.sigma[:, ANGLE]) < continuation["angle_rad"])
-        for s in shots)
+        _finest(s, POSITION) < continuation["position_m"]
+        or _finest(s, ANGLE) < continuation["angle_rad"] for s in shots)
     # starting values (and the roll grid's chi^2) under the weights of the first stage
     first_shots = [floor_sigmas(s, continuation) for s in shots] if staged else shots
+    if auto_start and initial is None and estimates is None and any(
+            np.isfinite(s.launch_spin_rad_s) or np.isfinite(s.twist_m_per_turn) for s in shots):
+        from cadra.flight.starts import start_estimates
+
+        # a known spin always starts the arms in its bands (docs/spark_range.md)
+        estimates = start_estimates(shots, "auto", model)
     start = starting_model(first_shots, model, estimates) if auto_start else model
     states = list(initial) if initial is not None else initial_states(
         first_shots, start, options.integration, estimates)

@@ -38,6 +38,7 @@ from cadra.channels import residual
 from cadra.fitting.priors import prior_chi2, prior_names, prior_rows
 from cadra.fitting.sensitivity import LOCAL_NAMES
 from cadra.flight.data import CHANNELS
+from cadra.stats import POOR_MINIMUM_P, chi2_p_value
 
 if TYPE_CHECKING:
     from cadra.fitting.problem import FitProblem
@@ -181,6 +182,41 @@ class FitResult:
     @property
     def converged(self) -> bool:
         return self.status == "converged"
+
+    @property
+    def chi2_p_value(self) -> float:
+        """P(chi^2 >= this chi^2) for chi^2 with :attr:`dof` degrees of freedom: how likely
+        noise of the stated sigmas alone leaves residuals this large (NaN without dof)."""
+        return chi2_p_value(self.chi2, self.dof)
+
+    @property
+    def poor_minimum(self) -> bool:
+        """Converged, but to residuals its noise does not allow: p(chi^2) below
+        :data:`POOR_MINIMUM_P` (a wrong minimum, an aliased start, or physics the model
+        lacks: the gap diagnosis asks which)."""
+        p = self.chi2_p_value
+        return self.converged and math.isfinite(p) and p < POOR_MINIMUM_P
+
+    @property
+    def verdict(self) -> str:
+        """:attr:`status`, or ``"poor_minimum"`` for a converged fit far above its noise
+        (:attr:`poor_minimum`): what reports and command lines say."""
+        return "poor_minimum" if self.poor_minimum else self.status
+
+    def worst_residual(self) -> str:
+        """Where the residuals are largest: the channel with the largest share of chi^2 and
+        the measurement with the largest normalized residual (shot, station, channel)."""
+        r = self.residuals
+        if not len(r) or "normalized" not in r:
+            return "no residuals"
+        z = r["normalized"].to_numpy(float)
+        share = (r.assign(z2=z**2).groupby("channel")["z2"].sum() / np.nansum(z**2))
+        ch = str(share.idxmax())
+        k = int(np.nanargmax(np.abs(z)))
+        row = r.iloc[k]
+        return (f"channel {ch} carries {100 * share.max():.0f} % of chi^2; the largest "
+                f"residual is {z[k]:+.1f} sigma, shot {row['shot_id']} station "
+                f"{int(row['station'])} channel {row['channel']}")
 
     @property
     def dof(self) -> int:

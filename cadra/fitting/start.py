@@ -26,8 +26,8 @@ from cadra.aero import AeroModel
 from cadra.channels import residual
 from cadra.conventions import axis_from_inclinations, body_to_facility_matrix, quat_from_axis_roll
 from cadra.dynamics.setup import state_from_reference
-from cadra.fitting.problem import FitProblem
-from cadra.fitting.sensitivity import Integration
+from cadra.fitting.problem import FitProblem, default_local_free
+from cadra.fitting.sensitivity import LOCAL_NAMES, Integration
 from cadra.flight.data import CHANNELS, FitDataError, ShotData
 from cadra.flight.estimates import (
     MotionEstimate,
@@ -39,6 +39,9 @@ from cadra.motion import FlightConditions, planar_coefficients
 
 #: roll angles (deg) tried for a shot whose roll the images do not show
 ROLL_GRID_DEG = tuple(range(0, 360, 30))
+#: relative spins a known spin's start tries (-6 % to +3 % of the muzzle spin, 0.25 % apart:
+#: a step moves the spark range's fast arm by under half a radian over the record)
+SPIN_SCAN = np.arange(-0.06, 0.03 + 1e-9, 0.0025)
 #: the axis-inclination channels (columns of ``ShotData.meas``)
 _THETA, _PSI = CHANNELS.index("theta"), CHANNELS.index("psi")
 _PHI = CHANNELS.index("phi")
@@ -124,6 +127,11 @@ def starting_model(shots: Sequence[ShotData], model: AeroModel,
                             0.2 * abs(cma) + 1e-3))
             targets.append((lambda p: float(model.evaluate(**point, params=p)["Cm"]), 0.0,
                             0.05 * abs(cma) + 1e-4))
+    cla_given = mean_finite([e.cl_alpha for e in est])
+    if "CL" in model.coefficients and np.isfinite(cla_given) and sigma_plane:
+        # the swerve's lift slope (a known spin's arms, epicyclic_estimates): secant slope
+        targets.append((lambda p: float(model.evaluate(**point, params=p)["CL"]) / angle,
+                        cla_given, 0.1 * abs(cla_given) + 1e-3))
     if "Cmq" in model.coefficients and (np.isfinite(lp) or np.isfinite(cmq_given)):
         cmq = float(np.clip(cmq_given if np.isfinite(cmq_given)
                             else planar(0.0, lp, I_yy)[1], -20, 20))
@@ -200,10 +208,17 @@ def _roll_and_rate(shot: ShotData) -> tuple[float, float]:
 
 
 def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
-                     spin_rad_s: float = 0.0) -> list[np.ndarray]:
+                     spin_rad_s: float = 0.0, axis_rate_F=None,
+                     axis_angles=None, cg_lateral=None) -> list[np.ndarray]:
     """Starting states at the epoch for each roll angle of the grid (one if no angles),
     spinning at ``spin_rad_s`` about the measured axis (stage one does not see roll: 0 unless
-    an estimate gives it, :class:`MotionEstimate`).
+    an estimate gives it, :class:`MotionEstimate`). ``axis_rate_F`` (facility frame, 1/s)
+    replaces the measured angles' local slope as the axis's rate of turn (an estimate's
+    :attr:`MotionEstimate.axis_rate_F`, from arms a local slope cannot follow), and
+    ``axis_angles`` (theta, psi, rad) the axis itself (the local fit would average an arm
+    that turns between stations away). ``cg_lateral`` ((y, z) m, (vy, vz) m/s) replaces the
+    polynomials' lateral cg position and velocity at the epoch (a swerve fitted with the
+    arms: a spinning bullet's slow arm swerves it by millimetres at half a metre a second).
 
     A shot that measures its roll angle (``phi``: a finned body) starts at its measured roll
     and at the roll rate phi's slope gives, in place of the grid and ``spin_rad_s``. A mounted
@@ -230,6 +245,11 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
         q = quat_from_axis_roll(a, 0.0)
         return [state_from_reference(pos, vel, q, np.zeros(3), ref)]
     a, adot = _axis_and_rate(shot)
+    if axis_angles is not None and np.all(np.isfinite(axis_angles)):
+        a = axis_from_inclinations(*axis_angles)
+    if axis_rate_F is not None and np.all(np.isfinite(axis_rate_F)):
+        adot = np.asarray(axis_rate_F, dtype=float)
+        adot = adot - (adot @ a) * a
     w_F = np.cross(a, adot)                # transverse angular velocity, facility frame
     if shot.has_roll:
         phi0, phi_dot = _roll_and_rate(shot)
@@ -249,7 +269,10 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
     for roll in roll_grid_deg:
         q = quat_from_axis_roll(a, math.radians(roll))
         R = body_to_facility_matrix(q)
-        out.append(state_from_reference(pos, vel, q, R.T @ w_F, ref))
+        y = state_from_reference(pos, vel, q, R.T @ w_F, ref)
+        if cg_lateral is not None:
+            y[1:3], y[4:6] = cg_lateral[0], cg_lateral[1]
+        out.append(y)
     return out
 
 
@@ -271,11 +294,26 @@ def _pivot_rolls(shot: ShotData, a: np.ndarray) -> tuple[float, float]:
 
 
 def initial_state(shot: ShotData, model: AeroModel,
-                  integ: Integration | None = None, spin_rad_s: float = 0.0) -> np.ndarray:
+                  integ: Integration | None = None, spin_rad_s: float = 0.0,
+                  axis_rate_F=None, axis_angles=None, cg_lateral=None) -> np.ndarray:
     """The best starting state of ``shot`` under ``model``: the roll-grid candidate whose
-    predicted trajectory is closest to the measurements (chi^2)."""
+    predicted trajectory is closest to the measurements (chi^2).
+
+    With a known spin's arms (``axis_rate_F`` given) the spin is scanned too, over
+    :data:`SPIN_SCAN` of ``spin_rad_s``: the twist gives the muzzle spin, and the spin at the
+    epoch is a per cent or two lower (it decays, and the muzzle is not where the record
+    starts), which on a spark range is radians of the fast arm's phase by the record's ends.
+    A body whose roll the fit does not use (:func:`default_local_free`) skips the roll grid."""
     integ = integ or Integration()
-    cands = state_candidates(shot, spin_rad_s=spin_rad_s)
+    grid = ROLL_GRID_DEG
+    if LOCAL_NAMES.index("rot_x_rad") not in default_local_free(shot, model):
+        grid = (0.0,)              # turning it about its axis changes nothing measured
+    spins = [spin_rad_s]
+    if axis_rate_F is not None and np.isfinite(spin_rad_s) and spin_rad_s != 0:
+        spins = list(spin_rad_s * (1.0 + SPIN_SCAN))
+    cands = [y for p in spins for y in state_candidates(
+        shot, grid, spin_rad_s=p, axis_rate_F=axis_rate_F, axis_angles=axis_angles,
+        cg_lateral=cg_lateral)]
     if len(cands) == 1:
         return cands[0]
     # the fit's forward model (cadra.fitting.problem), as the solver will predict
@@ -296,9 +334,18 @@ def initial_states(shots: Sequence[ShotData], model: AeroModel,
                    integ: Integration | None = None,
                    estimates: Sequence[MotionEstimate] | None = None) -> list[np.ndarray]:
     """:func:`initial_state` of every shot, spinning at its estimate's spin where given."""
-    spins = [0.0 if e is None or not np.isfinite(e.spin_rad_s) else e.spin_rad_s
-             for e in (estimates if estimates is not None else [None] * len(shots))]
-    return [initial_state(s, model, integ, p) for s, p in zip(shots, spins, strict=True)]
+    est = list(estimates) if estimates is not None else [None] * len(shots)
+    spins = [0.0 if e is None or not np.isfinite(e.spin_rad_s) else e.spin_rad_s for e in est]
+    return [initial_state(s, model, integ, p, None if e is None else e.axis_rate_F,
+                          None if e is None else e.axis_angles, _lateral(e))
+            for s, p, e in zip(shots, spins, est, strict=True)]
+
+
+def _lateral(e):
+    """An estimate's swerve at the epoch as :func:`state_candidates` takes it, or None."""
+    if e is None or e.cg_lateral is None or e.cg_lateral_velocity is None:
+        return None
+    return (np.asarray(e.cg_lateral, dtype=float), np.asarray(e.cg_lateral_velocity, dtype=float))
 
 
 __all__ = ["ROLL_GRID_DEG", "initial_state", "initial_states", "starting_model",

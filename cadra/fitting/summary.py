@@ -14,6 +14,7 @@ import math
 
 from cadra.channels import BY_NAME
 from cadra.numfmt import pm
+from cadra.stats import POOR_MINIMUM_P
 
 #: |correlation| above which the report lists a pair of free aerodynamic parameters
 REPORT_CORRELATION = 0.9
@@ -29,8 +30,13 @@ def status_line(result) -> str:
     its = f"{result.iterations} iterations"
     if phases:
         its += " (" + " + ".join(f"{p['iterations']} {p['label'][5:-1]}" for p in phases) + ")"
-    return (f"{result.status}: {detail}; chi^2/nu = {result.chi2:.4g}/{result.dof} = "
+    line = (f"{result.status}: {detail}; chi^2/nu = {result.chi2:.4g}/{result.dof} = "
             f"{result.reduced_chi2:.3g}, {its}, {result.elapsed_s:.2f} s")
+    if result.poor_minimum:
+        line = (f"poor_minimum: converged to a poor minimum (p(chi^2) = "
+                f"{result.chi2_p_value:.2g} < {POOR_MINIMUM_P:g}: the residuals are far "
+                f"above the noise; {result.worst_residual()}); {line}")
+    return line
 
 
 def phase_lines(result) -> list[str]:

@@ -34,6 +34,7 @@ from cadra.conventions import axis_from_inclinations
 from cadra.flight.data import ShotData
 from cadra.flight.estimates import MotionEstimate, estimate_motion
 from cadra.motion import (
+    Dealiased,
     EpicyclicFit,
     FlightConditions,
     KBResult,
@@ -42,6 +43,7 @@ from cadra.motion import (
     NonplanarRatio,
     Sections,
     SwerveFit,
+    dealias_arms,
     fit_epicyclic,
     kb_reduction,
     lift_from_swerve,
@@ -50,6 +52,7 @@ from cadra.motion import (
     sectional_epicyclic,
 )
 from cadra.numfmt import pm
+from cadra.stats import POOR_MINIMUM_P as POOR_P
 
 #: sectional fits: a window spans this many cycles of the slower arm, at least MIN_WINDOW
 #: points, and the K-B reduction needs at least MIN_SECTIONS windows
@@ -85,6 +88,8 @@ class ShotMotion:
     kb: KBResult | None = None
     kb_lift_corrected: bool = False
     notes: tuple[str, ...] = field(default_factory=tuple)
+    #: the arms' frequency bands from the spin (None: no spin given)
+    alias: Dealiased | None = None
 
     @property
     def s(self) -> np.ndarray:
@@ -107,6 +112,18 @@ class ShotMotion:
             out.append(f"{self.shot_id}: the arms' frequencies give a spin of "
                        f"{pm(lc.spin_from_fit, lc.spin_from_fit_sigma, 'rad/s')}, not the "
                        f"{spin:g} rad/s given")
+        if self.fit.chi2_p_value < POOR_P:
+            fit = self.fit.predict(self.s)
+            if self.fit.nonrolling is not None:
+                fit = fit * np.exp(-1j * self.fit.nonrolling)
+            z = np.hypot((self.beta - fit.real) / self.sigma_beta,
+                         (self.alpha - fit.imag) / self.sigma_alpha)
+            k = int(np.argmax(z))
+            out.append(f"{self.shot_id}: converged to a poor minimum, p(chi^2) = "
+                       f"{self.fit.chi2_p_value:.2g} < {POOR_P:g}: the largest residual is "
+                       f"{z[k]:.1f} sigma at station {int(self.stations[k])}; an arm in the "
+                       "wrong alias band (give the spin: --spin or --twist) or a motion the "
+                       "epicyclic form does not describe")
         if not np.all(np.isfinite(self.fit.sigmas)):
             out.append(f"{self.shot_id}: some fitted constants are not determined by the data "
                        "(infinite sigma)")
@@ -210,7 +227,9 @@ def _check_motion(shot: ShotData, fp) -> None:
 
 def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | None = None,
                  offset: bool = False, nonrolling: bool = False, degree: int = 2,
-                 window: int | None = None, step: int | None = None) -> ShotMotion:
+                 window: int | None = None, step: int | None = None,
+                 trim: bool | None = None, curvature: bool = False,
+                 cm_alpha_guess: float | None = None) -> ShotMotion:
     """The classic reduction of one shot (module doc).
 
     ``variable``: the epicyclic fit's independent variable, ``"distance"`` or ``"time"``;
@@ -218,7 +237,13 @@ def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | No
     roll rate) and C_mpα; ``offset``: fit a constant angle too; ``nonrolling``: seed 002's
     nonrolling-axis correction; ``degree``: of the flight path's polynomials;
     ``window``, ``step``: points per sectional fit and between sections (default: 1.2 cycles
-    of the slower arm, at least 12; a tenth of the window).
+    of the slower arm, at least 12; a tenth of the window). ``trim``: the tricyclic trim arm
+    at the spin (default: whenever a spin is given; a gun-launched body of revolution has
+    none, and on a spark range its arm aliases onto the others). ``curvature``: the
+    12-constant form (each arm's frequency changing linearly, as p/V does along a long
+    record). With a spin, the arms are put into the frequency bands gyroscopic theory gives
+    for it (:func:`cadra.motion.alias.dealias_arms`; ``cm_alpha_guess`` tells apart bands of
+    equal sum), and :attr:`ShotMotion.alias` says what was moved.
 
     Raises ValueError for a record that cannot be reduced (too few stations), and
     :class:`cadra.motion.MotionFitError` when the epicyclic fit does not converge.
@@ -226,8 +251,11 @@ def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | No
     notes: list[str] = []
     fp = flight_path_angles(shot, degree)
     t = fp.t_s
-    need = min_points(spin is not None, offset)
-    form = "tricyclic" if spin is not None else "epicyclic"
+    trim = spin is not None if trim is None else bool(trim)
+    if trim and spin is None:
+        raise ValueError("trim: the trim arm turns at the spin; give the spin")
+    need = min_points(trim, offset)
+    form = "tricyclic" if trim else "epicyclic"
     if t.size < need:
         raise ValueError(f"{_name(shot)}: {t.size} station(s) with position and both angles "
                          f"(theta, psi) measured; the {form} fit needs at least {need}")
@@ -235,9 +263,27 @@ def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | No
     cond, _ = conditions_of(shot, spin or 0.0, variable)
     s = fp.x_m if variable == "distance" else t
     per_s = cond.speed_m_s if variable == "distance" else 1.0
-    trim = None if spin is None else spin / per_s
-    fit = fit_epicyclic(s, fp.alpha, fp.beta, fp.sigma_alpha, fp.sigma_beta, trim_rate=trim,
-                        offset=offset, nonrolling=nonrolling, variable=variable)
+    # the 12-constant form refers its frequencies to the record's middle: the coefficients
+    # are then those of the middle, not extrapolated along omega-dot to the first station
+    fit = fit_epicyclic(s, fp.alpha, fp.beta, fp.sigma_alpha, fp.sigma_beta,
+                        trim_rate=spin / per_s if trim else None, offset=offset,
+                        curvature=curvature, nonrolling=nonrolling, variable=variable,
+                        s_ref=0.5 * (s[0] + s[-1]) if curvature else None)
+    alias = None
+    if spin:
+        _, _, ix_over_i = cond.scales()
+        guess = None
+        if cm_alpha_guess is not None and np.isfinite(cm_alpha_guess):
+            s_m = cond.scales()[0]
+            guess = cm_alpha_guess / (s_m * per_s**2)
+        try:
+            alias = dealias_arms(fit, s, fp.alpha, fp.beta, fp.sigma_alpha, fp.sigma_beta,
+                                 expected_sum=ix_over_i * spin / per_s, expected_product=guess)
+            fit = alias.fit
+            if alias.aliased:
+                notes.append(alias.note("m" if variable == "distance" else "s"))
+        except ValueError as exc:
+            notes.append(f"the arms could not be put in the spin's bands: {exc}")
     npr = nonplanar_ratio_of_fit(fit, float(s[0]), float(s[-1]))
     if fp.cg_m[:, 0].size >= 8:
         psig = np.hypot(shot.sigma[fp.keep, 1], shot.sigma[fp.keep, 2]) / math.sqrt(2)
@@ -254,13 +300,13 @@ def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | No
     if np.any(np.abs(shot.rigid.cg_from_ref_body_m[1:]) > 0):
         notes.append("the cg's offset from the axis is not applied to the positions (it needs "
                      "the roll angle, which the images do not show)")
-    sections, kb, corrected = _sectional(fp, fit, lc, cond, spin, window, step, notes)
+    sections, kb, corrected = _sectional(fp, fit, lc, cond, spin, window, step, notes, trim)
     return ShotMotion(shot.shot_id, variable, shot.stations[fp.keep], t, fp.x_m, fp.alpha,
                       fp.beta, fp.sigma_alpha, fp.sigma_beta, fp.gamma, fp.chi, fit, cond, npr,
-                      lc, sw, sections, kb, corrected, tuple(notes))
+                      lc, sw, sections, kb, corrected, tuple(notes), alias)
 
 
-def _sectional(fp: FlightPathAngles, fit, lc, cond, spin, window, step, notes):
+def _sectional(fp: FlightPathAngles, fit, lc, cond, spin, window, step, notes, trim=True):
     """Sectional fits in time and the K-B reduction when the record allows (else a note);
     returns (sections, K-B result, whether the K-B terms were corrected for the lift)."""
     t = fp.t_s
@@ -284,7 +330,8 @@ def _sectional(fp: FlightPathAngles, fit, lc, cond, spin, window, step, notes):
         return None, None, False
     try:
         sec = sectional_epicyclic(t, fp.alpha, fp.beta, fp.sigma_alpha, fp.sigma_beta,
-                                  window=window, step=step, variable="time", trim_rate=spin)
+                                  window=window, step=step, variable="time",
+                                  trim_rate=spin if trim else None)
     except (MotionFitError, ValueError) as exc:
         notes.append(f"sectional fits: not computed ({exc})")
         return None, None, False

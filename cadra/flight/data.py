@@ -83,6 +83,13 @@ class ShotData:
     sigma_t_s: float = 0.0
     source: dict = field(default_factory=dict)
     facility: str = ""
+    #: the spin at the muzzle (rad/s; NaN: not known), from the shot file's ``[gun]``: the
+    #: twist and muzzle velocity or the spin itself. Stage one cannot see a body of
+    #: revolution's spin; the fit's start takes it from here (docs/spark_range.md)
+    launch_spin_rad_s: float = math.nan
+    #: the rifling's twist, m per turn (NaN: not known): with no muzzle velocity the start
+    #: takes the spin as 2 pi V / twist at the speed measured in the range
+    twist_m_per_turn: float = math.nan
 
     def __post_init__(self):
         n = len(self.t_s)
@@ -134,16 +141,16 @@ class ShotData:
 
 
 def _floor(sigma: np.ndarray, floor: dict) -> np.ndarray:
+    """``sigma`` floored; a NaN sigma (a channel not measured) stays NaN."""
     out = sigma.copy()
-    out[:, _POS] = np.fmax(out[:, _POS], floor.get("position_m", 0.0))
-    out[:, _ANG] = np.fmax(out[:, _ANG], floor.get("angle_rad", 0.0))
+    out[:, _POS] = np.maximum(out[:, _POS], floor.get("position_m", 0.0))
+    out[:, _ANG] = np.maximum(out[:, _ANG], floor.get("angle_rad", 0.0))
     return out
 
 
 def floor_sigmas(shot: ShotData, floor: dict) -> ShotData:
     """``shot`` with its sigmas floored at ``floor`` (``{"position_m": .., "angle_rad": ..}``).
-    An unmeasured channel's NaN sigma becomes the floor; the channel stays masked by its NaN
-    measurement."""
+    An unmeasured channel keeps its NaN sigma: it carries no weight and enters nothing."""
     return replace(shot, sigma=_floor(shot.sigma, floor))
 
 
@@ -258,7 +265,56 @@ def shot_data_from_trajectory(traj, shot, *, sigma_t_s: float = 0.0,
         shot_id=shot.shot_id, rigid=rigid_body_from_shot(shot, effects), body_kind=kind,
         stations=table["station"].to_numpy(int), t_s=t_s, meas=meas,
         sigma=_fold_timing(t_s, meas, sigma, sigma_t_s), sigma_t_s=float(sigma_t_s),
-        source=source, facility=str(shot.facility))
+        source=source, facility=str(shot.facility), **gun_fields(shot.gun))
+
+
+def gun_fields(gun) -> dict:
+    """:class:`ShotData`'s spin fields from a shot file's :class:`cadra.io.shotfile.Gun`
+    (or None)."""
+    if gun is None:
+        return {}
+    spin = gun.spin_rad_s()
+    twist = gun.twist_m_per_turn
+    return {"launch_spin_rad_s": spin,
+            "twist_m_per_turn": math.nan if twist is None else float(twist)}
+
+
+def with_launch_spin(shot: ShotData, *, spin_rad_s: float | None = None,
+                     twist_m_per_turn: float | None = None,
+                     muzzle_velocity_m_s: float | None = None) -> ShotData:
+    """``shot`` launched at a known spin: ``spin_rad_s`` itself, or the rifling's
+    ``twist_m_per_turn`` (negative: left-hand) with ``muzzle_velocity_m_s`` (without it the
+    start uses the speed measured in the range), or the shot's own twist with a muzzle
+    velocity. Values not given keep the shot's (its shot file's ``[gun]``)."""
+    if spin_rad_s is not None and twist_m_per_turn is not None:
+        raise ValueError("give the spin or the twist, not both")
+    if spin_rad_s is not None:
+        if not (math.isfinite(spin_rad_s) and spin_rad_s != 0):
+            raise ValueError(f"spin: a finite, non-zero spin in rad/s, got {spin_rad_s!r}")
+        return replace(shot, launch_spin_rad_s=float(spin_rad_s))
+    twist = shot.twist_m_per_turn if twist_m_per_turn is None else float(twist_m_per_turn)
+    if twist_m_per_turn is not None and not (math.isfinite(twist) and twist != 0):
+        raise ValueError(f"twist: a finite, non-zero twist, got {twist_m_per_turn!r}")
+    if muzzle_velocity_m_s is not None and not muzzle_velocity_m_s > 0:
+        raise ValueError(f"muzzle velocity: a positive speed in m/s, got {muzzle_velocity_m_s!r}")
+    if twist_m_per_turn is None and muzzle_velocity_m_s is None:
+        return shot
+    if not math.isfinite(twist):
+        raise ValueError(f"{shot.shot_id}: a muzzle velocity without a twist gives no spin "
+                         "(give the twist too)")
+    spin = (2.0 * math.pi * muzzle_velocity_m_s / twist if muzzle_velocity_m_s is not None
+            else (math.nan if twist_m_per_turn is not None else shot.launch_spin_rad_s))
+    return replace(shot, twist_m_per_turn=twist, launch_spin_rad_s=spin)
+
+
+def launch_spin(shot: ShotData, speed_m_s: float | None = None) -> float:
+    """The shot's spin at launch (rad/s): given, or 2 pi V / twist at ``speed_m_s`` (the speed
+    in the range) when only the twist is known; NaN when neither is."""
+    if np.isfinite(shot.launch_spin_rad_s):
+        return float(shot.launch_spin_rad_s)
+    if np.isfinite(shot.twist_m_per_turn) and speed_m_s is not None:
+        return 2.0 * math.pi * float(speed_m_s) / shot.twist_m_per_turn
+    return math.nan
 
 
 def shot_data_from_truth(truth: pd.DataFrame, rigid: RigidBody, shot_id: str, body_kind: str, *,

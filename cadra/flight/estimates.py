@@ -57,6 +57,30 @@ class MotionEstimate:
     #: epicyclic arms give it as (omega_1 + omega_2) I / I_x. The starting state spins at it
     #: (a gyroscopically stable body started without spin tumbles)
     spin_rad_s: float = math.nan
+    #: the nose axis's rate of turn at the epoch, facility frame (1/s; None: from the
+    #: measured angles' local slope), from the epicyclic arms when a spin put them in their
+    #: frequency bands: on a spark range the fast arm turns more than once between stations,
+    #: which no local slope sees (:func:`cadra.flight.starts.epicyclic_estimates`)
+    axis_rate_F: tuple[float, float, float] | None = None
+    #: the nose axis's inclinations (theta, psi) at the epoch from the same arms (rad; None:
+    #: from the measured angles' local fit, which averages an aliased arm away)
+    axis_angles: tuple[float, float] | None = None
+    #: the cg's lateral position (y, z, m) and velocity (vy, vz, m/s) at the epoch from the
+    #: same arms' swerve (None: from polynomials in time, which miss a swerve of millimetres
+    #: and half a metre a second at the slow arm's frequency)
+    cg_lateral: tuple[float, float] | None = None
+    cg_lateral_velocity: tuple[float, float] | None = None
+    #: what the start did about aliased arms ("" when nothing)
+    alias_note: str = ""
+    #: the lift slope C_Lα the swerve gives (per rad; NaN: none), with a known spin's arms
+    cl_alpha: float = math.nan
+    #: the nose axis's rate of turn at the epoch, facility frame (1/s; None: from the
+    #: measured angles' local slope), from the epicyclic arms when a spin put them in their
+    #: frequency bands: on a spark range the fast arm turns more than once between stations,
+    #: which no local slope sees (:func:`cadra.flight.starts.epicyclic_estimates`)
+    axis_rate_F: tuple[float, float, float] | None = None
+    #: what the start did about aliased arms ("" when nothing)
+    alias_note: str = ""
 
 
 def polyfit_finite(t, v, deg, w=None):
@@ -66,7 +90,10 @@ def polyfit_finite(t, v, deg, w=None):
 
 
 def kinematics_at_epoch(shot: ShotData):
-    """Reference-point position and velocity at the epoch, and the deceleration fit."""
+    """Reference-point position and velocity at the epoch: quadratics in time, and for x a
+    cubic where the record shows one (its coefficient more than 5 sigma from zero: a long
+    record's drag changes the deceleration, and a quadratic then misses the speed at a
+    mid-record epoch by half a metre a second over the spark range's 96 m)."""
     t = shot.t_s
     t0 = t[shot.epoch_index]
     tt = t - t0
@@ -76,10 +103,28 @@ def kinematics_at_epoch(shot: ShotData):
     pos = np.zeros(3)
     vel = np.zeros(3)
     for j in range(3):
-        c = polyfit_finite(tt, shot.meas[:, j], 2)
+        c = _cubic_if_shown(tt, shot.meas[:, j], shot.sigma[:, j]) if j == 0 else None
+        if c is None:
+            c = polyfit_finite(tt, shot.meas[:, j], 2)
         pos[j] = np.polyval(c, 0.0)
         vel[j] = np.polyval(np.polyder(c), 0.0)
     return pos, vel
+
+
+def _cubic_if_shown(t, v, sigma, n_sigma: float = 5.0):
+    """A cubic in ``t`` fitted to ``v`` (weights 1/sigma) when its cubic coefficient is more
+    than ``n_sigma`` sigmas from zero, else None."""
+    ok = np.isfinite(v) & np.isfinite(sigma) & (sigma > 0)
+    if ok.sum() < 8:
+        return None
+    w = 1.0 / sigma[ok]
+    scale = max(float(np.max(np.abs(t[ok]))), 1e-12)
+    A = np.vander(t[ok] / scale, 4) * w[:, None]
+    c, *_ = np.linalg.lstsq(A, v[ok] * w, rcond=None)
+    cov = np.linalg.pinv(A.T @ A)
+    if not abs(c[0]) > n_sigma * np.sqrt(max(cov[0, 0], 0.0)):
+        return None
+    return c / scale ** np.arange(3, -1, -1)
 
 
 def _drag_k(shot: ShotData) -> tuple[float, float]:

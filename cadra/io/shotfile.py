@@ -63,7 +63,15 @@ GYRATION_FRACTION_RANGE = (0.01, 1.0)
 MODEL_SIZE_KEYS = ("d", "diameter", "h", "length", "l")
 
 _TOP_KEYS = ("schema_version", "shot_id", "facility", "notes", "nominal_velocity_m_s",
-             "model", "mass", "range", "test_mode", "stations")
+             "model", "mass", "range", "test_mode", "gun", "stations")
+#: keys of the optional ``[gun]`` table: the launcher's rifling twist (one of the two units;
+#: negative for a left-hand twist) and the muzzle velocity, or the muzzle spin itself
+GUN_KEYS = ("twist_in_per_turn", "twist_m_per_turn", "muzzle_velocity_m_s",
+            "muzzle_spin_rad_s")
+#: accepted twists, m per turn (a 7-inch small-arms barrel to 30 calibres of a large gun)
+TWIST_M_RANGE = (0.02, 20.0)
+#: accepted muzzle spins, rad/s
+SPIN_RAD_S_MAX = 2.0e5
 #: keys of the optional ``[test_mode]`` table (file units; the pivot in model axes)
 TEST_MODE_KEYS = ("kind", "stream_m_s", "pivot_from_cg_cm")
 _INERTIA_COMPONENT_KEYS = {
@@ -110,6 +118,31 @@ class MassProperties:
 
 
 @dataclass(frozen=True)
+class Gun:
+    """How the shot was launched, as far as its spin goes (SI; docs/shot_file.md).
+
+    ``twist_m_per_turn``: the rifling's travel per turn (negative: left-hand), with
+    ``muzzle_velocity_m_s`` the spin at the muzzle p = 2 pi V / twist; or
+    ``muzzle_spin_rad_s`` given directly. The fit's start takes the spin from it
+    (docs/spark_range.md): a spark range's stations cannot show a bullet's spin.
+    """
+
+    twist_m_per_turn: float | None = None
+    muzzle_velocity_m_s: float | None = None
+    muzzle_spin_rad_s: float | None = None
+
+    def spin_rad_s(self, speed_m_s: float | None = None) -> float:
+        """The muzzle spin, rad/s: given, or 2 pi V / twist with the muzzle velocity (or,
+        without one, ``speed_m_s``, e.g. the speed measured in the range); NaN if unknown."""
+        if self.muzzle_spin_rad_s is not None:
+            return float(self.muzzle_spin_rad_s)
+        v = self.muzzle_velocity_m_s if self.muzzle_velocity_m_s is not None else speed_m_s
+        if self.twist_m_per_turn is None or v is None:
+            return math.nan
+        return 2.0 * math.pi * float(v) / float(self.twist_m_per_turn)
+
+
+@dataclass(frozen=True)
 class StationRecord:
     """One station of a shot: spark time (s, from the shot's reference epoch) and images.
 
@@ -140,6 +173,7 @@ class ShotFile:
     nominal_velocity_m_s : optional nominal speed, m/s.
     test_mode : how the model was tested (:class:`cadra.dynamics.modes.TestMode`; default free
         flight in the range). A wind-tunnel record's "stations" are its camera frames.
+    gun : the launcher's twist and muzzle velocity, or the muzzle spin (:class:`Gun`), or None.
     """
 
     shot_id: str
@@ -153,6 +187,7 @@ class ShotFile:
     source_path: str | None = None
     nominal_velocity_m_s: float | None = None
     test_mode: TestMode = field(default_factory=TestMode)
+    gun: Gun | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "stations", tuple(self.stations))
@@ -437,6 +472,7 @@ def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) 
         v_nom = _in_range(_number(v_nom, "nominal_velocity_m_s"), "nominal_velocity_m_s",
                           *VELOCITY_M_S_RANGE, "a model speed in m/s")
     test_mode = _test_mode_from_dict(data.get("test_mode"))
+    gun = gun_from_dict(data.get("gun"))
     stations = _stations_from_list(_require(data, "stations"),
                                    MAX_TIME_S["range" if test_mode.kind == "range" else "tunnel"])
     _check_density(model, mass)
@@ -444,7 +480,42 @@ def shot_from_dict(data: Mapping, source_path: str | os.PathLike | None = None) 
                     pressure_pa=units.torr_to_pa(p_torr), temperature_k=t_k,
                     facility=facility, stations=stations, notes=notes,
                     source_path=str(source_path) if source_path is not None else None,
-                    nominal_velocity_m_s=v_nom, test_mode=test_mode)
+                    nominal_velocity_m_s=v_nom, test_mode=test_mode, gun=gun)
+
+
+def gun_from_dict(table) -> Gun | None:
+    """A shot file's (or spec's) ``[gun]`` table in file units (absent: None)."""
+    if table is None:
+        return None
+    if not isinstance(table, Mapping):
+        raise ShotFileError("gun: expected a table")
+    _check_unknown(table, set(GUN_KEYS), "gun.")
+    if "twist_in_per_turn" in table and "twist_m_per_turn" in table:
+        raise ShotFileError("gun.twist_in_per_turn: give the twist once (in or m per turn)")
+    twist = None
+    for key, to_m in (("twist_in_per_turn", units.M_PER_IN), ("twist_m_per_turn", 1.0)):
+        if key in table:
+            twist = _number(table[key], f"gun.{key}") * to_m
+            if not TWIST_M_RANGE[0] <= abs(twist) <= TWIST_M_RANGE[1]:
+                raise ShotFileError(
+                    f"gun.{key}: {table[key]!r} is not a rifling twist (|twist| from "
+                    f"{TWIST_M_RANGE[0]} to {TWIST_M_RANGE[1]} m per turn)")
+    v = table.get("muzzle_velocity_m_s")
+    if v is not None:
+        v = _in_range(_number(v, "gun.muzzle_velocity_m_s"), "gun.muzzle_velocity_m_s",
+                      *VELOCITY_M_S_RANGE, "a muzzle velocity in m/s")
+    spin = table.get("muzzle_spin_rad_s")
+    if spin is not None:
+        spin = _number(spin, "gun.muzzle_spin_rad_s")
+        if not 0 < abs(spin) <= SPIN_RAD_S_MAX:
+            raise ShotFileError(f"gun.muzzle_spin_rad_s: {spin!r} is not a spin in rad/s "
+                                f"(0 < |p| <= {SPIN_RAD_S_MAX:g})")
+        if twist is not None:
+            raise ShotFileError("gun.muzzle_spin_rad_s: give the spin or the twist, not both")
+    if twist is None and spin is None:
+        raise ShotFileError("gun: give the twist (twist_in_per_turn or twist_m_per_turn) or "
+                            "the muzzle spin (muzzle_spin_rad_s)")
+    return Gun(twist, v, spin)
 
 
 def _test_mode_from_dict(table) -> TestMode:
@@ -508,6 +579,12 @@ def shot_to_dict(shot: ShotFile) -> dict:
         if mode.mounted:
             pivot = units.m_to_cm(model_to_body_vector(np.array(mode.pivot_from_cg_body_m)))
             out["test_mode"]["pivot_from_cg_cm"] = [c(float(v)) for v in pivot]
+    if shot.gun is not None:
+        g = shot.gun
+        out["gun"] = {k: c(float(v)) for k, v in (
+            ("twist_m_per_turn", g.twist_m_per_turn),
+            ("muzzle_velocity_m_s", g.muzzle_velocity_m_s),
+            ("muzzle_spin_rad_s", g.muzzle_spin_rad_s)) if v is not None}
     out["stations"] = [{"station": _toml(r.station), "time_s": _toml(r.time_s),
                         "images": {str(k): str(v) for k, v in r.images.items()}}
                        for r in shot.stations]
@@ -556,7 +633,7 @@ def dumps_shot(shot: ShotFile) -> str:
     for k in ("schema_version", "shot_id", "facility", "notes", "nominal_velocity_m_s"):
         if k in data:
             lines.append(f"{k} = {_toml_value(data[k])}")
-    for section in ("model", "mass", "range", "test_mode"):
+    for section in ("model", "mass", "range", "test_mode", "gun"):
         if section not in data:
             continue
         lines.append("")
@@ -595,7 +672,7 @@ def save_shot(shot: ShotFile, path: str | os.PathLike, overwrite: bool = False) 
 
 
 __all__ = [
-    "MODEL_KINDS", "SCHEMA_VERSION", "MassProperties", "ShotFile", "ShotFileError",
-    "StationRecord", "dumps_shot", "load_shot", "save_shot", "shot_from_dict", "shot_to_dict",
-    "validate_inertia", "validate_model_spec",
+    "GUN_KEYS", "MODEL_KINDS", "SCHEMA_VERSION", "Gun", "MassProperties", "ShotFile",
+    "ShotFileError", "StationRecord", "dumps_shot", "gun_from_dict", "load_shot", "save_shot",
+    "shot_from_dict", "shot_to_dict", "validate_inertia", "validate_model_spec",
 ]

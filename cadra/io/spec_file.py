@@ -22,7 +22,13 @@ from cadra.dynamics.effects import Effects
 from cadra.dynamics.setup import DT_MAX_TRUTH
 from cadra.dynamics.trajectory import Launch
 from cadra.io.seed004 import load_seed004_table
-from cadra.io.shotfile import INERTIA_MAX_G_CM2, ShotFileError, validate_inertia
+from cadra.io.shotfile import (
+    INERTIA_MAX_G_CM2,
+    Gun,
+    ShotFileError,
+    gun_from_dict,
+    validate_inertia,
+)
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
 #: keys of one station's entry in ``[station_biases]`` (m, m, m, s), in this order
@@ -35,7 +41,7 @@ AIMS = ("none", "centre")
 
 _TOP_KEYS = ("shot_id", "seed004_shot", "model", "mass", "range", "aero_model", "aero_values",
              "launch", "effects", "facility", "n_stations", "trigger", "film", "render", "seed",
-             "dt_max_s", "aim", "station_biases")
+             "dt_max_s", "aim", "station_biases", "gun")
 _MASS_KEYS = ("mass_g", "x_cg_from_base_cm", "x_cg_from_ref_cm", "y_cg_cm", "z_cg_cm",
               "inertia_g_cm2", "uniform_density_g_cm3")
 _TRIGGER_KEYS = ("offset_mean_m", "offset_sd_m")
@@ -88,6 +94,9 @@ class ShotSpec:
     aim: str = "none"            # "centre": slant the gun so the path stays centred in view
     # injected biases: station id -> (x_m, y_m, z_m, time_s); absent = unbiased
     station_biases: dict = field(default_factory=dict)
+    # the launcher's twist and muzzle velocity, written into the shot file's [gun] (the
+    # reduction's spin; the flight itself spins at launch.p_rad_s)
+    gun: Gun | None = None
 
 
 def load_shot_spec(path: str | os.PathLike) -> ShotSpec:
@@ -174,7 +183,15 @@ def spec_from_dict(data: dict, source_path: Path | None = None) -> ShotSpec:
         seed004_shot=int(row["shot"]) if row is not None else None,
         aim=_aim(data.get("aim", "none")),
         station_biases=_station_biases(data.get("station_biases")),
+        gun=_gun(data.get("gun")),
     )
+
+
+def _gun(table) -> Gun | None:
+    try:
+        return gun_from_dict(table)
+    except ShotFileError as exc:
+        raise SpecError(str(exc)) from None
 
 
 def _uniform_solid(mass: dict, body) -> dict:

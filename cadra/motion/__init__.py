@@ -9,6 +9,7 @@ dataclasses out; no file I/O (their text reports: :mod:`cadra.report.motion`). M
 numpy, scipy, cadra.conventions, cadra.units and cadra.numfmt.
 """
 
+from cadra.motion.alias import AliasBand, Dealiased, dealias_arms
 from cadra.motion.coefficients import (
     CgSeriesFit,
     FlightConditions,
@@ -44,10 +45,12 @@ from cadra.motion.pureroll import (
 from cadra.motion.sectional import Sections, sectional_epicyclic, sectional_pitch
 
 __all__ = [
-    "Arm", "CgSeriesFit", "CubicCorrelator", "EpicyclicFit", "FlightConditions", "KBResult",
+    "AliasBand", "Arm", "CgSeriesFit", "CubicCorrelator", "Dealiased", "EpicyclicFit",
+    "FlightConditions", "KBResult",
     "Layout", "LinearCoefficients", "MomentDerivatives", "MotionFitError", "NonplanarRatio",
     "PitchFit", "RollCoefficients", "RollFit", "Sections", "SwerveFit",
-    "cubic_correlator", "energy_balance_amplitude", "fit_cg_series", "fit_epicyclic", "fit_pitch",
+    "cubic_correlator", "dealias_arms", "energy_balance_amplitude", "fit_cg_series",
+    "fit_epicyclic", "fit_pitch",
     "fixed_plane_angles", "kb_pitch_reduction", "kb_reduction", "lift_from_swerve",
     "limit_cycle_amplitude_eq31", "linear_coefficients", "mdc_fit", "nonplanar_ratio",
     "nonplanar_ratio_of_fit", "nonrolling_angle", "nonrolling_rate", "pitch_coefficients",

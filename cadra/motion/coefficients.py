@@ -193,6 +193,31 @@ class SwerveFit:
     C_L_alpha_sigma: float
     rms: float
     chi2_dof: float
+    #: the fitted swerve Z = c_0 + c_1 u - i g u^2 / 2 + c G(u) (lift_from_swerve's doc):
+    #: c_0 (m), c_1 (per unit of the fit's variable), c, and g in that variable
+    c0: complex = complex("nan")
+    c1: complex = complex("nan")
+    c: complex = complex("nan")
+    g_s: float = 0.0
+
+    def lateral(self, fit: EpicyclicFit, s: float) -> tuple[complex, complex]:
+        """The fitted cg lateral position Z = y + i z (m) and its slope dZ/ds (per unit of
+        the fit's variable) at ``s``; ``fit`` is the arms' fit the swerve was fitted with."""
+        u = float(s) - fit.s_ref
+        L, x = fit.layout, fit.values
+        G = dG = 0j
+        for j in range(1, L.arms + 1):
+            arm = fit.arm(j)
+            r = arm.lam + 1j * arm.omega
+            A = x[L.index(f"A{j}_re")] + 1j * x[L.index(f"A{j}_im")]
+            e = A * np.exp(r * u + 0.5j * arm.omega_dot * u * u)
+            G += e / r**2
+            dG += e / r
+        if L.trim or L.offset:
+            raise ValueError("lateral: the swerve of a fit with a trim arm or offset is not "
+                             "evaluated")
+        return (complex(self.c0 + self.c1 * u - 0.5j * self.g_s * u * u + self.c * G),
+                complex(self.c1 - 1j * self.g_s * u + self.c * dG))
 
 
 def lift_from_swerve(fit: EpicyclicFit, s, y, z, sigma=None, *,
@@ -244,7 +269,9 @@ def lift_from_swerve(fit: EpicyclicFit, s, y, z, sigma=None, *,
     resid = (A_ @ sol) - target
     return SwerveFit(C_L_alpha=float(scale * sol[4]),
                      C_L_alpha_sigma=float(scale * np.sqrt(cov[4, 4])),
-                     rms=float(np.sqrt(np.mean(np.abs(resid) ** 2))), chi2_dof=chi2_dof)
+                     rms=float(np.sqrt(np.mean(np.abs(resid) ** 2))), chi2_dof=chi2_dof,
+                     c0=complex(sol[0], sol[1]), c1=complex(sol[2], sol[3]),
+                     c=complex(sol[4]), g_s=float(g_s))
 
 
 @dataclass(frozen=True)

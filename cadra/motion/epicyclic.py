@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
+from scipy.stats import chi2 as chi2_dist
 
 from cadra.motion import _checks
 from cadra.motion._named import ByName
@@ -164,6 +165,14 @@ class EpicyclicFit(ByName):
     nfev: int
     nonrolling_iterations: int = 0
     nonrolling: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def chi2_p_value(self) -> float:
+        """P(chi^2 >= this chi^2) with :attr:`dof` degrees of freedom: how likely the angle
+        sigmas alone leave residuals this large (NaN without degrees of freedom)."""
+        if self.dof <= 0 or not np.isfinite(self.chi2):
+            return float("nan")
+        return float(chi2_dist.sf(self.chi2, self.dof))
 
     def predict(self, s, derivative: bool = False) -> np.ndarray:
         """The fitted xi (or dxi/ds) at ``s``, in the frame the fit was made in."""
@@ -327,7 +336,7 @@ def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: in
                   offset: bool = False, curvature: bool = False, nonrolling: bool = False,
                   nonrolling_iterations: int = 1, variable: str = "time",
                   s_ref: float | None = None, start: EpicyclicFit | None = None,
-                  scale_covariance: bool = True) -> EpicyclicFit:
+                  scale_covariance: bool = True, exponents=None) -> EpicyclicFit:
     """Fit the epicyclic (``trim_rate=None``) or tricyclic model to an angle history.
 
     Parameters
@@ -346,6 +355,9 @@ def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: in
         ``nonrolling_iterations`` times (the seed: one iteration is generally enough)
     s_ref : where the amplitudes are referred (default: the first point)
     start : an earlier fit to start from (re-referred to ``s_ref``); default: automatic
+    exponents : the arms' starting exponents λ_j + iω_j (one per arm; e.g. gyroscopic
+        theory's frequencies, which an aliased record's automatic start cannot find), the
+        amplitudes then by linear least squares; default: automatic
     scale_covariance : scale the covariance by χ²/dof (default; stated in the result)
     """
     if arms not in (1, 2):
@@ -358,6 +370,8 @@ def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: in
                          f"{nonrolling_iterations!r}")
     if trim_rate is None and free_trim_rate:
         raise ValueError("free_trim_rate: needs a trim_rate to start from")
+    if exponents is not None and (trim_rate is not None or offset or len(exponents) != arms):
+        raise ValueError("exponents: one per arm, for a form without a trim arm or offset")
     layout = Layout(arms=arms, curvature=curvature, trim=trim_rate is not None,
                     free_trim_rate=free_trim_rate, offset=offset)
     n_par = len(layout.names())
@@ -377,13 +391,20 @@ def fit_epicyclic(s, alpha, beta, sigma_alpha=None, sigma_beta=None, *, arms: in
         x0 = rereferred(start, s_ref)
     elif curvature:   # the 10-constant fit first, then the ω̇ terms from zero
         flat = Layout(arms=arms, trim=layout.trim, free_trim_rate=free_trim_rate, offset=offset)
-        xf = _best(flat, s, xi, w_b, w_a, s_ref, p, _starts(flat, s, xi, s_ref, p), False,
-                   variable)["values"]
+        if exponents is not None:
+            xf = _solve(flat, s, xi, w_b, w_a, s_ref, p,
+                        _start(flat, s, xi, s_ref, p, np.asarray(exponents, dtype=complex)),
+                        False, variable)["values"]
+        else:
+            xf = _best(flat, s, xi, w_b, w_a, s_ref, p, _starts(flat, s, xi, s_ref, p), False,
+                       variable)["values"]
         m = flat.per_arm
         x0 = np.concatenate([np.r_[xf[j * m:(j + 1) * m], 0.0] for j in range(arms)]
                             + [xf[arms * m:]])
     else:
         x0 = None
+    if x0 is None and exponents is not None:
+        x0 = _start(layout, s, xi, s_ref, p, np.asarray(exponents, dtype=complex))
     if x0 is None:
         out = _best(layout, s, xi, w_b, w_a, s_ref, p, _starts(layout, s, xi, s_ref, p),
                     scale_covariance, variable)

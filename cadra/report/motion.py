@@ -37,6 +37,28 @@ KB = (("Cm_alpha0", "Cm_alpha0_per_rad", "C_mα, C_0 (per rad)"),
       ("Cm_p_alpha2", "Cm_p_alpha2_per_rad3", "C_mpα, C_2 (per rad³)"))
 
 
+#: the rate normalisations a report may give its damping and Magnus coefficients in: CADRA's
+#: own (rates q d / 2V, p d / 2V) or McCoy's and BRL's (q d / V, p d / V); a coefficient per
+#: d/V rate is half the one per d/2V rate
+RATES = {"d/2V": 1.0, "d/V": 0.5}
+#: the coefficients that multiply a rate
+_RATE_ATTRS = ("Cmq_sum", "Cm_p_alpha", "Cmq_sum0", "Cmq_sum2", "Cm_p_alpha0", "Cm_p_alpha2")
+
+
+def _rated(attr: str, value, rates: str):
+    """``value`` of coefficient ``attr`` in the rate normalisation ``rates``."""
+    if value is None or attr.removesuffix("_sigma") not in _RATE_ATTRS:
+        return value
+    return value * RATES[rates]
+
+
+def _label(attr: str, label: str, rates: str) -> str:
+    if attr not in _RATE_ATTRS:
+        return label
+    rate = "q" if attr.startswith("Cmq") else "p"
+    return label.replace("per rad", f"per rad, rate {rate} {rates.replace('/', ' / ')}")
+
+
 def _unit(r) -> str:
     return "m" if r.variable == "distance" else "s"
 
@@ -62,17 +84,22 @@ def arms_table(results) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def coefficients_table(results) -> pd.DataFrame:
+def coefficients_table(results, rates: str = "d/2V") -> pd.DataFrame:
+    """Per shot and method, the coefficients and their sigmas; the damping and Magnus
+    coefficients in the rate normalisation ``rates`` (:data:`RATES`; its own column)."""
     rows = []
     for r in results:
         c = r.conditions
         base = {"shot_id": r.shot_id, "speed_m_s": c.speed_m_s, "density_kg_m3": c.density_kg_m3,
-                "spin_given_rad_s": c.spin_rad_s if c.spin_rad_s else math.nan}
+                "spin_given_rad_s": c.spin_rad_s if c.spin_rad_s else math.nan,
+                "rate_normalisation": rates,
+                "aliased_arms": "" if r.alias is None else str(r.alias.shifts)}
         lc = r.coefficients
         if lc is not None:
             row = {**base, "method": f"linear theory ({r.variable})"}
             for attr, col, _ in LINEAR:
-                v, s = getattr(lc, attr), getattr(lc, attr + "_sigma")
+                v = _rated(attr, getattr(lc, attr), rates)
+                s = _rated(attr, getattr(lc, attr + "_sigma"), rates)
                 row[col] = math.nan if v is None else v
                 row[col.replace("_per", "_sigma_per").replace("_rad_s", "_sigma_rad_s")] = (
                     math.nan if s is None else s)
@@ -80,8 +107,9 @@ def coefficients_table(results) -> pd.DataFrame:
         if r.kb is not None:
             row = {**base, "method": "Kryloff-Bogoliuboff (time)"}
             for attr, col, _ in KB:
-                row[col] = getattr(r.kb, attr)
-                row[col.replace("_per", "_sigma_per")] = getattr(r.kb, attr + "_sigma")
+                row[col] = _rated(attr, getattr(r.kb, attr), rates)
+                row[col.replace("_per", "_sigma_per")] = _rated(
+                    attr, getattr(r.kb, attr + "_sigma"), rates)
             rows.append(row)
     return pd.DataFrame(rows)
 
@@ -108,8 +136,8 @@ def _form(r) -> str:
         ", nonrolling-axis correction" if f.nonrolling_iterations else "")
 
 
-def shot_lines(r, verbose: bool = False) -> list[str]:
-    """The console's account of one shot."""
+def shot_lines(r, verbose: bool = False, rates: str = "d/2V") -> list[str]:
+    """The console's account of one shot (damping and Magnus per ``rates``)."""
     f, u = r.fit, _unit(r)
     lines = [f"{r.shot_id}: {_form(r)} fit in {r.variable}, {f.n_points} stations, rms "
              f"{f.rms * DEG:.3g} deg, chi^2/dof {f.chi2_dof:.3g}"]
@@ -122,25 +150,29 @@ def shot_lines(r, verbose: bool = False) -> list[str]:
                      f"rate p {pm(a.omega, None, 'rad/' + u)} (given)")
             lines.append(f"  arm {name}: K {pm(a.K * DEG, a.K_sigma * DEG, 'deg')}, {rates}")
     lines.append(f"  NPR {r.npr.npr:.3f}")
+    if r.alias is not None:
+        lines.append(f"  {r.alias.note(u)}")
     lc = r.coefficients
     if lc is not None:
         for attr, _, label in LINEAR:
-            v = getattr(lc, attr)
+            v = _rated(attr, getattr(lc, attr), rates)
             if v is not None and math.isfinite(v):
-                lines.append(f"  {label}: {pm(v, getattr(lc, attr + '_sigma'))}")
+                lines.append(f"  {_label(attr, label, rates)}: "
+                             f"{pm(v, _rated(attr, getattr(lc, attr + '_sigma'), rates))}")
     if r.kb is not None:
         for attr, _, label in KB:
-            v = getattr(r.kb, attr)
+            v = _rated(attr, getattr(r.kb, attr), rates)
             if math.isfinite(v):
-                lines.append(f"  K-B {label}: {pm(v, getattr(r.kb, attr + '_sigma'))}")
+                lines.append(f"  K-B {_label(attr, label, rates)}: "
+                             f"{pm(v, _rated(attr, getattr(r.kb, attr + '_sigma'), rates))}")
     return lines
 
 
-def console_lines(results, verbose: bool = False) -> list[str]:
-    return [line for r in results for line in shot_lines(r, verbose)]
+def console_lines(results, verbose: bool = False, rates: str = "d/2V") -> list[str]:
+    return [line for r in results for line in shot_lines(r, verbose, rates)]
 
 
-def report_markdown(results) -> str:
+def report_markdown(results, rates: str = "d/2V") -> str:
     L = ["# Angular-motion reduction (cadra2 motion)", "",
          "Angles relative to the mean flight path: α = θ − γ (+ nose up), β = ψ − χ (+ nose to "
          "port), ξ = β + iα (docs/motion.md); γ, χ the inclinations of the velocity of a "
@@ -148,7 +180,8 @@ def report_markdown(results) -> str:
          "swerve's oscillation left in the angles scales the arms' amplitudes by ~(1 + a/r_j) "
          "but leaves their exponents, hence the coefficients, as they are. Arm 1 is the arm of "
          "the larger signed frequency (for p ≥ 0 the nutation arm). Sigmas are 1σ from the "
-         "fit's covariance scaled by its χ²/dof.", ""]
+         "fit's covariance scaled by its χ²/dof. Damping and Magnus coefficients multiply the "
+         f"rates q {rates.replace('/', ' / ')} and p {rates.replace('/', ' / ')}.", ""]
     for r in results:
         c, f, u = r.conditions, r.fit, _unit(r)
         L += [f"## {r.shot_id}", "",
@@ -173,11 +206,14 @@ def report_markdown(results) -> str:
              for name, a in _arms(r)))
         L += ["", f"Nonplanar Ratio (bounded form, the two arms): {r.npr.npr:.4f} (seed 002 eq. 18 "
               f"as printed: {r.npr.seed_ratio:.4g}).", ""]
+        if r.alias is not None:
+            L += [f"Frequency bands from the spin: {r.alias.note(u)}.", ""]
         if r.coefficients is not None:
             L += markdown.table(
                 ("coefficient (linear theory)", "value ± σ"),
-                ((label, pm(getattr(r.coefficients, attr),
-                            getattr(r.coefficients, attr + "_sigma")))
+                ((_label(attr, label, rates),
+                  pm(_rated(attr, getattr(r.coefficients, attr), rates),
+                     _rated(attr, getattr(r.coefficients, attr + "_sigma"), rates)))
                  for attr, _, label in LINEAR if getattr(r.coefficients, attr) is not None))
             L.append("")
         if r.kb is not None:
@@ -188,7 +224,9 @@ def report_markdown(results) -> str:
                      "turning by lift (C_Lα from the swerve)" if r.kb_lift_corrected else "")
                   + ":", ""]
             L += markdown.table(("coefficient", "value ± σ"),
-                                ((label, pm(getattr(r.kb, attr), getattr(r.kb, attr + "_sigma")))
+                                ((_label(attr, label, rates),
+                                  pm(_rated(attr, getattr(r.kb, attr), rates),
+                                     _rated(attr, getattr(r.kb, attr + "_sigma"), rates)))
                                  for attr, _, label in KB))
             L.append("")
         if r.notes:
@@ -284,17 +322,18 @@ def plot_sectional(results, path) -> None:
 
 
 def write_outputs(results, out_dir: str | os.PathLike, *, overwrite: bool = False,
-                  command: dict | None = None) -> list[str]:
-    """Every file, atomically; returns their names."""
+                  command: dict | None = None, rates: str = "d/2V") -> list[str]:
+    """Every file, atomically; returns their names. ``rates``: the damping and Magnus
+    coefficients' rate normalisation (:data:`RATES`), named in every file."""
     files = ["report.md", "angles.csv", "arms.csv", "coefficients.csv", "yaw_card.png",
              "arms.png"]
     sectional = any(r.kb is not None for r in results)
     with atomic_output_dir(Path(out_dir), overwrite=overwrite,
                            kind="motion") as tmp:
-        (tmp / "report.md").write_text(report_markdown(results), encoding="utf-8")
+        (tmp / "report.md").write_text(report_markdown(results, rates), encoding="utf-8")
         angles_table(results).to_csv(tmp / "angles.csv", index=False, float_format="%.10g")
         arms_table(results).to_csv(tmp / "arms.csv", index=False, float_format="%.10g")
-        coefficients_table(results).to_csv(tmp / "coefficients.csv", index=False,
+        coefficients_table(results, rates).to_csv(tmp / "coefficients.csv", index=False,
                                            float_format="%.10g")
         plot_yaw_card(results, tmp / "yaw_card.png")
         plot_arms(results, tmp / "arms.png")
@@ -371,6 +410,6 @@ def coefficients_report(lc: LinearCoefficients | None = None, kb: KBResult | Non
     return "\n".join(lines)
 
 
-__all__ = ["angles_table", "arms_table", "coefficients_report", "coefficients_table",
+__all__ = ["RATES", "angles_table", "arms_table", "coefficients_report", "coefficients_table",
            "console_lines", "fit_report", "plot_arms", "plot_sectional", "plot_yaw_card",
            "report_markdown", "shot_lines", "write_outputs"]

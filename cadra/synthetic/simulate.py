@@ -191,7 +191,7 @@ class SimulatedShot:
                    f"{self.spec.aero_model}; effects {list(self.rigid.effects.active)}"
                    + ("; station biases injected (station_biases.csv)"
                       if self.station_biases else "")),
-            source_path=None)
+            source_path=None, gun=self.spec.gun)
 
     def station_bias(self, station: int) -> tuple[float, float, float, float]:
         """The injected bias ``(x_m, y_m, z_m, time_s)`` of station id ``station`` (m, s)."""
