@@ -354,7 +354,9 @@ def test_trajectory_and_shot_from_a_folder_or_a_file(shots, tmp_path):
         trajectory_and_shot(tmp_path / "empty")
     data, paths = load_shots([folder], min_sigma_angle_deg=90.0)
     assert paths == [folder / "trajectory.csv"] and data[0].shot_id == "M2-2429"
-    # the angle floor arrives in radians: every angle sigma is at least pi/2
-    assert np.all(data[0].sigma[:, 3:] >= math.radians(90.0))
+    # the angle floor arrives in radians: every measured angle's sigma is at least pi/2; the
+    # roll, not measured, has no sigma at all
+    assert np.all(data[0].sigma[:, 3:5] >= math.radians(90.0))
+    assert np.all(np.isnan(data[0].sigma[:, 5]))
     with pytest.raises(ValueError, match="one --shot per trajectory"):
         load_shots([folder, traj], [shot_file])

@@ -252,9 +252,10 @@ def test_fit_one_status_line_and_two_labelled_phases(fine_shot, capsys):
 
 
 def test_fit_warnings_go_to_stderr_and_survive_quiet(fine_shot, capsys):
-    """chi^2/nu far above 1 is a warning on the result: stderr, with or without -q (it was
-    stdout, and -q hid it); stdout keeps the status line. The data: the fine shot with its
-    sigmas halved (chi^2/nu ~ 4)."""
+    """chi^2/nu far above 1 is said on stderr, with or without -q (it was stdout, and -q hid
+    it). The data: the fine shot with its sigmas halved (chi^2/nu ~ 4, p(chi^2) far below
+    1e-6): a poor minimum, with its worst channel and station and exit status 1; stdout
+    holds no "converged" line."""
     from cadra.io.trajectory import load_trajectory
 
     base, traj = fine_shot
@@ -269,14 +270,14 @@ def test_fit_warnings_go_to_stderr_and_survive_quiet(fine_shot, capsys):
     for quiet in (True, False):
         out = base / f"tight_fit_{quiet}"
         assert cadra2_main(["fit", str(tight), "--model", "m2_m070", "-o", str(out),
-                            "--no-plots", *(["-q"] if quiet else [])]) == 0
+                            "--no-plots", *(["-q"] if quiet else [])]) == 1
         cap = capsys.readouterr()
-        warn = [line for line in cap.err.splitlines() if line.startswith("cadra2 fit: warning")]
-        assert warn and warn[0].startswith("cadra2 fit: warning: chi^2/nu = ")
-        assert "> 2: the sigmas or the model do not describe the data" in warn[0]
-        assert "warning" not in cap.out
-        assert cap.out.startswith("converged: ")
-        assert (cap.out.count("\n") == 1) == quiet
+        poor = [line for line in cap.err.splitlines()
+                if line.startswith("cadra2 fit: CONVERGED TO A POOR MINIMUM")]
+        assert poor and "p(chi^2) = " in poor[0] and "carries" in poor[0], cap.err
+        assert "station" in poor[0] and "warning" not in cap.out
+        assert not cap.out.startswith("converged: ")
+        assert (cap.out == "") == quiet
 
 
 # --------------------------------------------------------------------------- single

@@ -142,15 +142,16 @@ def test_each_frame_keeps_its_own_roll_sigma(tmp_path):
 
 
 def test_a_roll_fit_far_above_the_noise_is_warned_about(tmp_path, capsys):
-    """Sigmas written 5x too small: chi^2/nu ~25; the fit's warning, as cadra2 fit gives."""
+    """Sigmas written 5x too small: chi^2/nu ~25, p(chi^2) ~ 0: a poor minimum as cadra2 fit
+    says it (its worst channel and station), exit status 1."""
     traj, _ = _files(tmp_path, duration_s=4.0)
     head = [line for line in traj.read_text().splitlines() if line.startswith("#")]
     table = pd.read_csv(traj, comment="#")
     table["sigma_phi_deg"] = table["sigma_phi_deg"] / 5.0
     traj.write_text("\n".join(head) + "\n" + table.to_csv(index=False))
-    main(["roll", str(traj), "-o", str(tmp_path / "out"), "-q"])
+    assert main(["roll", str(traj), "-o", str(tmp_path / "out"), "-q"]) == 1
     err = capsys.readouterr().err
-    assert "warning: chi^2/nu = " in err and "> 2" in err, err
+    assert "CONVERGED TO A POOR MINIMUM" in err and "channel phi carries" in err, err
 
 
 def test_a_relative_shot_file_is_found_beside_the_trajectory(tmp_path, monkeypatch):

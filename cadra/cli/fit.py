@@ -88,6 +88,10 @@ def run(args) -> int:
 
             reference = load_reference(args.reference)   # before the fit: fail early
         estimates = None if args.no_auto_start else start_estimates(shots, args.start, model)
+        for sd, e in zip(shots, estimates or (), strict=False):
+            if e is not None and e.alias_note:
+                notes.append(f"{sd.shot_id}: the start's arms at the spin "
+                             f"{e.spin_rad_s:.6g} rad/s: {e.alias_note}")
         result, start = fit_shots(shots, model, options=options,
                                   auto_start=not args.no_auto_start,
                                   variance_components=args.variance_components,

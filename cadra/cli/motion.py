@@ -33,11 +33,11 @@ def _motion_arguments(p) -> None:
     p.add_argument("--rates", choices=tuple(RATES), default=None,
                    help="the rate normalisation of the damping and Magnus coefficients "
                         "written: CADRA's d/2V (rates q d / 2V, p d / 2V) or McCoy's and "
-                        "BRL's d/V (half the d/2V values); default: the --model's, else d/2V")
+                        "BRL's d/V (half the d/2V values) (default: the --model's, else d/2V)")
     p.add_argument("--model", default=None,
                    help="an aero model (bundled name or file) whose C_m_alpha tells apart "
                         "frequency bands of equal sum and whose rate normalisation is the "
-                        "default of --rates (optional)")
+                        "default of --rates (default: none)")
     p.add_argument("--offset", action="store_true",
                    help="fit a constant angle too (a fixed trim)")
     p.add_argument("--nonrolling", action="store_true",

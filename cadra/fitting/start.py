@@ -216,9 +216,10 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
     replaces the measured angles' local slope as the axis's rate of turn (an estimate's
     :attr:`MotionEstimate.axis_rate_F`, from arms a local slope cannot follow), and
     ``axis_angles`` (theta, psi, rad) the axis itself (the local fit would average an arm
-    that turns between stations away). ``cg_lateral`` ((y, z) m, (vy, vz) m/s) replaces the
-    polynomials' lateral cg position and velocity at the epoch (a swerve fitted with the
-    arms: a spinning bullet's slow arm swerves it by millimetres at half a metre a second).
+    that turns between stations away). ``cg_lateral`` ((y, z) m, (vy, vz) m/s[, vx m/s])
+    replaces the polynomials' lateral cg position and velocity at the epoch (a swerve fitted
+    with the arms: a spinning bullet's slow arm swerves it by millimetres at half a metre a
+    second), and the downrange speed when given.
 
     A shot that measures its roll angle (``phi``: a finned body) starts at its measured roll
     and at the roll rate phi's slope gives, in place of the grid and ``spin_rad_s``. A mounted
@@ -272,6 +273,8 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
         y = state_from_reference(pos, vel, q, R.T @ w_F, ref)
         if cg_lateral is not None:
             y[1:3], y[4:6] = cg_lateral[0], cg_lateral[1]
+            if len(cg_lateral) > 2 and np.isfinite(cg_lateral[2]):
+                y[3] = cg_lateral[2]
         out.append(y)
     return out
 
@@ -303,14 +306,14 @@ def initial_state(shot: ShotData, model: AeroModel,
     :data:`SPIN_SCAN` of ``spin_rad_s``: the twist gives the muzzle spin, and the spin at the
     epoch is a per cent or two lower (it decays, and the muzzle is not where the record
     starts), which on a spark range is radians of the fast arm's phase by the record's ends.
-    A body whose roll the fit does not use (:func:`default_local_free`) skips the roll grid."""
+    Such a body, when the fit does not use its roll (:func:`default_local_free`), skips the
+    roll grid: turning it about its axis changes nothing measured."""
     integ = integ or Integration()
-    grid = ROLL_GRID_DEG
-    if LOCAL_NAMES.index("rot_x_rad") not in default_local_free(shot, model):
-        grid = (0.0,)              # turning it about its axis changes nothing measured
-    spins = [spin_rad_s]
+    grid, spins = ROLL_GRID_DEG, [spin_rad_s]
     if axis_rate_F is not None and np.isfinite(spin_rad_s) and spin_rad_s != 0:
         spins = list(spin_rad_s * (1.0 + SPIN_SCAN))
+        if LOCAL_NAMES.index("rot_x_rad") not in default_local_free(shot, model):
+            grid = (0.0,)
     cands = [y for p in spins for y in state_candidates(
         shot, grid, spin_rad_s=p, axis_rate_F=axis_rate_F, axis_angles=axis_angles,
         cg_lateral=cg_lateral)]
@@ -345,7 +348,8 @@ def _lateral(e):
     """An estimate's swerve at the epoch as :func:`state_candidates` takes it, or None."""
     if e is None or e.cg_lateral is None or e.cg_lateral_velocity is None:
         return None
-    return (np.asarray(e.cg_lateral, dtype=float), np.asarray(e.cg_lateral_velocity, dtype=float))
+    return (np.asarray(e.cg_lateral, dtype=float), np.asarray(e.cg_lateral_velocity, dtype=float),
+            e.vx_m_s)
 
 
 __all__ = ["ROLL_GRID_DEG", "initial_state", "initial_states", "starting_model",

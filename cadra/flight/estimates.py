@@ -70,6 +70,9 @@ class MotionEstimate:
     #: and half a metre a second at the slow arm's frequency)
     cg_lateral: tuple[float, float] | None = None
     cg_lateral_velocity: tuple[float, float] | None = None
+    #: the reference point's downrange speed at the epoch from a cubic in time (m/s; NaN:
+    #: the quadratic's), for the same long records
+    vx_m_s: float = math.nan
     #: what the start did about aliased arms ("" when nothing)
     alias_note: str = ""
     #: the lift slope C_Lα the swerve gives (per rad; NaN: none), with a known spin's arms
@@ -89,11 +92,13 @@ def polyfit_finite(t, v, deg, w=None):
     return np.polyfit(t[ok], v[ok], deg, w=None if w is None else w[ok])
 
 
-def kinematics_at_epoch(shot: ShotData):
-    """Reference-point position and velocity at the epoch: quadratics in time, and for x a
-    cubic where the record shows one (its coefficient more than 5 sigma from zero: a long
-    record's drag changes the deceleration, and a quadratic then misses the speed at a
-    mid-record epoch by half a metre a second over the spark range's 96 m)."""
+def kinematics_at_epoch(shot: ShotData, cubic_x: bool = False):
+    """Reference-point position and velocity at the epoch: quadratics in time; with
+    ``cubic_x``, for x a cubic where the record shows one (its coefficient more than 5 sigma
+    from zero: over a long record the drag changes the deceleration, and a quadratic then
+    misses the speed at a mid-record epoch by half a metre a second over the spark range's
+    96 m). Not the default: on a short record of a lifting body the deceleration follows the
+    yaw, which a cubic does not describe either, and the quadratic starts better there."""
     t = shot.t_s
     t0 = t[shot.epoch_index]
     tt = t - t0
@@ -103,7 +108,8 @@ def kinematics_at_epoch(shot: ShotData):
     pos = np.zeros(3)
     vel = np.zeros(3)
     for j in range(3):
-        c = _cubic_if_shown(tt, shot.meas[:, j], shot.sigma[:, j]) if j == 0 else None
+        c = (_cubic_if_shown(tt, shot.meas[:, j], shot.sigma[:, j]) if j == 0 and cubic_x
+             else None)
         if c is None:
             c = polyfit_finite(tt, shot.meas[:, j], 2)
         pos[j] = np.polyval(c, 0.0)

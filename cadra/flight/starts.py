@@ -17,7 +17,7 @@ import numpy as np
 
 from cadra.flight.classic import analyse_shot, conditions_of, min_points
 from cadra.flight.data import launch_spin
-from cadra.flight.estimates import MotionEstimate, estimate_motion
+from cadra.flight.estimates import MotionEstimate, estimate_motion, kinematics_at_epoch
 from cadra.motion import MotionFitError, fit_epicyclic, linear_coefficients
 
 #: stations with angles from which a known spin's start uses the 12-constant form
@@ -75,8 +75,8 @@ def _spinning_estimate(shot, est: MotionEstimate, spin: float,
     revolution has none): C_mα, C_mq + C_mα̇ and the axis's rate at the epoch from the
     de-aliased arms; the spin itself. A record of :data:`CURVATURE_STATIONS` or more is
     reduced in the 12-constant form (p/V, and with it the arms' frequencies, changes along a
-    long record: over the spark range's 96 m the 10-constant C_mα is 2.4 % low, the
-    12-constant one right to 0.02 %). A reduction that fails keeps the spin only."""
+    long record, which biases the 10-constant C_mα; docs/spark_range.md). A reduction that
+    fails keeps the spin only."""
     failed = None
     for curvature in ((True, False) if np.isfinite(shot.meas[:, 3]).sum()
                       >= CURVATURE_STATIONS else (False,)):
@@ -104,8 +104,10 @@ def _spinning_estimate(shot, est: MotionEstimate, spin: float,
     if ok and motion.swerve is not None:
         Z, dZ = motion.swerve.lateral(motion.fit, s0)
         lateral, lateral_v = (Z.real, Z.imag), (dZ.real * per_s, dZ.imag * per_s)
+    vx = float(kinematics_at_epoch(shot, cubic_x=True)[1][0])
     return replace(
         est, spin_rad_s=float(spin), cg_lateral=lateral, cg_lateral_velocity=lateral_v,
+        vx_m_s=vx,
         cm_alpha=float(lc.Cm_alpha) if ok else math.nan,
         cmq_sum=float(lc.Cmq_sum) if ok and np.isfinite(lc.Cmq_sum) else math.nan,
         axis_rate_F=(0.0, dxi.real, dxi.imag) if ok else None, alias_note=note,

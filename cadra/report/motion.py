@@ -145,10 +145,10 @@ def shot_lines(r, verbose: bool = False, rates: str = "d/2V") -> list[str]:
         lines += ["  " + t for t in fit_report(f).splitlines()]
     else:
         for name, a in _arms(r):
-            rates = (f"lambda {pm(a.lam, a.lam_sigma, '1/' + u)}, omega "
-                     f"{pm(a.omega, a.omega_sigma, 'rad/' + u)}" if name != "trim" else
-                     f"rate p {pm(a.omega, None, 'rad/' + u)} (given)")
-            lines.append(f"  arm {name}: K {pm(a.K * DEG, a.K_sigma * DEG, 'deg')}, {rates}")
+            exps = (f"lambda {pm(a.lam, a.lam_sigma, '1/' + u)}, omega "
+                    f"{pm(a.omega, a.omega_sigma, 'rad/' + u)}" if name != "trim" else
+                    f"rate p {pm(a.omega, None, 'rad/' + u)} (given)")
+            lines.append(f"  arm {name}: K {pm(a.K * DEG, a.K_sigma * DEG, 'deg')}, {exps}")
     lines.append(f"  NPR {r.npr.npr:.3f}")
     if r.alias is not None:
         lines.append(f"  {r.alias.note(u)}")

@@ -55,6 +55,8 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "validate_tricyclic": ("Seed 002 Table 2: tricyclic fits of nonplanar tunnel runs",
                            "motion.md"),
     "validate_m80": ("The M-80 bullet end to end (BRL MR 1833 Table II)", "m80.md"),
+    "validate_spark_range": ("M-80 rounds on a BRL-like spark range, reduced from the twist "
+                             "alone", "spark_range.md"),
     "validate_roll_seed001": ("Seed 001 Table IV: roll lock-in", "pureroll.md"),
     "validate_roll_seed003": ("Seed 003: the global segmented roll fit", "segmented_roll.md"),
     "validate_roll_images": ("A finned body's roll from its images", "stage1.md"),
