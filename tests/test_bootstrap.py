@@ -46,6 +46,7 @@ def test_bootstrap_sigmas_agree_with_the_covariance_on_near_linear_data(fitted, 
     # the bias is a fraction of a sigma, the interval brackets the value
     assert (t["bias_sigma"].abs() < 0.8).all()
     assert ((t["lower"] < t["value"]) & (t["value"] < t["upper"])).all()
+    assert ((t["t_lower"] < t["value"]) & (t["value"] < t["t_upper"])).all()
     assert t["non_gaussian"].isna().all()          # 30 refits: too few to judge
     assert "too few to judge" in boot.report()
 
@@ -104,6 +105,23 @@ def test_percentile_figures_and_the_non_gaussian_flag_on_known_samples():
     assert s["lower"] - 1.0 == pytest.approx(0.1 * (-np.log(0.975) - 1.0), abs=0.01)
     assert s["upper"] - 1.0 == pytest.approx(0.1 * (np.log(40.0) - 1.0), abs=0.03)
     assert _figures("few", 1.0, 0.1, rng.standard_normal(10))["non_gaussian"] is None
+
+
+def test_the_studentized_interval_reflects_the_refits_t():
+    """Bootstrap-t: t_b = (x_b - value) / s_b with each refit's own sigma s_b; the interval
+    [value - t_97.5 sigma, value - t_2.5 sigma]. Refits whose sigma grows with their value
+    (s_b = 0.1 x_b) give t quantiles known in closed form here; without sigmas, NaN."""
+    rng = np.random.default_rng(4)
+    x = 1.0 + 0.1 * rng.standard_normal(4000)
+    s = 0.1 * x
+    f = _figures("t", 1.0, 0.1, x, s)
+    t_lo, t_hi = np.quantile((x - 1.0) / s, [0.025, 0.975])
+    assert f["t_lower"] == pytest.approx(1.0 - 0.1 * t_hi, rel=1e-12)
+    assert f["t_upper"] == pytest.approx(1.0 - 0.1 * t_lo, rel=1e-12)
+    # a refit sigma equal to the fit's: the interval is the basic one, reflected about value
+    g = _figures("g", 1.0, 0.1, x, np.full(x.size, 0.1))
+    assert g["t_lower"] == pytest.approx(2.0 - g["upper"], rel=1e-12)
+    assert np.isnan(_figures("n", 1.0, 0.1, x)["t_lower"])
 
 
 def test_a_campaigns_bootstrap_task_outside_a_worker_runs_its_refits_here(fitted):

@@ -29,7 +29,7 @@ from cadra.campaign.manifest import Manifest, ShotEntry
 #: per kind, bumped when that kind's code changes what it returns for the same inputs (a
 #: change to one kind reruns it and what takes its results, not the campaign's stage one)
 TASK_VERSIONS = {"stage1": "2", "calibrate": "2", "single": "2", "multifit": "3",
-                 "holdone": "3", "diagnose": "2", "bootstrap": "2"}
+                 "holdone": "3", "diagnose": "2", "bootstrap": "3"}
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,8 @@ NON_GAUSSIAN = 0.20
 MIN_TO_FLAG = 200
 #: the central coverage of the percentile interval
 COVERAGE = 0.95
+#: column prefix of a replicate's own covariance sigma of a parameter (``sigma:<name>``)
+SIGMA_PREFIX = "sigma:"
 #: the profile likelihood's chi^2 rise at the same coverage (one parameter: 1.96^2)
 PROFILE_LEVEL = 1.959963984540054 ** 2
 
@@ -124,6 +126,11 @@ def replicate(result: FitResult, seed: int, noise: str = "white",
     row.update(status=res.status, chi2=res.chi2, iterations=res.iterations)
     row.update({n: float(v) for n, v in zip(res.aero_names, res.aero_values, strict=True)})
     row.update({e.name: float(v) for e, v in zip(res.extras, res.extra_values, strict=True)})
+    # each refit's own covariance sigmas: the studentized (bootstrap-t) interval's scale
+    row.update({SIGMA_PREFIX + n: float(s)
+                for n, s in zip(res.aero_names, res.aero_sigma, strict=True)})
+    row.update({SIGMA_PREFIX + e.name: float(s)
+                for e, s in zip(res.extras, res.extra_sigma, strict=True)})
     return row
 
 
@@ -190,7 +197,9 @@ def summarize(result: FitResult, rows: Sequence[dict], noise: str = "white",
     sig = dict(zip(result.aero_names, result.aero_sigma, strict=True))
     sig.update(zip(result.extra_names, result.extra_sigma, strict=True))
     table = pd.DataFrame([_figures(n, values[n], sig[n], ok[n].to_numpy(float)
-                                   if n in ok else np.zeros(0)) for n in names])
+                                   if n in ok else np.zeros(0),
+                                   ok[SIGMA_PREFIX + n].to_numpy(float)
+                                   if SIGMA_PREFIX + n in ok else None) for n in names])
     der = pd.DataFrame()
     if derived:
         der = _derived(result, ok, derived)
@@ -198,13 +207,30 @@ def summarize(result: FitResult, rows: Sequence[dict], noise: str = "white",
                            n_requested=len(samples), seconds=seconds, derived=der)
 
 
-def _figures(name: str, value: float, sigma: float, x: np.ndarray) -> dict:
+def _studentized(value: float, sigma: float, x: np.ndarray, s) -> tuple[float, float]:
+    """The studentized (bootstrap-t) interval: the refits' t = (x - value) / s, their own
+    sigmas s, quantiles t_lo, t_hi; [value - t_hi sigma, value - t_lo sigma] (Efron &
+    Tibshirani, ch. 12). NaN without the refits' sigmas."""
+    if s is None or not (sigma > 0):
+        return math.nan, math.nan
+    s = np.asarray(s, dtype=float)
+    ok = np.isfinite(x) & np.isfinite(s) & (s > 0)
+    if ok.sum() < 2:
+        return math.nan, math.nan
+    a = (1.0 - COVERAGE) / 2.0
+    t_lo, t_hi = np.quantile((x[ok] - value) / s[ok], [a, 1.0 - a])
+    return float(value - t_hi * sigma), float(value - t_lo * sigma)
+
+
+def _figures(name: str, value: float, sigma: float, x: np.ndarray, s=None) -> dict:
+    t_lower, t_upper = _studentized(value, sigma, np.asarray(x, dtype=float), s)
     x = x[np.isfinite(x)]
     a = (1.0 - COVERAGE) / 2.0
     if x.size < 2:
         return {"parameter": name, "value": value, "sigma_cov": sigma, "sigma_boot": math.nan,
                 "ratio": math.nan, "bias": math.nan, "bias_sigma": math.nan,
-                "lower": math.nan, "upper": math.nan, "non_gaussian": None, "n": int(x.size)}
+                "lower": math.nan, "upper": math.nan, "t_lower": t_lower, "t_upper": t_upper,
+                "non_gaussian": None, "n": int(x.size)}
     sb = float(np.std(x, ddof=1))
     lower, upper = np.quantile(x, [a, 1.0 - a])
     half = 1.959963984540054 * sigma
@@ -217,7 +243,8 @@ def _figures(name: str, value: float, sigma: float, x: np.ndarray) -> dict:
     return {"parameter": name, "value": value, "sigma_cov": sigma, "sigma_boot": sb,
             "ratio": sb / sigma if sigma > 0 else math.nan, "bias": bias,
             "bias_sigma": bias / sigma if sigma > 0 else math.nan, "lower": float(lower),
-            "upper": float(upper), "non_gaussian": non_gauss, "n": int(x.size)}
+            "upper": float(upper), "t_lower": t_lower, "t_upper": t_upper,
+            "non_gaussian": non_gauss, "n": int(x.size)}
 
 
 def with_profiles(boot: BootstrapResult, result: FitResult,
@@ -255,8 +282,8 @@ def _derived(result: FitResult, ok: pd.DataFrame, derived: Mapping[str, Callable
     for k in derived:
         x = np.array([r[k] for r in reps], dtype=float)
         f = _figures(k, at[k], float(np.std(x, ddof=1)) if x.size > 1 else math.nan, x)
-        f.pop("sigma_cov")
-        f.pop("ratio")
+        for key in ("sigma_cov", "ratio", "t_lower", "t_upper"):
+            f.pop(key)
         rows.append(f)
     return pd.DataFrame(rows)
 

@@ -115,6 +115,7 @@ def _coverage_draw(args) -> dict:
         rows[r.parameter] = {"determined": True,
                              "basic": bool(2 * r.value - q_hi <= v <= 2 * r.value - q_lo),
                              "percentile": bool(q_lo <= v <= q_hi),
+                             "studentized": bool(r.t_lower <= v <= r.t_upper),
                              "covariance": bool(abs(r.value - v) <= 1.96 * r.sigma_cov),
                              "ratio": float(r.ratio)}
     return {"draw": k, "status": res.status, "converged_refits": boot.n_converged,
@@ -161,7 +162,7 @@ def coverage_figures(draws: int, refits: int, workers: int, seed: int = 0,
     cells = [p for r in ok for p in r["params"].values() if p["determined"]]
     peak = [r["params"][COVERAGE_PEAK] for r in ok
             if r["params"].get(COVERAGE_PEAK, {}).get("determined")]
-    kinds = ("basic", "percentile", "covariance")
+    kinds = ("basic", "percentile", "studentized", "covariance")
     by_param = {}
     for name in (ok[0]["params"] if ok else {}):
         ps = [r["params"][name] for r in ok if r["params"][name]["determined"]]
