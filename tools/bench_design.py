@@ -37,6 +37,7 @@ def _headline(out: dict) -> dict:
             "bootstrap_sigma_ratio_max": get("bootstrap", "ratio_max"),
             "percentile_coverage": cov.get("percentile", {}).get("rate"),
             "basic_interval_coverage": cov.get("basic", {}).get("rate"),
+            "studentized_coverage": cov.get("studentized", {}).get("rate"),
             "peak_percentile_coverage": cov.get("peak", {}).get("percentile", {}).get("rate"),
             "covariance_coverage": cov.get("covariance", {}).get("rate"),
             "plan_realised_over_predicted_min": get("plan", "realised_over_predicted_min"),
