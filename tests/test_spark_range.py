@@ -126,16 +126,30 @@ def test_cadra2_motion_with_the_twist_names_its_rates(spark, capsys):
     assert outs["d/V"]["Cmq_sum_per_rad"] == pytest.approx(0.5 * lin["Cmq_sum_per_rad"])
     assert outs["d/V"]["Cm_alpha_per_rad"] == pytest.approx(lin["Cm_alpha_per_rad"])
     assert abs(lin["Cm_alpha_per_rad"] - 1.82) < 3 * lin["Cm_alpha_sigma_per_rad"]
+    # a bullet fitted without its spin is warned about
+    assert "spin is not known" in _fit_without_gun(base, traj, capsys)
     # without the twist (a shot file without [gun]) the fast arm stays where the stations
     # put it, and C_m_alpha is far off
-    text = (SAMPLE / "shot.toml").read_text()
-    gunless = base / "gunless.toml"
-    gunless.write_text(text[:text.index("[gun]")] + text[text.index("[[stations]]"):])
+    gunless = _gunless(base)
     out = base / "motion_no_twist"
     cadra2_main(["motion", str(traj), "--shot", str(gunless), "-o", str(out), "-q"])
     capsys.readouterr()
     c = pd.read_csv(out / "coefficients.csv").iloc[0]
     assert abs(c["Cm_alpha_per_rad"] - 1.82) > 10 * c["Cm_alpha_sigma_per_rad"]
+
+
+def _gunless(base: Path) -> Path:
+    text = (SAMPLE / "shot.toml").read_text()
+    path = base / "gunless.toml"
+    if not path.exists():
+        path.write_text(text[:text.index("[gun]")] + text[text.index("[[stations]]"):])
+    return path
+
+
+def _fit_without_gun(base, traj, capsys) -> str:
+    cadra2_main(["fit", str(traj), "--shot", str(_gunless(base)), "--model", "m80",
+                 "--max-iterations", "2", "-o", str(base / "fit_no_gun"), "--no-plots", "-q"])
+    return capsys.readouterr().err
 
 
 def test_a_fit_far_above_its_noise_is_a_poor_minimum(spark, capsys):

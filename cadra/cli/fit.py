@@ -6,6 +6,7 @@ estimates :func:`cadra.flight.starts.start_estimates` gives, written by
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -87,6 +88,13 @@ def run(args) -> int:
             from cadra.fitting.reference import load_reference
 
             reference = load_reference(args.reference)   # before the fit: fail early
+        unspun = [sd.shot_id for sd in shots if sd.body_kind == "bullet"
+                  and not (math.isfinite(sd.launch_spin_rad_s)
+                           or math.isfinite(sd.twist_m_per_turn))]
+        if unspun and not args.no_auto_start:
+            warn("cadra2 fit", f"{', '.join(unspun)}: a bullet whose spin is not known (give "
+                 "--twist or --spin, or the shot file's [gun]): the stations do not show it, "
+                 "and on a spark range its fast yaw arm aliases (docs/spark_range.md)")
         estimates = None if args.no_auto_start else start_estimates(shots, args.start, model)
         for sd, e in zip(shots, estimates or (), strict=False):
             if e is not None and e.alias_note:
