@@ -13,7 +13,7 @@ called converged outside it (``false_converged``), the 6-DOF pulls' standard dev
 fraction within 2 sigma per coefficient, the classic reduction's sigmas over the 6-DOF's,
 its C_m_alpha within 2 sigma (``motion_cma_within_2sigma_frac``) and the time per fit.
 
-Usage: python tools/validate_spark_range.py [--rounds 20] [--seed 1880]
+Usage: python tools/validate_spark_range.py [--rounds 20] [--seed 1880] [--no-muzzle-velocity]
 (about 8 s a round on one core). Last line: a JSON object.
 """
 
@@ -36,9 +36,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--rounds", type=int, default=20, help="rounds flown and reduced")
     ap.add_argument("--seed", type=int, default=1880, help="seed of the draws")
+    ap.add_argument("--no-muzzle-velocity", action="store_true",
+                    help="give the reducer the twist alone (the spin at the range's speed)")
     args = ap.parse_args(argv)
-    s = run_tool("validate_spark_range", ROOT, lambda: show(run(args.rounds, args.seed)),
-                 argv=argv, seconds_key="run_s")
+    s = run_tool("validate_spark_range", ROOT, lambda: show(run(
+        args.rounds, args.seed, not args.no_muzzle_velocity)), argv=argv, seconds_key="run_s")
     return 0 if s["false_converged"] == 0 else 1
 
 

@@ -39,9 +39,11 @@ from cadra.motion import FlightConditions, planar_coefficients
 
 #: roll angles (deg) tried for a shot whose roll the images do not show
 ROLL_GRID_DEG = tuple(range(0, 360, 30))
-#: relative spins a known spin's start tries (-6 % to +3 % of the muzzle spin, 0.25 % apart:
-#: a step moves the spark range's fast arm by under half a radian over the record)
-SPIN_SCAN = np.arange(-0.06, 0.03 + 1e-9, 0.0025)
+#: relative spins a known spin's start tries (-6 % to +6 % of the spin given, 0.25 % apart:
+#: a step moves the spark range's fast arm by under half a radian over the record). The
+#: muzzle's spin is a few per cent above the range's; a spin from the twist at the speed
+#: measured in the range, a few per cent below
+SPIN_SCAN = np.arange(-0.06, 0.06 + 1e-9, 0.0025)
 #: the axis-inclination channels (columns of ``ShotData.meas``)
 _THETA, _PSI = CHANNELS.index("theta"), CHANNELS.index("psi")
 _PHI = CHANNELS.index("phi")
@@ -305,7 +307,8 @@ def initial_state(shot: ShotData, model: AeroModel,
     With a known spin's arms (``axis_rate_F`` given) the spin is scanned too, over
     :data:`SPIN_SCAN` of ``spin_rad_s``: the twist gives the muzzle spin, and the spin at the
     epoch is a per cent or two lower (it decays, and the muzzle is not where the record
-    starts), which on a spark range is radians of the fast arm's phase by the record's ends.
+    starts), which on a spark range is radians of the fast arm's phase by the record's ends;
+    without a muzzle velocity the twist's spin at the range's speed is low instead.
     Such a body, when the fit does not use its roll (:func:`default_local_free`), skips the
     roll grid: turning it about its axis changes nothing measured."""
     integ = integ or Integration()

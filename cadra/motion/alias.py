@@ -33,8 +33,8 @@ SUM_TOLERANCE = 0.15
 #: chi^2 by which another band must fit better to be taken over the one nearest the physics
 CHI2_MARGIN = 9.0
 #: relative frequency sums theory's start is tried at (the spin at the range is below the
-#: muzzle's by up to a few per cent)
-SUM_SCAN = np.arange(-0.05, 0.02 + 1e-9, 0.005)
+#: muzzle's by a few per cent; a spin from the twist at the range's speed, above)
+SUM_SCAN = np.arange(-0.05, 0.05 + 1e-9, 0.005)
 
 
 @dataclass(frozen=True)

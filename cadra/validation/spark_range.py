@@ -74,9 +74,10 @@ def draw_round(k: int, seed: int):
     return simulate_shot(spec_from_dict(d)), values, v_muzzle
 
 
-def measured(sim, rng: np.random.Generator, v_muzzle: float):
+def measured(sim, rng: np.random.Generator, v_muzzle: float | None):
     """The round as the reducer sees it: the truth plus film-level noise, the gun's twist
-    and muzzle velocity, the body frame (the fit chooses its own)."""
+    and muzzle velocity (None: the twist alone, the spin then at the range's measured
+    speed), the body frame (the fit chooses its own)."""
     sd = shot_data_from_truth(sim.truth, sim.rigid.with_frame("body"), sim.spec.shot_id,
                               "bullet", sigma_position_m=SIGMA_POSITION_M,
                               sigma_angle_rad=math.radians(SIGMA_ANGLE_DEG), rng=rng)
@@ -89,6 +90,7 @@ def fit_round(sim, values: dict, sd, model) -> dict:
     from cadra.fitting import fit_shots
     from cadra.flight.classic import analyse_shot
     from cadra.flight.data import launch_spin
+    from cadra.flight.estimates import estimate_motion
     from cadra.flight.starts import cm_alpha_of
 
     t0 = time.perf_counter()
@@ -108,7 +110,8 @@ def fit_round(sim, values: dict, sd, model) -> dict:
         row[f"{n}_value"], row[f"{n}_sigma"], row[f"{n}_truth"] = v, s, values[n]
         row[f"{n}_pull"] = (v - values[n]) / s if s > 0 else math.nan
     try:
-        motion = analyse_shot(sd, spin=launch_spin(sd), trim=False, curvature=True,
+        motion = analyse_shot(sd, spin=launch_spin(sd, estimate_motion(sd).speed_m_s),
+                              trim=False, curvature=True,
                               cm_alpha_guess=cm_alpha_of(model), window=None)
         lc = motion.coefficients
         for n, (attr, f) in CLASSIC.items():
@@ -121,15 +124,17 @@ def fit_round(sim, values: dict, sd, model) -> dict:
     return row
 
 
-def run(rounds: int = 20, seed: int = 1880) -> dict:
-    """Fly, measure and reduce ``rounds`` rounds; the figures (module doc)."""
+def run(rounds: int = 20, seed: int = 1880, muzzle_velocity: bool = True) -> dict:
+    """Fly, measure and reduce ``rounds`` rounds; the figures (module doc). Without
+    ``muzzle_velocity`` the reducer has the twist alone."""
     model = resolve_model("m80").with_vary({"CDD2": True})
     rows = []
     for k in range(rounds):
         sim, values, v_m = draw_round(k, seed)
-        sd = measured(sim, np.random.default_rng([seed, k, 1]), v_m)
+        sd = measured(sim, np.random.default_rng([seed, k, 1]),
+                      v_m if muzzle_velocity else None)
         rows.append(fit_round(sim, values, sd, model))
-    return summarise(rows)
+    return {**summarise(rows), "muzzle_velocity_given": bool(muzzle_velocity)}
 
 
 def summarise(rows: list[dict]) -> dict:
