@@ -19,6 +19,13 @@ of ``r_F`` is ``plane_basis @ r_F``, and the image follows by the inverse of the
 ``image_to_plane`` affine (docs/conventions.md, "Images and pixels"). Every map is affine, so
 the Jacobians are constants.
 
+:class:`PointSourceProjection` (a direct shadowgraph: a point-source spark throws the shadow
+onto a film): the view plane is the film's plane, rays run from the spark S through the point,
+and a point P lands at P' = S + λ (P − S), λ = n·(O − S) / n·(P − S) (O a point of the film, n
+its normal; λ is the magnification, typically 1.0–1.3): a conical projection, whose Jacobians
+depend on the point. It implements the protocol; stage one, the renderer and the facility file
+do not use it yet (a point-source facility is still refused).
+
 :func:`intersect_rays` is the weighted least-squares intersection of several views' rays, the
 combination step of stage one.
 """
@@ -33,7 +40,8 @@ import numpy as np
 
 from cadra.geometry import affine_inverse, apply_affine
 
-__all__ = ["ParallelProjection", "Projection", "RayIntersection", "intersect_rays"]
+__all__ = ["ParallelProjection", "PointSourceProjection", "Projection", "RayIntersection",
+           "intersect_rays"]
 
 
 @runtime_checkable
@@ -152,6 +160,103 @@ class ParallelProjection:
         return ab @ self.plane_basis, _broadcast(self.direction, ab)
 
     # image <-> view plane
+    def to_plane(self, uv) -> np.ndarray:
+        return apply_affine(self.image_to_plane, uv)
+
+    def from_plane(self, ab) -> np.ndarray:
+        return apply_affine(self.plane_to_image, ab)
+
+    def to_plane_jacobian(self, uv) -> np.ndarray:
+        return _broadcast(self.image_to_plane[:, :2], uv)
+
+    def from_plane_jacobian(self, ab) -> np.ndarray:
+        return _broadcast(self.plane_to_image[:, :2], ab)
+
+
+@dataclass(frozen=True, eq=False)
+class PointSourceProjection:
+    """Conical projection from a point source onto a film plane: see the module docstring.
+
+    Parameters
+    ----------
+    spark_m : (3,) the spark's position in F, m.
+    film_origin_m : (3,) the film plane's origin (its (a, b) = (0, 0)) in F, m.
+    plane_basis : (2, 3) orthonormal rows, the film's in-plane axes in F (its a and b).
+    image_to_plane : (2, 3) affine ``[a, b] = M @ [u, v, 1]`` (m, in the film plane): the
+        scan's pixels on the film (a similarity or an affine for film shrinkage and tilt).
+    """
+
+    spark_m: np.ndarray
+    film_origin_m: np.ndarray
+    plane_basis: np.ndarray
+    image_to_plane: np.ndarray
+    plane_to_image: np.ndarray = field(init=False, repr=False)
+    normal: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        S = np.array(self.spark_m, dtype=float).reshape(-1)
+        O = np.array(self.film_origin_m, dtype=float).reshape(-1)
+        P = np.array(self.plane_basis, dtype=float)
+        M = np.array(self.image_to_plane, dtype=float)
+        if S.shape != (3,) or O.shape != (3,) or not np.all(np.isfinite(np.r_[S, O])):
+            raise ValueError("spark_m, film_origin_m: expected finite points (3,) in m")
+        if P.shape != (2, 3) or not np.allclose(P @ P.T, np.eye(2), atol=1e-12):
+            raise ValueError("plane_basis: expected (2, 3) orthonormal rows")
+        if M.shape != (2, 3) or not np.all(np.isfinite(M)) or np.linalg.det(M[:, :2]) == 0.0:
+            raise ValueError("image_to_plane: expected a finite, invertible (2, 3) affine")
+        n = np.cross(P[0], P[1])
+        if abs(n @ (O - S)) < 1e-6:
+            raise ValueError("spark_m: the spark lies in the film's plane (it must face it)")
+        Minv = affine_inverse(M)
+        for name, value in (("spark_m", S), ("film_origin_m", O), ("plane_basis", P),
+                            ("image_to_plane", M), ("plane_to_image", Minv), ("normal", n)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    def magnification(self, r_F) -> np.ndarray:
+        """λ = n·(O − S) / n·(P − S) of each facility point: the shadow's size over the
+        point's (NaN for a point level with the spark, whose ray never meets the film)."""
+        d = (np.asarray(r_F, dtype=float) - self.spark_m) @ self.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(d != 0.0, (self.normal @ (self.film_origin_m - self.spark_m)) / d,
+                            np.nan)
+
+    # facility -> image
+    def plane_point(self, r_F) -> np.ndarray:
+        r = np.asarray(r_F, dtype=float)
+        lam = self.magnification(r)[..., None]
+        return (self.spark_m + lam * (r - self.spark_m) - self.film_origin_m) @ self.plane_basis.T
+
+    def plane_point_jacobian(self, r_F) -> np.ndarray:
+        """``A (λ E − λ (P − S) nᵀ / n·(P − S))``, A the film's axes: zero along the ray."""
+        r = np.asarray(r_F, dtype=float)
+        d = r - self.spark_m
+        lam = self.magnification(r)
+        dn = d @ self.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dP = lam[..., None, None] * (np.eye(3) - d[..., :, None] * self.normal
+                                         / dn[..., None, None])
+        return self.plane_basis @ dP
+
+    def to_image(self, r_F) -> np.ndarray:
+        return self.from_plane(self.plane_point(r_F))
+
+    def to_image_jacobian(self, r_F) -> np.ndarray:
+        return self.plane_to_image[:, :2] @ self.plane_point_jacobian(r_F)
+
+    # image -> facility
+    def ray(self, uv) -> tuple[np.ndarray, np.ndarray]:
+        return self.plane_ray(self.to_plane(uv))
+
+    def plane_ray(self, ab) -> tuple[np.ndarray, np.ndarray]:
+        """The ray from the spark through each film point: origin on the film, unit
+        direction from the spark toward it."""
+        ab = np.asarray(ab, dtype=float)
+        o = self.film_origin_m + ab @ self.plane_basis
+        d = o - self.spark_m
+        return o, d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    # image <-> film plane
     def to_plane(self, uv) -> np.ndarray:
         return apply_affine(self.image_to_plane, uv)
 
