@@ -93,8 +93,34 @@ def _broadcast(mat: np.ndarray, pts) -> np.ndarray:
     return np.broadcast_to(mat, pts.shape[:-1] + mat.shape).copy()
 
 
+class _ImagePlane:
+    """What every view shares: the image <-> view-plane affine (``image_to_plane`` and its
+    inverse ``plane_to_image``), and the image and the ray through the view-plane point."""
+
+    image_to_plane: np.ndarray
+    plane_to_image: np.ndarray
+
+    def to_image(self, r_F) -> np.ndarray:
+        return self.from_plane(self.plane_point(r_F))
+
+    def ray(self, uv) -> tuple[np.ndarray, np.ndarray]:
+        return self.plane_ray(self.to_plane(uv))
+
+    def to_plane(self, uv) -> np.ndarray:
+        return apply_affine(self.image_to_plane, uv)
+
+    def from_plane(self, ab) -> np.ndarray:
+        return apply_affine(self.plane_to_image, ab)
+
+    def to_plane_jacobian(self, uv) -> np.ndarray:
+        return _broadcast(self.image_to_plane[:, :2], uv)
+
+    def from_plane_jacobian(self, ab) -> np.ndarray:
+        return _broadcast(self.plane_to_image[:, :2], ab)
+
+
 @dataclass(frozen=True, eq=False)
-class ParallelProjection:
+class ParallelProjection(_ImagePlane):
     """Parallel (collimated) projection: see the module docstring.
 
     Parameters
@@ -145,36 +171,17 @@ class ParallelProjection:
     def plane_point_jacobian(self, r_F) -> np.ndarray:
         return _broadcast(self.plane_basis, r_F)
 
-    def to_image(self, r_F) -> np.ndarray:
-        return self.from_plane(self.plane_point(r_F))
-
     def to_image_jacobian(self, r_F) -> np.ndarray:
         return _broadcast(self.plane_to_image[:, :2] @ self.plane_basis, r_F)
 
     # image -> facility
-    def ray(self, uv) -> tuple[np.ndarray, np.ndarray]:
-        return self.plane_ray(self.to_plane(uv))
-
     def plane_ray(self, ab) -> tuple[np.ndarray, np.ndarray]:
         ab = np.asarray(ab, dtype=float)
         return ab @ self.plane_basis, _broadcast(self.direction, ab)
 
-    # image <-> view plane
-    def to_plane(self, uv) -> np.ndarray:
-        return apply_affine(self.image_to_plane, uv)
-
-    def from_plane(self, ab) -> np.ndarray:
-        return apply_affine(self.plane_to_image, ab)
-
-    def to_plane_jacobian(self, uv) -> np.ndarray:
-        return _broadcast(self.image_to_plane[:, :2], uv)
-
-    def from_plane_jacobian(self, ab) -> np.ndarray:
-        return _broadcast(self.plane_to_image[:, :2], ab)
-
 
 @dataclass(frozen=True, eq=False)
-class PointSourceProjection:
+class PointSourceProjection(_ImagePlane):
     """Conical projection from a point source onto a film plane: see the module docstring.
 
     Parameters
@@ -238,16 +245,10 @@ class PointSourceProjection:
                                          / dn[..., None, None])
         return self.plane_basis @ dP
 
-    def to_image(self, r_F) -> np.ndarray:
-        return self.from_plane(self.plane_point(r_F))
-
     def to_image_jacobian(self, r_F) -> np.ndarray:
         return self.plane_to_image[:, :2] @ self.plane_point_jacobian(r_F)
 
     # image -> facility
-    def ray(self, uv) -> tuple[np.ndarray, np.ndarray]:
-        return self.plane_ray(self.to_plane(uv))
-
     def plane_ray(self, ab) -> tuple[np.ndarray, np.ndarray]:
         """The ray from the spark through each film point: origin on the film, unit
         direction from the spark toward it."""
@@ -255,19 +256,6 @@ class PointSourceProjection:
         o = self.film_origin_m + ab @ self.plane_basis
         d = o - self.spark_m
         return o, d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-    # image <-> film plane
-    def to_plane(self, uv) -> np.ndarray:
-        return apply_affine(self.image_to_plane, uv)
-
-    def from_plane(self, ab) -> np.ndarray:
-        return apply_affine(self.plane_to_image, ab)
-
-    def to_plane_jacobian(self, uv) -> np.ndarray:
-        return _broadcast(self.image_to_plane[:, :2], uv)
-
-    def from_plane_jacobian(self, ab) -> np.ndarray:
-        return _broadcast(self.plane_to_image[:, :2], ab)
 
 
 @dataclass(frozen=True)
