@@ -35,6 +35,7 @@ decide on real parts; everything else is the analytic complex function, so
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numba import njit
@@ -147,9 +148,10 @@ class AeroProgram:
         """Readable listing of the program (one op a line)."""
         return disassemble(self.ops, self.args, self.starts, self.param_names)
 
+    @cached_property
     def variables_read(self) -> frozenset[str]:
         """Names of the :data:`VARIABLES` the program reads (the flight variables its
-        coefficients depend on)."""
+        coefficients depend on); read once per program (every fit problem asks)."""
         names = set()
         for op, a in zip(self.ops, self.args, strict=True):
             op = int(op)

@@ -152,7 +152,7 @@ def run(args) -> int:
         print(boot.report())
     cli.say(args, f"wrote {out}/ (report.md, results.json, coefficients.csv, plots/"
             + (", bootstrap.csv" if boot is not None else "") + ")")
-    return 0 if result.converged and not result.poor_minimum else 1
+    return 0 if result.verdict == "converged" else 1
 
 
 def print_result(result, args, full: bool = False) -> None:

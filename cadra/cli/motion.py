@@ -52,16 +52,6 @@ def _motion_arguments(p) -> None:
                    help="points between sections (default: a tenth of the window)")
 
 
-def _spins(args, n: int) -> list[float | None]:
-    given = args.spin or []
-    if len(given) not in (0, 1, n):
-        raise ValueError(f"--spin: give one value for every shot or one per trajectory "
-                         f"({n}), got {len(given)}")
-    if any(not math.isfinite(v) for v in given):
-        raise ValueError("--spin: must be finite")
-    return [None] * n if not given else (given * n if len(given) == 1 else list(given))
-
-
 def run(args) -> int:
     """``cadra2 motion`` (module doc); returns the exit status."""
     from tqdm import tqdm
@@ -78,20 +68,22 @@ def run(args) -> int:
         if args.path_degree < 1:
             raise ValueError(f"--path-degree: at least 1, got {args.path_degree}")
         shots, _ = cli.shots_of(args)
-        given = _spins(args, len(shots))
+        # the spins --spin, --twist or the shot files' [gun] give (cli.with_gun, in
+        # shots_of); --spin keeps the tricyclic trim arm by default, a twist does not
+        trim_default = bool(args.spin)
         model, rates = _model_and_rates(args)
         guess = None if model is None else cm_alpha_of(model)
         results = []
-        for shot, spin in tqdm(list(zip(shots, given, strict=True)), desc="motion",
-                               disable=cli.quiet(args) or len(shots) < 2, file=sys.stderr,
-                               leave=False):
+        for shot in tqdm(shots, desc="motion", disable=cli.quiet(args) or len(shots) < 2,
+                         file=sys.stderr, leave=False):
             if not shot.has_angles:
                 raise ValueError(f"{shot.source.get('trajectory_file', shot.shot_id)}: no "
                                  "measured angles (theta, psi): nothing to reduce")
-            trim = args.trim if args.trim is not None else spin is not None
-            if spin is None:          # --twist or the shot file's [gun]
-                known = launch_spin(shot, estimate_motion(shot).speed_m_s)
-                spin = known if math.isfinite(known) else None
+            known = launch_spin(shot)
+            if not math.isfinite(known) and math.isfinite(shot.twist_m_per_turn):
+                known = launch_spin(shot, estimate_motion(shot).speed_m_s)   # twist alone
+            spin = known if math.isfinite(known) else None
+            trim = args.trim if args.trim is not None else trim_default
             try:
                 results.append(analyse_shot(
                     shot, variable=args.variable, spin=spin, offset=args.offset,

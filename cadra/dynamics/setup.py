@@ -168,7 +168,7 @@ def non_rolling_obstacle(phys, program, phys_dirs=(), ref_from_cg_body_m=None) -
     ph = rows[0]
     if program.angle_plane != "sigma":
         return "the aerodynamic model is not a total-angle (sigma) model"
-    roll_vars = sorted(program.variables_read() & ROLL_VARIABLES)
+    roll_vars = sorted(program.variables_read & ROLL_VARIABLES)
     if roll_vars:
         return f"the aerodynamic model reads {', '.join(roll_vars)}"
     if int(round(ph[P_MODE])) != 0:

@@ -194,8 +194,7 @@ class FitResult:
         """Converged, but to residuals its noise does not allow: p(chi^2) below
         :data:`POOR_MINIMUM_P` (a wrong minimum, an aliased start, or physics the model
         lacks: the gap diagnosis asks which)."""
-        p = self.chi2_p_value
-        return self.converged and math.isfinite(p) and p < POOR_MINIMUM_P
+        return self.converged and self.chi2_p_value < POOR_MINIMUM_P    # NaN: False
 
     @property
     def verdict(self) -> str:

@@ -218,7 +218,7 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
     replaces the measured angles' local slope as the axis's rate of turn (an estimate's
     :attr:`MotionEstimate.axis_rate_F`, from arms a local slope cannot follow), and
     ``axis_angles`` (theta, psi, rad) the axis itself (the local fit would average an arm
-    that turns between stations away). ``cg_lateral`` ((y, z) m, (vy, vz) m/s[, vx m/s])
+    that turns between stations away). ``cg_lateral`` ((y, z) m, (vy, vz) m/s, vx m/s or NaN)
     replaces the polynomials' lateral cg position and velocity at the epoch (a swerve fitted
     with the arms: a spinning bullet's slow arm swerves it by millimetres at half a metre a
     second), and the downrange speed when given.
@@ -275,7 +275,7 @@ def state_candidates(shot: ShotData, roll_grid_deg=ROLL_GRID_DEG,
         y = state_from_reference(pos, vel, q, R.T @ w_F, ref)
         if cg_lateral is not None:
             y[1:3], y[4:6] = cg_lateral[0], cg_lateral[1]
-            if len(cg_lateral) > 2 and np.isfinite(cg_lateral[2]):
+            if np.isfinite(cg_lateral[2]):
                 y[3] = cg_lateral[2]
         out.append(y)
     return out

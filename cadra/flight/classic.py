@@ -271,10 +271,9 @@ def analyse_shot(shot: ShotData, *, variable: str = "distance", spin: float | No
                         s_ref=0.5 * (s[0] + s[-1]) if curvature else None)
     alias = None
     if spin:
-        _, _, ix_over_i = cond.scales()
+        s_m, _, ix_over_i = cond.scales()
         guess = None
         if cm_alpha_guess is not None and np.isfinite(cm_alpha_guess):
-            s_m = cond.scales()[0]
             guess = cm_alpha_guess / (s_m * per_s**2)
         try:
             alias = dealias_arms(fit, s, fp.alpha, fp.beta, fp.sigma_alpha, fp.sigma_beta,

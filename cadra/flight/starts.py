@@ -16,10 +16,11 @@ from dataclasses import replace
 import numpy as np
 
 from cadra.flight.classic import analyse_shot, conditions_of, min_points
-from cadra.flight.data import launch_spin
+from cadra.flight.data import CHANNELS, launch_spin
 from cadra.flight.estimates import MotionEstimate, estimate_motion, kinematics_at_epoch
 from cadra.motion import MotionFitError, fit_epicyclic, linear_coefficients
 
+_THETA = CHANNELS.index("theta")
 #: stations with angles from which a known spin's start uses the 12-constant form
 CURVATURE_STATIONS = 16
 #: the choices of :func:`start_estimates`
@@ -78,7 +79,7 @@ def _spinning_estimate(shot, est: MotionEstimate, spin: float,
     long record, which biases the 10-constant C_mα; docs/spark_range.md). A reduction that
     fails keeps the spin only."""
     failed = None
-    for curvature in ((True, False) if np.isfinite(shot.meas[:, 3]).sum()
+    for curvature in ((True, False) if np.isfinite(shot.meas[:, _THETA]).sum()
                       >= CURVATURE_STATIONS else (False,)):
         try:
             motion = analyse_shot(shot, window=None, spin=spin, trim=False,

@@ -86,6 +86,11 @@ class Dealiased:
         return text
 
 
+def _omegas(fit: EpicyclicFit) -> tuple[float, float]:
+    """The two arms' frequencies of ``fit`` (per unit of its variable)."""
+    return tuple(float(fit.values[fit.layout.index(f"omega{j}")]) for j in (1, 2))
+
+
 def _shifted(fit: EpicyclicFit, dw: tuple[float, float]) -> EpicyclicFit:
     values = fit.values.copy()
     for j, d in enumerate(dw):
@@ -129,7 +134,7 @@ def dealias_arms(fit: EpicyclicFit, s, alpha, beta, sigma_alpha, sigma_beta, *,
     s = np.asarray(s, dtype=float)
     spacing = float(np.median(np.diff(s)))
     step = 2.0 * math.pi / spacing
-    w = [float(fit.values[fit.layout.index(f"omega{j}")]) for j in (1, 2)]
+    w = _omegas(fit)
     sign = math.copysign(1.0, expected_sum)
     use_product = expected_product is not None and np.isfinite(expected_product) and (
         expected_product > 0)
@@ -177,7 +182,7 @@ def dealias_arms(fit: EpicyclicFit, s, alpha, beta, sigma_alpha, sigma_beta, *,
                 pass
     bands = []
     for refit in sorted(refits, key=lambda r: r.chi2):
-        w1, w2 = (float(refit.values[refit.layout.index(f"omega{j}")]) for j in (1, 2))
+        w1, w2 = _omegas(refit)
         if w1 * sign <= 0 or w2 * sign <= 0:
             continue
         miss = (w1 + w2) / expected_sum - 1.0
@@ -193,8 +198,7 @@ def dealias_arms(fit: EpicyclicFit, s, alpha, beta, sigma_alpha, sigma_beta, *,
             f"no band of the arms ({w[0]:.4g}, {w[1]:.4g} rad per unit, stations {spacing:.4g} "
             f"apart) sums to the spin's {expected_sum:.4g} within {SUM_TOLERANCE:.0%}: the "
             "spin given does not belong to this motion, or one arm is not seen")
-    bands.sort(key=lambda b: distance(*(float(b.fit.values[b.fit.layout.index(f"omega{j}")])
-                                        for j in (1, 2))))
+    bands.sort(key=lambda b: distance(*_omegas(b.fit)))
     best = bands[0]
     for b in bands[1:]:
         if b.fit.chi2 < best.fit.chi2 - CHI2_MARGIN:

@@ -47,7 +47,7 @@ _RATE_ATTRS = ("Cmq_sum", "Cm_p_alpha", "Cmq_sum0", "Cmq_sum2", "Cm_p_alpha0", "
 
 def _rated(attr: str, value, rates: str):
     """``value`` of coefficient ``attr`` in the rate normalisation ``rates``."""
-    if value is None or attr.removesuffix("_sigma") not in _RATE_ATTRS:
+    if value is None or attr not in _RATE_ATTRS:
         return value
     return value * RATES[rates]
 
