@@ -13,6 +13,9 @@ circle, cone, bullet and finner = centre of the base plane. Body axes: x nose, y
 :func:`silhouette` gives the exact outline under parallel projection as a polygon whose
 vertices lie on the outline; :func:`silhouette_area_m2` its area in closed form. A finned body's
 outline depends on its roll: :func:`finner_silhouette` (:func:`outline_polygon` for any body).
+Under a point source (a direct shadowgraph) the shadow's outline is the film's cut through the
+cone of rays tangent to the body: :func:`conical_silhouette` (its contour generator
+:func:`contour_generator`), :func:`conical_outline_polygon` for any body.
 """
 
 from cadra.body.bullet import M80_IN, M80_MASS_G, bullet, bullet_preset, tangent_ogive_radius_m
@@ -25,10 +28,12 @@ from cadra.body.capsule import (
     preset_dimensions_m,
     solve_capsule_oml,
 )
+from cadra.body.conical import conical_silhouette, contour_generator
 from cadra.body.finner import (
     BASIC_FINNER_CAL,
     FinnedBody,
     FinnedMassProperties,
+    conical_outline_polygon,
     fin_polygons,
     finner,
     finner_mass_properties,
@@ -76,6 +81,9 @@ __all__ = [
     "finner_silhouette_area_m2",
     "meridian",
     "outline_polygon",
+    "conical_outline_polygon",
+    "conical_silhouette",
+    "contour_generator",
     "preset_dimensions_m",
     "silhouette",
     "silhouette_area_m2",

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cadra.body.conical import conical_silhouette
 from cadra.body.mass import solid_properties
 from cadra.body.model import Body, make_body, spec_from_params
 from cadra.body.outline import silhouette
@@ -259,15 +260,22 @@ def fin_corners(fb: FinnedBody, R_FB, r_ref_F, *, from_axis: bool = True) -> np.
     return r0 + np.einsum("cj,kjd->kcd", grid, frames)
 
 
-def fin_polygons(fb: FinnedBody, R_FB, r_ref_F, P_view) -> list[np.ndarray]:
+def fin_polygons(fb: FinnedBody, R_FB, r_ref_F, P_view=None, *,
+                 to_plane=None) -> list[np.ndarray]:
     """The four fins' projected outlines: each the convex hull of its box's 8 projected
-    corners, (M, 2) counter-clockwise in view-plane metres (``P_view @ r_F``)."""
+    corners, (M, 2) counter-clockwise in view-plane metres (``P_view @ r_F``, or
+    ``to_plane(r_F)`` for a central projection, which also maps a box to the hull of its
+    corners' images)."""
     from scipy.spatial import ConvexHull
 
-    P = _check_view(P_view)
+    if to_plane is None:
+        P = _check_view(P_view)
+
+        def to_plane(r):
+            return r @ P.T
     polys = []
     for corners in fin_corners(fb, _check_rotation(R_FB), r_ref_F):
-        pts = corners @ P.T
+        pts = np.asarray(to_plane(corners), dtype=float)
         polys.append(pts[ConvexHull(pts).vertices])      # counter-clockwise in 2-D
     return polys
 
@@ -338,6 +346,21 @@ def outline_polygon(body, R_FB, r_ref_F, P_view, n_points: int = 4096) -> np.nda
     if isinstance(body, FinnedBody):
         return finner_silhouette(body, R_FB, r_ref_F, P_view, n_points=n_points)
     return silhouette(body, R_FB, r_ref_F, P_view, n_points=n_points)
+
+
+def conical_outline_polygon(body, R_FB, r_ref_F, spark_m, to_plane,
+                            n_points: int = 4096) -> np.ndarray:
+    """The outline of any body's shadow from a point source ``spark_m`` on a film mapped by
+    ``to_plane`` (:func:`cadra.body.conical.conical_silhouette`'s contract); a finned body's
+    is the union of its body's shadow and its fins' (each the hull of its corners' images:
+    a central projection keeps a box convex and every piece still contains the axis point
+    at s = chord / 2)."""
+    if isinstance(body, FinnedBody):
+        R = _check_rotation(R_FB)
+        pieces = [conical_silhouette(body.body, R, r_ref_F, spark_m, to_plane, n_points),
+                  *fin_polygons(body, R, r_ref_F, to_plane=to_plane)]
+        return np.asarray(_union(pieces).exterior.coords)[:-1]
+    return conical_silhouette(body, R_FB, r_ref_F, spark_m, to_plane, n_points)
 
 
 # --------------------------------------------------------------------------- mass

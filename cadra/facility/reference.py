@@ -6,8 +6,11 @@ station has a top view (sees x, y) and a side view (sees x, z). A *parallel* (co
 view maps its two facility coordinates affinely to pixels: ``[a, b] = M @ [u, v, 1]`` with
 ``M = image_to_plane`` (2x3), pixels (u, v) = (column, row) from the centre of the top-left
 pixel. Fiducial wires -- straight, with surveyed 3-D end points -- let stage one re-solve that
-affine per image (:func:`fit_affine_to_wires`). ``point_source`` (perspective) views are
-recognised and refused ("not supported yet"); the schema has room for their fields.
+affine per image (:func:`fit_affine_to_wires`). A *point-source* view (a direct shadowgraph)
+has a spark and a film beyond the line of flight: a point reaches the film along the ray from
+the spark (:class:`~cadra.optics.projection.PointSourceProjection`), and the affine maps pixels
+to the film's points; the wires (straight lines, still straight on the film) solve it the same
+way.
 
 This module holds the facility's geometry and data objects; reading and validating the file
 (``load_facility``, ``FacilityFileError`` naming the key path) is
@@ -113,7 +116,7 @@ class View:
     ----------
     station : station id.
     name : ``"top"`` (sees x, y) or ``"side"`` (sees x, z).
-    projection : ``"parallel"``.
+    projection : ``"parallel"`` or ``"point_source"``.
     axes : facility axis indices seen, (0, 1) for top, (0, 2) for side.
     width_px, height_px : image size.
     bit_depth : 8 or 16.
@@ -121,6 +124,11 @@ class View:
     image_to_plane : (2, 3) nominal affine ``[a, b] = M @ [u, v, 1]`` (view-plane metres in F).
     wires : the fiducial wires seen in this view.
     reference_mark : the scanner reference mark.
+    source_position_m : a point-source view's spark (3,), m in F; None for a parallel view.
+    film_distance_m : a point-source view's distance from the spark to the film, m, along
+        the view's sight axis (z for top, y for side); the film lies beyond the line of
+        flight, perpendicular to that axis, and ``image_to_plane`` maps pixels to its
+        points' facility coordinates along the view's axes (docs/facility_file.md).
     """
 
     station: int
@@ -134,9 +142,14 @@ class View:
     image_to_plane: np.ndarray
     wires: tuple[Wire, ...]
     reference_mark: ReferenceMark
+    source_position_m: np.ndarray | None = None
+    film_distance_m: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "image_to_plane", _ro(np.reshape(self.image_to_plane, (2, 3))))
+        if self.source_position_m is not None:
+            object.__setattr__(self, "source_position_m",
+                               _ro(np.reshape(self.source_position_m, 3)))
         object.__setattr__(self, "wires", tuple(self.wires))
         object.__setattr__(self, "axes", tuple(int(a) for a in self.axes))
 
@@ -149,6 +162,23 @@ class View:
         return P
 
     @property
+    def sight_axis(self) -> int:
+        """The facility axis the view looks along (the one it does not see): z for top."""
+        return ({0, 1, 2} - set(self.axes)).pop()
+
+    @property
+    def film_origin_m(self) -> np.ndarray:
+        """A point-source view's film point with view-plane coordinates (0, 0), m in F: on
+        the sight axis, ``film_distance_m`` from the spark, beyond the line of flight."""
+        if self.source_position_m is None:
+            raise ValueError(f"station {self.station} {self.name}: a parallel view has no film")
+        k = self.sight_axis
+        S = self.source_position_m[k]
+        origin = np.zeros(3)
+        origin[k] = S - np.copysign(float(self.film_distance_m), S)
+        return origin
+
+    @property
     def plane_to_image(self) -> np.ndarray:
         """(2, 3) inverse of :attr:`image_to_plane`: ``[u, v] = M_inv @ [a, b, 1]``."""
         return affine_inverse(self.image_to_plane)
@@ -159,16 +189,26 @@ class View:
         return np.array([(self.width_px - 1) / 2.0, (self.height_px - 1) / 2.0])
 
     def optics(self, affine: np.ndarray | None = None):
-        """This view's :class:`~cadra.optics.projection.ParallelProjection` (docs/conventions.md,
-        "Projections"), with the nominal image->plane affine or ``affine`` (e.g. the one solved
+        """This view's :class:`~cadra.optics.projection.Projection` (docs/conventions.md,
+        "Projections"): a ``ParallelProjection``, or a ``PointSourceProjection`` from the spark
+        onto the film, with the nominal image->plane affine or ``affine`` (e.g. the one solved
         from the image's wires)."""
-        from cadra.optics.projection import ParallelProjection
+        from cadra.optics.projection import ParallelProjection, PointSourceProjection
 
+        if self.projection == "point_source":
+            return PointSourceProjection(
+                spark_m=self.source_position_m, film_origin_m=self.film_origin_m,
+                plane_basis=self.P_view,
+                image_to_plane=self.image_to_plane if affine is None else affine)
         return ParallelProjection.from_view(self, affine)
 
     def project_points(self, r_F: np.ndarray) -> np.ndarray:
-        """Parallel projection of facility points ``(N, 3)`` (or ``(3,)``) to the view plane."""
+        """View-plane points (m) of facility points ``(N, 3)`` (or ``(3,)``): where the view's
+        ray through each meets the view plane (for a parallel view, the two coordinates it
+        sees)."""
         r_F = np.asarray(r_F, dtype=float)
+        if self.projection == "point_source":
+            return self.optics().plane_point(r_F)
         return r_F[..., list(self.axes)]
 
     def plane_to_pixels(self, ab: np.ndarray, affine: np.ndarray | None = None) -> np.ndarray:
@@ -184,6 +224,13 @@ class View:
         """Pixels ``(N, 2)`` (u, v) to view-plane points ``(N, 2)`` (m)."""
         M = self.image_to_plane if affine is None else np.asarray(affine, dtype=float)
         return apply_affine(M, uv)
+
+    def wire_width_px(self, wire: Wire) -> float:
+        """The width of ``wire``'s image, px: its diameter at the view's magnification at its
+        middle (1 for parallel light; a point source's shadow is wider than the wire) over
+        the nominal scale."""
+        mid = 0.5 * (np.asarray(wire.p0_m) + np.asarray(wire.p1_m))
+        return wire.diameter_m * float(self.optics().magnification(mid)) / self.scale_m_per_px
 
     def wire_lines_plane(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Each wire's projected end points in the view plane (m), in :attr:`wires` order."""
@@ -391,15 +438,47 @@ def spark_range_text() -> str:
         spacing=4.0, n_st=25, survey_seed=1880)
 
 
+#: The BRL-like point-source range's layout (docs/facility_file.md): the spark's stand-off
+#: from the line of flight and its distance to the film, m (magnification 1.2 at the line).
+BRL_SPARK_STANDOFF_M, BRL_FILM_DISTANCE_M = 1.5, 1.8
+
+
+def brl_spark_text() -> str:
+    """TOML text of ``facilities/brl_spark.toml`` (the file is this function's output).
+
+    A BRL-like small-arms spark range with direct shadowgraphs (docs/facility_file.md, "The
+    point-source range"): 25 stations 0.9144 m (3 ft) apart, each view a spark 1.5 m from
+    the line of flight (above it for the top view, to port for the side view) throwing the
+    shadow onto a film 0.3 m beyond the line (1.8 m from the spark): magnification 1.2 at
+    the line of flight, in the 1.0-1.3 of the standard method. Film scanned at 0.127 mm/px
+    (1600 x 1200 px). Per view two wires across the range (0.07 m either side of the
+    station) 0.12 m beyond the line of flight, toward the film, and two along it 0.20 m
+    beyond: two depths, so that the wires' images also carry the spark's position. Survey
+    errors as the other ranges', from another seed.
+    """
+    return _range_text(
+        "brl_spark",
+        "BRL-like small-arms spark range (docs/facility_file.md): 25 direct-shadowgraph "
+        "stations 0.9144 m (3 ft) apart, point-source sparks 1.5 m from the line of flight "
+        "and films 0.3 m beyond it (magnification 1.2), films scanned at 0.127 mm/px "
+        "(1600 x 1200 px), 4 surveyed fiducial wires per view at two depths.",
+        spacing=0.9144, n_st=25, survey_seed=900,
+        point_source=(BRL_SPARK_STANDOFF_M, BRL_FILM_DISTANCE_M))
+
+
 _GENERATOR = {"hffaf": "default_hffaf_text", "small_arms": "small_arms_range_text",
-              "spark_range": "spark_range_text"}
+              "spark_range": "spark_range_text", "brl_spark": "brl_spark_text"}
 
 
 def _range_text(name: str, description: str, *, spacing: float, n_st: int,
-                survey_seed: int) -> str:
-    """TOML text of a range of ``n_st`` HFFAF-like stations ``spacing`` metres apart."""
+                survey_seed: int, point_source: tuple[float, float] | None = None) -> str:
+    """TOML text of a range of ``n_st`` HFFAF-like stations ``spacing`` metres apart;
+    ``point_source`` = (spark stand-off, spark-to-film distance) for direct shadowgraphs."""
     w, h, s = 1600, 1200, 1.27e-4
     across, along, off, half = 0.080, 0.069, 0.12, 0.15
+    off_along = off     # the depth of the wires along the range
+    if point_source is not None:
+        across, along, off_along = 0.070, 0.062, 0.20   # clear of the mark when magnified
     offs = iter(_survey_offsets(n_st * 2 * 4 * 6, seed=survey_seed))
 
     def f(x):
@@ -416,7 +495,7 @@ def _range_text(name: str, description: str, *, spacing: float, n_st: int,
         f"schema_version = {SCHEMA_VERSION}",
         f'name = "{name}"',
         f'description = "{description}"',
-        'projection = "parallel"',
+        f'projection = "{"parallel" if point_source is None else "point_source"}"',
         "",
         "[view_defaults]",
         f"width_px = {w}",
@@ -425,28 +504,35 @@ def _range_text(name: str, description: str, *, spacing: float, n_st: int,
         f"scale_m_per_px = {s!r}",
         "reference_mark = { u_px = 100.0, v_px = 130.0, arm_px = 24.0, width_px = 3.0 }",
     ]
+    if point_source is not None:
+        lines.append(f"film_distance_m = {f(point_source[1])}")
     for k in range(1, n_st + 1):
         xs = round((k - 1) * spacing, 6)
         lines += ["", "[[stations]]", f"id = {k}", f"x_m = {f(xs)}"]
         for view in ("top", "side"):
             M = nominal_image_to_plane(xs, s, w, h)
+            oa = off_along
             if view == "top":   # wires in horizontal planes below the flight line (z = -off)
                 nominal = [
                     ("x-", (xs - across, -half, -off), (xs - across, half, -off)),
                     ("x+", (xs + across, -half, -off), (xs + across, half, -off)),
-                    ("y-", (xs - half, -along, -off), (xs + half, -along, -off)),
-                    ("y+", (xs - half, along, -off), (xs + half, along, -off)),
+                    ("y-", (xs - half, -along, -oa), (xs + half, -along, -oa)),
+                    ("y+", (xs - half, along, -oa), (xs + half, along, -oa)),
                 ]
+                spark = (xs, 0.0, None if point_source is None else point_source[0])
             else:               # wires in the vertical plane y = -off (starboard window)
                 top = off - 0.01  # vertical wires stop short of the top-view wires' plane
                 nominal = [
                     ("x-", (xs - across, -off, -top), (xs - across, -off, top)),
                     ("x+", (xs + across, -off, -top), (xs + across, -off, top)),
-                    ("z-", (xs - half, -off, -along), (xs + half, -off, -along)),
-                    ("z+", (xs - half, -off, along), (xs + half, -off, along)),
+                    ("z-", (xs - half, -oa, -along), (xs + half, -oa, -along)),
+                    ("z+", (xs - half, -oa, along), (xs + half, -oa, along)),
                 ]
-            lines += ["", f"[stations.views.{view}]",
-                      f"image_to_plane = [{vec(M[0])}, {vec(M[1])}]", "wires = ["]
+                spark = (xs, None if point_source is None else point_source[0], 0.0)
+            lines += ["", f"[stations.views.{view}]"]
+            if point_source is not None:
+                lines.append(f"source_position_m = {vec(spark)}")
+            lines += [f"image_to_plane = [{vec(M[0])}, {vec(M[1])}]", "wires = ["]
             for name, p0, p1 in nominal:
                 q0 = [p + next(offs) for p in p0]
                 q1 = [p + next(offs) for p in p1]
@@ -458,6 +544,7 @@ def _range_text(name: str, description: str, *, spacing: float, n_st: int,
 
 __all__ = [
     "VIEW_AXES", "AffineFit", "Facility", "ReferenceMark", "Station", "View", "Wire",
-    "default_hffaf_text", "fit_affine_to_wires", "small_arms_range_text", "spark_range_text",
+    "brl_spark_text", "default_hffaf_text", "fit_affine_to_wires", "small_arms_range_text",
+    "spark_range_text",
     "nominal_image_to_plane", "SCHEMA_VERSION",
 ]

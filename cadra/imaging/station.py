@@ -41,12 +41,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cadra.body import FinnedBody
-from cadra.conventions import axis_from_projected_angles
+from cadra.conventions import axis_from_inclinations, axis_from_projected_angles
 from cadra.facility.reference import Station
 from cadra.imaging.combine import StationPose, ViewPose, combine_views
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
-from cadra.imaging.silhouette.template import make_template, outline_px
+from cadra.imaging.silhouette.template import (
+    make_conical_template,
+    make_template,
+    outline_px,
+)
 from cadra.io.images import load_station_image, station_image
 from cadra.optics.projection import Projection
 
@@ -67,6 +71,10 @@ ROLL_TOL_RAD = math.radians(0.002)
 #: tilt step (rad) of the outline template that gives a view's pose sensitivity to the tilt
 #: (ViewFit.tilt_sensitivity; linear within 3 % up to 1 deg)
 TILT_STEP_RAD = math.radians(0.3)
+#: A point-source station's rounds stop once the 3-D pose its shadow templates are made at
+#: moves less than this, m (a shadow's shape changes by about size x move / spark distance:
+#: 1e-6 m moves a 30 mm bullet's 1.5 m from its spark by 2e-8 m, 1e-4 px)
+CONICAL_POSITION_TOL_M = 1e-6
 #: a station whose two views disagree on x by more than this many of their combined sigmas
 #: (the disagreement is ~N(0, 1): docs/stage1.md, "The two views' x errors") is failed: a
 #: swapped, foreign or repeated image, not a measurement
@@ -142,6 +150,51 @@ def _template(body, view_name: str, tilt_rad: float, n_points: int = 1024,
     return _template_cached(id(body), body, view_name, float(tilt_rad), int(n_points), roll)
 
 
+@functools.lru_cache(maxsize=64)
+def _conical_template_cached(body_key, body, view, r_ref: tuple, axis: tuple, roll_rad: float,
+                             n_points: int, tilt_rad: float):
+    return make_conical_template(body, view.optics(), np.array(r_ref), np.array(axis),
+                                 n_points=n_points, roll_rad=roll_rad, tilt_rad=tilt_rad)
+
+
+def _view_templates(body, view, tilt_rad: float, roll_rad: float, pose3d, final: bool):
+    """The view's outline template and (``final``) the pair at the tilt +- TILT_STEP_RAD that
+    give the fit's tilt sensitivity. A parallel view's depends on the axis' tilt out of its
+    plane; a point-source view's on the whole 3-D pose ``pose3d`` = (reference point, m; unit
+    axis), the tilt stepped about the film's plane with the axis' film image kept."""
+    if view.projection != "point_source":
+        steps = ((_template(body, view.name, tilt_rad + TILT_STEP_RAD, roll_rad=roll_rad),
+                  _template(body, view.name, tilt_rad - TILT_STEP_RAD, roll_rad=roll_rad),
+                  TILT_STEP_RAD) if final else None)
+        return _template(body, view.name, tilt_rad, roll_rad=roll_rad), steps
+    r_ref, axis = pose3d
+    roll = float(roll_rad) if isinstance(body, FinnedBody) else 0.0
+
+    def at(a, tilt):
+        return _conical_template_cached(id(body), body, view, tuple(r_ref), tuple(a), roll,
+                                        1024, float(tilt))
+    if not final:
+        return at(axis, tilt_rad), None
+    n = np.zeros(3)
+    n[view.sight_axis] = 1.0
+    a = np.asarray(axis, dtype=float)
+    e = a - (a @ n) * n
+    e /= np.linalg.norm(e)
+    tau = math.asin(float(np.clip(a @ n, -1.0, 1.0)))
+    stepped = [np.cos(tau + h) * e + np.sin(tau + h) * n
+               for h in (TILT_STEP_RAD, -TILT_STEP_RAD)]
+    return at(axis, tilt_rad), (at(stepped[0], tilt_rad + TILT_STEP_RAD),
+                                at(stepped[1], tilt_rad - TILT_STEP_RAD), TILT_STEP_RAD)
+
+
+def _station_pose3d(poses: Mapping[str, ViewPose], sphere: bool):
+    """(reference point, m; unit axis) of a station from its two views' poses (the rays'
+    intersection, the planes through the sparks): what a point-source template is made at."""
+    p = combine_views(poses["top"], poses["side"])
+    axis = (1.0, 0.0, 0.0) if sphere else tuple(axis_from_inclinations(p.theta_rad, p.psi_rad))
+    return (p.x_m, p.y_m, p.z_m), axis
+
+
 def _view_pose(fit: ViewFit, wires) -> ViewPose:
     """The view's pose for combination: the silhouette fit's sigma and the wire affine's
     uncertainty at the model's position, added in quadrature."""
@@ -195,19 +248,21 @@ def _model_box(img: np.ndarray, coarse, margin: int = 12) -> np.ndarray:
 
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
                   coarse=None, final: bool = True, masks: dict | None = None,
-                  roll: float = 0.0, restart: bool = False, formation=None) -> _Attempt:
+                  roll: float = 0.0, restart: bool = False, formation=None,
+                  pose3d=None) -> _Attempt:
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
     ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
     so template, changed much since ``prev``: its edge profile was fitted to mismatched fins);
-    ``formation``: the view's wire formation shared over the shot (None: this image's own)."""
+    ``formation``: the view's wire formation shared over the shot (None: this image's own);
+    ``pose3d``: a point-source view's expected 3-D pose (:func:`_view_templates`)."""
     from cadra.imaging.wires.fit import measure_wires
     from cadra.imaging.wires.mask import wire_mask
 
     masks = {} if masks is None else masks
 
-    template = _template(body, view.name, tilt, roll_rad=roll)
+    template, tilt_step = _view_templates(body, view, tilt, roll, pose3d, final)
     if prev is None:
         if coarse is None:
             coarse = locate_model(img, template, view.optics())
@@ -240,12 +295,7 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
                          edge_sigma0=prev.fit.edge_sigma_px if warm else 0.9,
                          noise_coef=prev.fit.noise_coef if warm else None,
                          edge_profile0=prev.fit.edge_profile if warm else None,
-                         centroid=final,
-                         tilt_step=((_template(body, view.name, tilt + TILT_STEP_RAD,
-                                               roll_rad=roll),
-                                     _template(body, view.name, tilt - TILT_STEP_RAD,
-                                               roll_rad=roll),
-                                     TILT_STEP_RAD) if final else None))
+                         centroid=final, tilt_step=tilt_step)
     if not fit.ok:
         return _Attempt(fit, fit.reason, wires, affine)
     warn = list(fit.warnings)
@@ -280,6 +330,10 @@ def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: flo
     """
     import time
 
+    if view.projection == "point_source":
+        raise ValueError(f"station {view.station} {view.name}: a point-source view's shadow "
+                         f"depends on the model's depth, which only the station's other view "
+                         f"gives; measure the station (measure_station)")
     t0 = time.perf_counter()
     settings = FitSettings() if settings is None else settings
     body = body_spec if hasattr(body_spec, "kind") else _body(body_spec)
@@ -376,6 +430,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
     settings = FitSettings() if settings is None else settings
     body = _body(body_spec)
     station_id = station.id
+    conical = _point_source_station(station, body)
     image_names = {n: _image_name(station_id, n, src) for n, src in images.items()}
     images_in, images, results = images, {}, {}
     sphere = body.kind == "sphere"
@@ -404,11 +459,23 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                for n in VIEWS}
         a = axis_from_projected_angles(phi["side"], phi["top"])
         tilts = {"top": math.asin(a[2]), "side": math.asin(a[1])}
+    pose3d = None
+    if conical:     # the rough 3-D pose the first shadow templates are made at
+        if not all(n in coarse and coarse[n].ok for n in VIEWS):
+            return StationResult(station_id, "failed", "a point-source station needs both "
+                                 "views to place the model in depth", None, results)
+        rough = {}
+        for n in VIEWS:
+            a, b, phi = pose_from_coarse(coarse[n], _template(body, n, 0.0, 256), nominal[n])
+            rough[n] = ViewPose(a, b, phi if math.isfinite(phi) else 0.0, 1e-4, 1e-4, 1e-3,
+                                projection=nominal[n])
+        pose3d = _station_pose3d(rough, sphere)
+        tilts = _tilts_of(station, pose3d[1])
     fits: dict[str, ViewResult] = {}
     masks: dict[str, np.ndarray] = {}
     finned = isinstance(body, FinnedBody)
     roll, station_roll = ROLL_START_RAD, None
-    rounds = 1 if sphere else (max_rounds + 2 if finned else max_rounds)
+    rounds = (2 if conical else 1) if sphere else (max_rounds + 2 if finned else max_rounds)
     for _round in range(rounds):
         for name, img in images.items():
             t0 = time.perf_counter()
@@ -423,7 +490,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                     att = _measure_view(
                         img, station.views[name], body, tilts[name], settings, prev,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
-                        formation=(formations or {}).get(name),
+                        formation=(formations or {}).get(name), pose3d=pose3d,
                         restart=prev is not None and abs(_wrap_period(view_roll - prev.roll_rad))
                         > ROLL_RESTART_RAD)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
@@ -437,12 +504,24 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                                     projection=None if att.wires is None
                                     else att.wires.projection,
                                     roll_rad=view_roll)
-        if sphere or not all(n in fits and fits[n].ok for n in VIEWS):
+        if not all(n in fits and fits[n].ok for n in VIEWS) or (sphere and not conical):
             break
-        a = axis_from_projected_angles(fits["side"].fit.pose[2], fits["top"].fit.pose[2])
-        new = {"top": math.asin(a[2]), "side": math.asin(a[1])}
+        moved_m = 0.0
+        if conical:     # the shadow templates follow the pose the views now give
+            new3d = _station_pose3d({n: _view_pose(fits[n].fit, fits[n].wires) for n in VIEWS},
+                                    sphere)
+            moved_m = float(np.linalg.norm(np.subtract(new3d[0], pose3d[0])))
+            pose3d = new3d
+            new = _tilts_of(station, pose3d[1])
+        else:
+            a = axis_from_projected_angles(fits["side"].fit.pose[2], fits["top"].fit.pose[2])
+            new = {"top": math.asin(a[2]), "side": math.asin(a[1])}
         change = max(abs(new[n] - tilts[n]) for n in VIEWS)
         tilts = new
+        if sphere:
+            if moved_m < CONICAL_POSITION_TOL_M:
+                break
+            continue
         roll_settled = True
         if finned:
             try:
@@ -457,7 +536,8 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
             new_roll = station_roll.best.roll_rad
             roll_settled = abs(_wrap_period(new_roll - roll)) < ROLL_TOL_RAD
             roll = new_roll
-        if change < 2e-5 and roll_settled and _round > 0:   # round 0 is a quick pass
+        if (change < 2e-5 and moved_m < CONICAL_POSITION_TOL_M and roll_settled
+                and _round > 0):   # round 0 is a quick pass
             break
     results.update(fits)
     if overlays:
@@ -465,8 +545,8 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
 
         for name, img in images.items():
             r = results[name]
-            tpl = (_template(body, name, r.tilt_rad, roll_rad=r.roll_rad)
-                   if r.fit is not None and r.fit.ok else None)
+            tpl = (_view_templates(body, station.views[name], r.tilt_rad, r.roll_rad, pose3d,
+                                   False)[0] if r.fit is not None and r.fit.ok else None)
             png = encode_png(view_overlay(img, r, tpl, station_id))
             results[name] = ViewResult(**{**r.__dict__, "overlay_png": png})
     ok_views = [n for n in VIEWS if n in results and results[n].ok]
@@ -488,6 +568,28 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                              roll=station_roll)
     status = "warning" if warnings else "ok"
     return StationResult(station_id, status, "", pose, results, warnings, roll=station_roll)
+
+
+def _point_source_station(station: Station, body) -> bool:
+    """Whether the station's views are point-source ones (then both must be, and the body
+    one of revolution: a finned body's roll is measured through parallel views only)."""
+    kinds = {v.projection for v in station.views.values()}
+    if "point_source" not in kinds:
+        return False
+    if len(kinds) > 1:
+        raise ValueError(f"station {station.id}: one point-source and one parallel view; "
+                         f"stage one measures a station whose views share their optics")
+    if isinstance(body, FinnedBody):
+        raise ValueError(f"station {station.id}: a finned body's roll is measured through "
+                         f"parallel views only; this station's are point-source")
+    return True
+
+
+def _tilts_of(station: Station, axis) -> dict[str, float]:
+    """Each view's tilt of the axis out of its plane (along its sight axis), rad."""
+    a = np.asarray(axis, dtype=float)
+    return {n: math.asin(float(np.clip(a[station.views[n].sight_axis], -1.0, 1.0)))
+            for n in VIEWS}
 
 
 def _views_disagree(pose: StationPose, results: dict) -> str:

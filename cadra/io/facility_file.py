@@ -5,9 +5,8 @@ into the facility's data objects (:class:`~cadra.facility.reference.Facility`, `
 ``View``, ``Wire``, ``ReferenceMark``, which keep the geometry). Errors are
 :class:`FacilityFileError` naming the key path, e.g.
 ``stations[3].views.top.wires[1].p0_m: expected 3 numbers``; :func:`load_facility` puts the
-file's path in front. ``point_source`` (perspective) views are recognised and refused
-(:class:`UnsupportedProjectionError`, "not supported yet"); the schema has room for their
-fields.
+file's path in front. ``point_source`` views (a spark and a film, a direct shadowgraph) carry
+``source_position_m`` and ``film_distance_m``, checked for a plausible layout.
 """
 
 from __future__ import annotations
@@ -36,9 +35,11 @@ from cadra.facility.reference import (
 )
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
-#: Projections the loader knows; only the first ones are supported.
-PROJECTIONS_SUPPORTED = ("parallel",)
+#: Projections the loader knows.
 PROJECTIONS_KNOWN = ("parallel", "point_source")
+#: A point-source view's magnification at its station's point of the line of flight: the
+#: standard layouts give 1.0-1.3 (docs/facility_file.md); beyond this bound the file is wrong.
+MAX_MAGNIFICATION = 3.0
 BIT_DEPTHS = (8, 16)
 #: Minimum number of wires per view (an affine has 6 unknowns; each wire line gives 2).
 MIN_WIRES = 3
@@ -46,10 +47,6 @@ MIN_WIRES = 3
 
 class FacilityFileError(ValueError):
     """A facility reference file that cannot be right; the message names the key path."""
-
-
-class UnsupportedProjectionError(FacilityFileError, NotImplementedError):
-    """A projection the schema knows but this CADRA cannot use yet (``point_source``)."""
 
 
 _F = Fields(FacilityFileError)
@@ -67,17 +64,44 @@ _VIEW_KEYS = {"projection", "width_px", "height_px", "bit_depth", "scale_m_per_p
 _DEFAULT_KEYS = _VIEW_KEYS - {"image_to_plane", "wires", "projection"}
 
 
-def _check_projection(proj, where: str, view: Mapping, vpath: str) -> str:
+def _check_projection(proj, where: str) -> str:
     if not isinstance(proj, str) or proj not in PROJECTIONS_KNOWN:
         raise _err(where, f"unknown projection {proj!r}; known: {list(PROJECTIONS_KNOWN)}")
-    if proj not in PROJECTIONS_SUPPORTED:
-        # check the fields such a view needs, so the file is ready when support lands
-        _vec(_require(view, "source_position_m", vpath), 3, f"{vpath}source_position_m")
-        _positive(_require(view, "film_distance_m", vpath), f"{vpath}film_distance_m")
-        raise UnsupportedProjectionError(
-            f"{where}: projection {proj!r} (perspective, point-source spark) is recognised "
-            f"but not supported yet; CADRA handles {list(PROJECTIONS_SUPPORTED)} only")
     return proj
+
+
+def _point_source(merged: Mapping, key_path, axes: tuple[int, int], x_m: float):
+    """A point-source view's spark (3,) and film distance, checked for a plausible layout:
+    the spark off the line of flight along the sight axis, the film beyond that line, the
+    magnification at the station's point of the line at most :data:`MAX_MAGNIFICATION`."""
+    for k in ("source_position_m", "film_distance_m"):
+        if k not in merged:
+            raise _err(key_path(k), "missing (a point-source view needs its spark and film; "
+                                    "give it in the view or in [view_defaults])")
+    S = _vec(merged["source_position_m"], 3, key_path("source_position_m"))
+    if np.any(np.abs(S) > 1e4):
+        raise _err(key_path("source_position_m"), f"{S.tolist()} is not a position in metres")
+    film = _positive(merged["film_distance_m"], key_path("film_distance_m"), 1e2)
+    sight = ({0, 1, 2} - set(axes)).pop()
+    stand_off = abs(float(S[sight]))
+    if stand_off < 0.1:
+        raise _err(key_path("source_position_m"),
+                   f"the spark is {stand_off:.3g} m from the line of flight along the view's "
+                   f"sight axis ({'xyz'[sight]}); it must stand off by at least 0.1 m")
+    if film <= stand_off:
+        raise _err(key_path("film_distance_m"),
+                   f"{film:g} m puts the film on the spark's side of the line of flight "
+                   f"(the spark stands {stand_off:g} m off it)")
+    if film / stand_off > MAX_MAGNIFICATION:
+        raise _err(key_path("film_distance_m"),
+                   f"magnification {film / stand_off:.3g} at the line of flight (film "
+                   f"{film:g} m, spark {stand_off:g} m off it) is implausible (> "
+                   f"{MAX_MAGNIFICATION:g}; check the units)")
+    if abs(float(S[0]) - x_m) > stand_off:
+        raise _err(key_path("source_position_m"),
+                   f"the spark at x = {S[0]:g} m is more than its stand-off ({stand_off:g} m) "
+                   f"from its station at x = {x_m:g} m")
+    return S, film
 
 
 def _reference_mark(value, path: str, width: int, height: int) -> ReferenceMark:
@@ -118,12 +142,9 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
     _check_unknown(view, _VIEW_KEYS, vpath)
     merged = {**defaults, **view}
     if "projection" in view:
-        _check_projection(view["projection"], f"{vpath}projection", merged, vpath)
-        projection = view["projection"]
+        projection = _check_projection(view["projection"], f"{vpath}projection")
     else:
-        proj, where = facility_projection
-        _check_projection(proj, where, merged, vpath)
-        projection = proj
+        projection = _check_projection(*facility_projection)
 
     def key_path(k):  # where a merged key came from
         return f"{vpath}{k}" if k in view else f"view_defaults.{k}"
@@ -143,6 +164,13 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
         raise _err(key_path("scale_m_per_px"), f"{scale:g} m/px is implausibly small "
                                                f"(< 1e-09; check the unit)")
     axes = VIEW_AXES[name]
+    spark, film = None, None
+    if projection == "point_source":
+        spark, film = _point_source(merged, key_path, axes, x_m)
+    else:
+        for k in ("source_position_m", "film_distance_m"):
+            if k in merged and k in view:
+                raise _err(key_path(k), "given for a parallel view (a point-source view's key)")
     if "image_to_plane" in view:
         ipath = f"{vpath}image_to_plane"
         raw = view["image_to_plane"]
@@ -178,7 +206,15 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
                           f"the image->plane affine")
     v = View(station=station_id, name=name, projection=projection, axes=axes, width_px=width,
              height_px=height, bit_depth=int(bit_depth), scale_m_per_px=scale,
-             image_to_plane=M, wires=wires, reference_mark=mark)
+             image_to_plane=M, wires=wires, reference_mark=mark, source_position_m=spark,
+             film_distance_m=film)
+    if spark is not None:
+        axis_px = v.optics().to_image(np.array([x_m, 0.0, 0.0]))
+        if not (0.0 <= axis_px[0] <= width - 1 and 0.0 <= axis_px[1] <= height - 1):
+            raise _err(key_path("source_position_m"),
+                       f"the station's point of the line of flight casts its shadow at "
+                       f"({axis_px[0]:.0f}, {axis_px[1]:.0f}) px, outside the {width} x "
+                       f"{height} image")
     lines = v.wire_lines_px()
     for i, seg in enumerate(lines):
         if seg is None:
@@ -299,7 +335,7 @@ def write_default_facility(path: str | os.PathLike | None = None,
 
 
 __all__ = [
-    "BIT_DEPTHS", "MIN_WIRES", "PROJECTIONS_KNOWN", "PROJECTIONS_SUPPORTED", "SCHEMA_VERSION",
-    "FacilityFileError", "UnsupportedProjectionError", "facility_from_dict", "load_facility",
+    "BIT_DEPTHS", "MAX_MAGNIFICATION", "MIN_WIRES", "PROJECTIONS_KNOWN", "SCHEMA_VERSION",
+    "FacilityFileError", "facility_from_dict", "load_facility",
     "resolve_facility_path", "write_default_facility",
 ]

@@ -23,8 +23,8 @@ the Jacobians are constants.
 onto a film): the view plane is the film's plane, rays run from the spark S through the point,
 and a point P lands at P' = S + λ (P − S), λ = n·(O − S) / n·(P − S) (O a point of the film, n
 its normal; λ is the magnification, typically 1.0–1.3): a conical projection, whose Jacobians
-depend on the point. It implements the protocol; stage one, the renderer and the facility file
-do not use it yet (a point-source facility is still refused).
+depend on the point. The renderer draws through it (:meth:`PointSourceProjection.outline`, the
+exact shadow of a body); stage one does not measure such views yet.
 
 :func:`intersect_rays` is the weighted least-squares intersection of several views' rays, the
 combination step of stage one.
@@ -68,6 +68,10 @@ class Projection(Protocol):
     def plane_point_jacobian(self, r_F) -> np.ndarray:
         """``d ab / d r_F`` at ``r_F``: (..., 2, 3); zero along the ray."""
 
+    def magnification(self, r_F) -> np.ndarray:
+        """The view plane's scale over the facility's at each point (...,): 1 for parallel
+        light, |P' − S| / |P − S| under a point source."""
+
     def ray(self, uv) -> tuple[np.ndarray, np.ndarray]:
         """The facility ray seen at image points: origin on the view plane, unit direction."""
 
@@ -85,6 +89,11 @@ class Projection(Protocol):
 
     def from_plane_jacobian(self, ab) -> np.ndarray:
         """``d uv / d ab`` at ``ab``: (..., 2, 2), px per m."""
+
+    def outline(self, body, R_FB, r_ref_F, n_points: int = 4096) -> np.ndarray:
+        """The exact outline (N, 2) of ``body`` at attitude ``R_FB`` and reference point
+        ``r_ref_F`` (m) in the view plane (m), counter-clockwise: what the view's light
+        draws on it (docs/bodies.md)."""
 
 
 def _broadcast(mat: np.ndarray, pts) -> np.ndarray:
@@ -171,6 +180,9 @@ class ParallelProjection(_ImagePlane):
     def plane_point_jacobian(self, r_F) -> np.ndarray:
         return _broadcast(self.plane_basis, r_F)
 
+    def magnification(self, r_F) -> np.ndarray:
+        return np.ones(np.asarray(r_F, dtype=float).shape[:-1])
+
     def to_image_jacobian(self, r_F) -> np.ndarray:
         return _broadcast(self.plane_to_image[:, :2] @ self.plane_basis, r_F)
 
@@ -178,6 +190,12 @@ class ParallelProjection(_ImagePlane):
     def plane_ray(self, ab) -> tuple[np.ndarray, np.ndarray]:
         ab = np.asarray(ab, dtype=float)
         return ab @ self.plane_basis, _broadcast(self.direction, ab)
+
+    def outline(self, body, R_FB, r_ref_F, n_points: int = 4096) -> np.ndarray:
+        """The body's exact parallel silhouette (:func:`cadra.body.outline_polygon`)."""
+        from cadra.body import outline_polygon
+
+        return outline_polygon(body, R_FB, r_ref_F, self.plane_basis, n_points=n_points)
 
 
 @dataclass(frozen=True, eq=False)
@@ -256,6 +274,15 @@ class PointSourceProjection(_ImagePlane):
         o = self.film_origin_m + ab @ self.plane_basis
         d = o - self.spark_m
         return o, d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def outline(self, body, R_FB, r_ref_F, n_points: int = 4096) -> np.ndarray:
+        """The film's cut through the cone of rays from the spark tangent to the body
+        (:func:`cadra.body.conical_outline_polygon`): exact, the fins of a finned body
+        included."""
+        from cadra.body import conical_outline_polygon
+
+        return conical_outline_polygon(body, R_FB, r_ref_F, self.spark_m, self.plane_point,
+                                       n_points=n_points)
 
 
 @dataclass(frozen=True)

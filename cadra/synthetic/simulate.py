@@ -28,7 +28,7 @@ import pandas as pd
 
 from cadra.aero import AeroModel, ModelNotFoundError, resolve_model
 from cadra.atmosphere import Atmosphere
-from cadra.body import Body, FinnedBody, body_from_spec, outline_polygon
+from cadra.body import Body, FinnedBody, body_from_spec
 from cadra.conventions import FLIP, body_to_facility_matrix
 from cadra.dynamics.setup import (
     DT_MAX_DEFAULT,
@@ -308,14 +308,13 @@ def view_scene(body: Body | FinnedBody, view, affine: np.ndarray, R_FB: np.ndarr
     r_ref = np.asarray(r_ref_F, float)
     v = np.asarray(v_F, float)
     # one exact polygon for any body, the fins of a finned body placed by R_FB's roll
-    poly_px = projection.from_plane(outline_polygon(body, R_FB, r_ref, projection.plane_basis))
+    poly_px = projection.from_plane(projection.outline(body, R_FB, r_ref))
     ref_px = to_px(r_ref)[0]
     axis_px = to_px(r_ref + 0.01 * R_FB[:, 0])[0] - ref_px
     blur_px = to_px(r_ref + v * exposure_s)[0] - ref_px
     flight_px = to_px(r_ref + v * 1e-4)[0] - ref_px
     flight_dir = flight_px / np.linalg.norm(flight_px)
-    wires = tuple((np.asarray(seg[0], float), np.asarray(seg[1], float),
-                   w.diameter_m / view.scale_m_per_px)
+    wires = tuple((np.asarray(seg[0], float), np.asarray(seg[1], float), view.wire_width_px(w))
                   for seg, w in zip(view.wire_lines_px(affine=affine, margin_px=20.0),
                                     view.wires, strict=True) if seg is not None)
     mark = view.reference_mark

@@ -54,7 +54,6 @@ def _case(i, shot, rng, tmp, config, crb=True):
     """Render one random station of the finner (``shot``: the simulated FINNER-1) into
     ``tmp`` and measure it; the per-case figures (``crb``: with the views' Cramér–Rao
     bounds)."""
-    from cadra.body import outline_polygon
     from cadra.conventions import body_to_facility_matrix, quat_from_axis_roll
     from cadra.imaging.station import measure_station
     from cadra.synthetic.crb_roll import roll_crb
@@ -88,7 +87,7 @@ def _case(i, shot, rng, tmp, config, crb=True):
 
             def outline(g, proj=proj):
                 Rg = body_to_facility_matrix(quat_from_axis_roll(axis, g))
-                return proj.from_plane(outline_polygon(shot.body, Rg, r_ref, proj.plane_basis))
+                return proj.from_plane(proj.outline(shot.body, Rg, r_ref))
 
             crbs[name] = roll_crb(outline, roll, (tr["u_ref_px"], tr["v_ref_px"]), cfg,
                                   motion_blur_px=scene.motion_blur_px,

@@ -54,7 +54,7 @@ def make_image(view, affine, config=None, seed=0, drop=(), bodies=()):
     """Render ``view``'s wires (minus ``drop``) and mark through ``affine``; float in [0, 1]."""
     config = RenderConfig() if config is None else config
     segs = view.wire_lines_px(affine=affine, margin_px=20.0)
-    wires = tuple((np.array(s[0]), np.array(s[1]), w.diameter_m / view.scale_m_per_px)
+    wires = tuple((np.array(s[0]), np.array(s[1]), view.wire_width_px(w))
                   for s, w in zip(segs, view.wires, strict=True) if w.name not in drop)
     mark = view.reference_mark
     scene = Scene(width_px=view.width_px, height_px=view.height_px, bodies=tuple(bodies),

@@ -27,7 +27,8 @@ from cadra.facility.reference import VIEW_AXES
 from cadra.geometry import polygon_moments
 from cadra.optics.projection import Projection
 
-__all__ = ["Template", "make_template", "outline_px", "pose_px", "rot"]
+__all__ = ["Template", "make_conical_template", "make_template", "outline_px", "pose_px",
+           "rot"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +66,33 @@ def make_template(body: Body | FinnedBody, view_name: str, tilt_rad: float = 0.0
                     principal_is_axis=principal_is_axis)
 
 
+
+
+def make_conical_template(body: Body | FinnedBody, projection: Projection, r_ref_F,
+                          axis_F, n_points: int = 1024, roll_rad: float = 0.0,
+                          tilt_rad: float = 0.0) -> Template:
+    """Outline template of ``body``'s shadow in a point-source view, for the 3-D pose
+    (reference point ``r_ref_F``, m, and unit nose axis ``axis_F``) it is expected at.
+
+    Under a point source the shadow's size and shape follow the model's position, not only
+    its attitude (docs/stage1.md, "Point-source views"): the template is the exact shadow
+    (``projection.outline``) at that pose, moved to the film point of the reference point and
+    turned so that the film image of the axis lies along the first view axis. The fitted
+    ``(a, b, phi)`` is then the film point of the reference point and the film angle of the
+    axis' image, which the two-view combination reads as rays from the sparks and planes
+    through them. ``tilt_rad`` is recorded (the axis' tilt out of the film's plane)."""
+    r = np.asarray(r_ref_F, dtype=float)
+    a = np.asarray(axis_F, dtype=float)
+    a = a / np.linalg.norm(a)
+    R_FB = FLIP @ quat_to_matrix(quat_from_axis_roll(a, float(roll_rad)))
+    ab0 = projection.plane_point(r)
+    d = projection.plane_point_jacobian(r) @ a
+    phi0 = math.atan2(d[1], d[0])
+    poly = (projection.outline(body, R_FB, r, n_points=n_points) - ab0) @ rot(phi0)
+    area, centroid, m2 = polygon_moments(poly)
+    return Template(outline_m=poly, centroid_m=centroid, area_m2=area, tilt_rad=float(tilt_rad),
+                    axisymmetric_point=body.kind == "sphere",
+                    principal_is_axis=bool(m2[0, 0] >= m2[1, 1]))
 
 
 def rot(phi: float) -> np.ndarray:

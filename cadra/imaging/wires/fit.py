@@ -485,7 +485,7 @@ def _centroid_pass(img: np.ndarray, view: View, exclude: np.ndarray | None, sear
             return out
 
         got = [] if collect else None
-        fits[i] = _measure_one(img, w.name, seg, 0.5 * w.diameter_m / view.scale_m_per_px,
+        fits[i] = _measure_one(img, w.name, seg, 0.5 * view.wire_width_px(w),
                                blocked, exclude, search_px, step_px, half_window, collect=got)
         if got:
             collected[i] = got[0]
@@ -645,7 +645,7 @@ def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None =
     lines = [_gauss_points(f) if f.found else None for f in fits]
     # each Gauss point's perpendicular error: sqrt(2) x the line's offset sigma (floored),
     # independent; plus the centroid's phase bias, common to the line's centres (step 7)
-    width_px = [w.diameter_m / scale for w in view.wires]
+    width_px = [view.wire_width_px(w) for w in view.wires]
     # (the profile model's centres carry no phase bias: no phase term, step 8)
     phases = [line_phases(f.centres_px, f.point_px, f.direction_px, f.profile_axis)
               if f.found and formation is None else None for f in fits]

@@ -31,7 +31,7 @@ def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
                       strict=True):
         if seg is None:
             continue
-        half = half_width_px + 0.5 * w.diameter_m / view.scale_m_per_px
+        half = half_width_px + 0.5 * view.wire_width_px(w)
         p0, p1 = np.array(seg[0]), np.array(seg[1])
         t = (p1 - p0) / math.hypot(*(p1 - p0))
         n = np.array([-t[1], t[0]]) * half
