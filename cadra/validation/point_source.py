@@ -97,10 +97,33 @@ def random_case(station: Station, body_spec: dict, rng: np.random.Generator, *,
 
 
 def parallel_station(station: Station) -> Station:
-    """The station as if its optics were parallel: the same views, wires and film map, the
-    sparks taken away (the assumption whose bias the harness measures)."""
-    views = {n: replace(v, projection="parallel", source_position_m=None, film_distance_m=None)
-             for n, v in station.views.items()}
+    """The station as a reduction that assumes collimated light would calibrate it from these
+    images: each view parallel, its wires where their shadows fall on the film, brought to
+    the line of flight by the magnification there (the scale such a reduction calibrates at
+    the line of flight), the film map likewise. Nothing but the depth of each point (its own
+    magnification) is then wrong: the assumption's error is what the harness measures."""
+    from cadra.facility.reference import Wire
+
+    views = {}
+    for n, v in station.views.items():
+        proj = v.optics()
+        centre = np.array([station.x_m, 0.0, 0.0])
+        lam0 = float(proj.magnification(centre))
+        c_ab = np.asarray(proj.plane_point(centre), dtype=float)
+
+        def to_flight(p, proj=proj, lam0=lam0, c_ab=c_ab, v=v):
+            q = np.array(p, dtype=float)
+            q[list(v.axes)] = c_ab + (proj.plane_point(q) - c_ab) / lam0
+            return q
+        wires = tuple(Wire(name=w.name, p0_m=to_flight(w.p0_m), p1_m=to_flight(w.p1_m),
+                           diameter_m=w.diameter_m * float(proj.magnification(
+                               0.5 * (w.p0_m + w.p1_m))) / lam0) for w in v.wires)
+        M = np.array(v.image_to_plane, dtype=float)
+        M[:, :2] /= lam0
+        M[:, 2] = c_ab + (M[:, 2] - c_ab) / lam0
+        views[n] = replace(v, projection="parallel", source_position_m=None,
+                           film_distance_m=None, wires=wires, image_to_plane=M,
+                           scale_m_per_px=v.scale_m_per_px / lam0)
     return replace(station, views=views)
 
 
@@ -197,7 +220,7 @@ def run_cases(station: Station, body_spec: dict, n: int, seed: int, *, offsets=N
     rng = np.random.default_rng(seed)
     body = body_from_spec(body_spec)
     sphere = body.kind == "sphere"
-    scores, bounds, parallel_errors = [], [], []
+    scores, bounds, parallel_errors, parallel_flagged = [], [], [], []
     flat = parallel_station(station) if parallel else None
     for i in range(n):
         off = None if offsets is None else offsets[i % len(offsets)]
@@ -208,12 +231,13 @@ def run_cases(station: Station, body_spec: dict, n: int, seed: int, *, offsets=N
             bounds.append(crb_3d(case, sphere))
         if flat is not None:
             res_flat = measure_station(flat, case.images, body_spec, overlays=False)
+            parallel_flagged.append(res_flat.status == "failed")
             parallel_errors.append(None if res_flat.pose is None else
                                    [res_flat.pose.x_m - case.r_ref_F[0],
                                     res_flat.pose.y_m - case.r_ref_F[1],
                                     res_flat.pose.z_m - case.r_ref_F[2]])
     return {"scores": scores, "bounds": bounds, "parallel_errors": parallel_errors,
-            "sphere": sphere}
+            "parallel_flagged": parallel_flagged, "sphere": sphere}
 
 
 def _rms(a) -> np.ndarray:
@@ -223,7 +247,8 @@ def _rms(a) -> np.ndarray:
 def summarize(run: dict) -> dict:
     """The figures of one :func:`run_cases`: rms errors, sigma / rms, rms / bound, the
     baseline's rms over CADRA's (per view, over both views' u, v and axis), the same in 3-D,
-    and the parallel assumption's mean and largest 3-D error."""
+    and the parallel assumption's mean and largest 3-D error, and how often stage one's
+    two-view check flags its stations (the views' x disagree)."""
     ok = [s for s in run["scores"] if s["ok"]]
     out = {"n": len(run["scores"]), "n_ok": len(ok)}
     if not ok:
@@ -249,9 +274,70 @@ def summarize(run: dict) -> dict:
         par = np.array(par)
         out.update(parallel_mean_3d=np.mean(par, axis=0).tolist(),
                    parallel_max_abs_3d=np.max(np.abs(par), axis=0).tolist(),
-                   parallel_rms_3d=_rms(par).tolist())
+                   parallel_rms_3d=_rms(par).tolist(),
+                   parallel_flagged_frac=float(np.mean(run["parallel_flagged"])))
     return out
 
 
-__all__ = ["BODIES", "StationCase", "crb_3d", "parallel_station", "random_case", "run_cases",
+#: The point-source range the harness flies its end-to-end rounds through.
+FACILITY = "brl_spark"
+
+
+def e2e_draws(draws: int, verbose: bool = True) -> dict:
+    """Two M-80 rounds (the sample specs ``m80_1``, ``m80_2``, flown through the point-source
+    range instead) per draw, from images through stage one and the 6-DOF fit as
+    ``tools/validate_m80.py`` runs them on the parallel range (:mod:`cadra.validation.m80`:
+    the fit started from the rounds' linear theory and the spin from the twist). Draw k
+    reseeds the specs by 1000 k. Returns the pulls per free coefficient, the fraction within
+    2 sigma, and chi^2/nu per draw with its expected scatter sqrt(2/nu)."""
+    import dataclasses
+
+    from cadra.imaging.shot import measure_shot
+    from cadra.synthetic.simulate import load_shot_spec, render_images, simulate_shot
+    from cadra.validation.m80 import (
+        FREE,
+        SPECS,
+        SPECS_DIR,
+        linear_theory,
+        six_dof,
+        start_from_linear,
+        truth_model,
+    )
+
+    truth = truth_model()
+    pulls = {n: [] for n in FREE}
+    chi2, scatter, failures = [], [], []
+    for k in range(draws):
+        shots = []
+        for name in SPECS:
+            spec = load_shot_spec(SPECS_DIR / f"{name}.toml")
+            spec = dataclasses.replace(spec, facility=FACILITY, seed=spec.seed + 1000 * k)
+            flown = render_images(simulate_shot(spec), progress=False)
+            stage1 = measure_shot(flown.shot_file(), images=flown.images, workers=1,
+                                  progress=False, overlays=False)
+            shots.append(stage1.shot_data())
+        res = six_dof(shots, start_from_linear([linear_theory(s) for s in shots]), truth)
+        if not res.converged:
+            failures.append(f"draw {k}: {res.status}")
+            continue
+        for n, v, sg in zip(res.aero_names, res.aero_values, res.aero_sigma, strict=True):
+            pulls[n].append(float((v - truth.parameter(n).value) / sg))
+        chi2.append(float(res.reduced_chi2))
+        scatter.append(float(math.sqrt(2.0 / res.dof)))
+        if verbose:
+            print(f"draw {k}: chi2/nu {res.reduced_chi2:.3f} (+-{scatter[-1]:.3f}); pulls "
+                  + ", ".join(f"{n} {pulls[n][-1]:+.2f}" for n in FREE), flush=True)
+    every = np.array([p for n in FREE for p in pulls[n]])
+    return {"draws": draws, "failures": failures,
+            "within_2sigma_frac": float(np.mean(np.abs(every) <= 2)) if every.size else None,
+            "n_pulls": int(every.size),
+            "pulls": {n: [round(p, 3) for p in v] for n, v in pulls.items()},
+            "pull_std": {n: float(np.std(v)) for n, v in pulls.items() if v},
+            "chi2_nu": chi2, "chi2_nu_scatter": scatter,
+            "chi2_nu_median": float(np.median(chi2)) if chi2 else None,
+            "chi2_nu_max_dev_sigmas": (float(np.max(np.abs(np.array(chi2) - 1)
+                                                    / np.array(scatter))) if chi2 else None)}
+
+
+__all__ = ["BODIES", "FACILITY", "e2e_draws", "StationCase", "crb_3d", "parallel_station", "random_case", "run_cases",
            "score_case", "station_case", "summarize"]
