@@ -10,7 +10,6 @@ from cadra.facility import fit_affine_to_wires, nominal_image_to_plane
 from cadra.facility.reference import REPO_ROOT, default_hffaf_text
 from cadra.io.facility_file import (
     FacilityFileError,
-    UnsupportedProjectionError,
     facility_from_dict,
     load_facility,
     write_default_facility,
@@ -194,31 +193,6 @@ def test_bad_input_names_the_key(mutate, key):
     with pytest.raises(FacilityFileError) as exc:
         facility_from_dict(_bad(mutate))
     assert key in str(exc.value)
-
-
-def test_point_source_is_recognised_and_refused():
-    def per_view(d):
-        d["stations"][3]["views"]["side"].update(
-            projection="point_source", source_position_m=[4.572, -3.0, 0.0],
-            film_distance_m=6.0)
-    with pytest.raises(UnsupportedProjectionError) as exc:
-        facility_from_dict(_bad(per_view))
-    msg = str(exc.value)
-    assert "stations[3].views.side.projection" in msg and "not supported yet" in msg
-    assert isinstance(exc.value, FacilityFileError) and isinstance(exc.value, NotImplementedError)
-
-    with pytest.raises(UnsupportedProjectionError) as exc:  # declared for the whole facility
-        facility_from_dict(_bad(lambda d: (d.update(projection="point_source"),
-                                           d["view_defaults"].update(
-                                               source_position_m=[0.0, 0.0, 3.0],
-                                               film_distance_m=6.0))))
-    assert str(exc.value).startswith("projection:")
-
-    # its own fields are checked too (the schema has room for them)
-    with pytest.raises(FacilityFileError) as exc:
-        facility_from_dict(_bad(lambda d: d["stations"][3]["views"]["side"].update(
-            projection="point_source", film_distance_m=6.0)))
-    assert "stations[3].views.side.source_position_m: missing" in str(exc.value)
 
 
 def test_load_by_name_path_and_errors(tmp_path, monkeypatch):

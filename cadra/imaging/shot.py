@@ -25,7 +25,13 @@ import numpy as np
 import pandas as pd
 
 from cadra import cores
-from cadra.imaging.station import VIEWS, StationResult, measure_station
+from cadra.body import body_from_spec
+from cadra.imaging.station import (
+    VIEWS,
+    StationResult,
+    measure_station,
+    point_source_station,
+)
 from cadra.io.shotfile import ShotFile
 from cadra.io.trajectory import station_rows
 
@@ -306,6 +312,10 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
             views = {v: images[(rec.station, v)] for v in VIEWS if (rec.station, v) in images}
         inputs += [Path(p) for p in views.values() if isinstance(p, str | os.PathLike)]
         tasks.append((facility.station(rec.station), views, dict(shot.model), overlays))
+    if tasks:   # a body the stations' optics cannot measure is the shot's error, not a station's
+        body = body_from_spec(dict(shot.model))
+        for station, *_ in tasks:
+            point_source_station(station, body)
     if isinstance(formation, Mapping):
         formations = dict(formation)
     elif formation == "view":

@@ -430,7 +430,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
     settings = FitSettings() if settings is None else settings
     body = _body(body_spec)
     station_id = station.id
-    conical = _point_source_station(station, body)
+    conical = point_source_station(station, body)
     image_names = {n: _image_name(station_id, n, src) for n, src in images.items()}
     images_in, images, results = images, {}, {}
     sphere = body.kind == "sphere"
@@ -570,7 +570,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
     return StationResult(station_id, status, "", pose, results, warnings, roll=station_roll)
 
 
-def _point_source_station(station: Station, body) -> bool:
+def point_source_station(station: Station, body) -> bool:
     """Whether the station's views are point-source ones (then both must be, and the body
     one of revolution: a finned body's roll is measured through parallel views only)."""
     kinds = {v.projection for v in station.views.values()}

@@ -70,13 +70,13 @@ def _check_projection(proj, where: str) -> str:
     return proj
 
 
-def _point_source(merged: Mapping, key_path, axes: tuple[int, int], x_m: float):
+def _point_source(merged: Mapping, key_path, vpath: str, axes: tuple[int, int], x_m: float):
     """A point-source view's spark (3,) and film distance, checked for a plausible layout:
     the spark off the line of flight along the sight axis, the film beyond that line, the
     magnification at the station's point of the line at most :data:`MAX_MAGNIFICATION`."""
     for k in ("source_position_m", "film_distance_m"):
         if k not in merged:
-            raise _err(key_path(k), "missing (a point-source view needs its spark and film; "
+            raise _err(f"{vpath}{k}", "missing (a point-source view needs its spark and film; "
                                     "give it in the view or in [view_defaults])")
     S = _vec(merged["source_position_m"], 3, key_path("source_position_m"))
     if np.any(np.abs(S) > 1e4):
@@ -166,7 +166,7 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
     axes = VIEW_AXES[name]
     spark, film = None, None
     if projection == "point_source":
-        spark, film = _point_source(merged, key_path, axes, x_m)
+        spark, film = _point_source(merged, key_path, vpath, axes, x_m)
     else:
         for k in ("source_position_m", "film_distance_m"):
             if k in merged and k in view:

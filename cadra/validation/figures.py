@@ -60,6 +60,9 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "validate_roll_seed001": ("Seed 001 Table IV: roll lock-in", "pureroll.md"),
     "validate_roll_seed003": ("Seed 003: the global segmented roll fit", "segmented_roll.md"),
     "validate_roll_images": ("A finned body's roll from its images", "stage1.md"),
+    "validate_point_source": ("Point-source (direct-shadowgraph) stations: stage one against "
+                              "the exact truth and the perspective bound, depth, end to end",
+                              "stage1.md"),
     "bench_starts": ("Starting values: epicyclic arms against damped sines", "fitting.md"),
     "bench_motion": ("Classic motion methods: speed and accuracy", "motion.md"),
     "bench_simulator": ("The 6-DOF simulator's speed", "dynamics.md"),

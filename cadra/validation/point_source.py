@@ -14,9 +14,10 @@ Scored per case:
   direction closest to the truth: generous to it);
 - the station's 3-D reference point and inclinations against the pose rendered;
 - the Cramér–Rao bound of a few cases, derived for the perspective case: each view's bound
-  on the shadow's pose (:func:`cadra.synthetic.crb.pose_crb` on the exact conical outline)
-  carried to 3-D through the same rays and planes from the sparks the measurement combines
-  by (:func:`cadra.imaging.combine.combine_views`);
+  on the shadow's pose (:func:`cadra.synthetic.crb.pose_crb` on the exact conical outline),
+  with the film map's error the wires leave added in 3-D, carried to 3-D through the same
+  rays and planes from the sparks the measurement combines by
+  (:func:`cadra.imaging.combine.combine_views`);
 - the same images measured as if the optics were parallel (the station's views with their
   sparks taken away): how far that assumption moves the 3-D point.
 """
@@ -40,6 +41,7 @@ from cadra.imaging.combine import ViewPose, combine_views
 from cadra.imaging.station import measure_station
 from cadra.synthetic.render import RenderConfig, render
 from cadra.synthetic.simulate import FilmPlacement, film_affine, view_scene
+from cadra.validation.stage1_bench import ratio_se
 
 #: The bodies scored: a sphere and the M2 capsule of the parallel bench's size, the M-80.
 BODIES = {"sphere": {"kind": "sphere", "d_m": 0.03556},
@@ -182,9 +184,16 @@ def score_case(case: StationCase, result, sphere: bool) -> dict:
     return out
 
 
-def crb_3d(case: StationCase, sphere: bool) -> dict:
+def crb_3d(case: StationCase, sphere: bool, result=None) -> dict:
     """The Cramér–Rao bound of a case: each view's (u, v, angle) in px and deg, and carried to
-    3-D through the views' rays and planes (x, y, z in m; theta, psi in rad)."""
+    3-D through the views' rays and planes (x, y, z in m; theta, psi in rad).
+
+    The image-model bound is the shadow's, for a film map known exactly; a station's 3-D point
+    also carries the film map's error, which the wires fix. With ``result`` (the case's
+    measured station) each view's in-plane bound is widened, in quadrature, by the wires' map
+    sigma at the model as stage one states it (``WireMeasurement.position_sigma_m``, whose
+    honesty tools/validate_wire_sigma.py checks): ``bound_3d`` then compares the 3-D error with
+    everything the station's two images can know."""
     from cadra.synthetic.crb import pose_crb
 
     views, per_view = {}, {}
@@ -198,6 +207,10 @@ def crb_3d(case: StationCase, sphere: bool) -> dict:
         d = proj.plane_point_jacobian(case.r_ref_F) @ case.axis_F
         J = proj.to_plane_jacobian(np.array([tr["u_ref_px"], tr["v_ref_px"]]))
         cov_ab = J @ np.diag([c.sigma_u_px ** 2, c.sigma_v_px ** 2]) @ J.T
+        if result is not None:
+            view_result = result.views[name]
+            cov_ab = cov_ab + np.diag(np.square(view_result.wires.position_sigma_m(
+                view_result.fit.ref_px)))
         s_phi = 0.0 if sphere else float(c.sigma_phi_rad)
         views[name] = ViewPose(float(ab[0]), float(ab[1]), math.atan2(d[1], d[0]),
                                math.sqrt(cov_ab[0, 0]), math.sqrt(cov_ab[1, 1]), s_phi,
@@ -227,8 +240,8 @@ def run_cases(station: Station, body_spec: dict, n: int, seed: int, *, offsets=N
         case = random_case(station, body_spec, rng, offset_m=off, config=config)
         res = measure_station(station, case.images, body_spec, overlays=False)
         scores.append(score_case(case, res, sphere))
-        if i < n_crb:
-            bounds.append(crb_3d(case, sphere))
+        if i < n_crb and scores[-1]["ok"]:
+            bounds.append(crb_3d(case, sphere, res))
         if flat is not None:
             res_flat = measure_station(flat, case.images, body_spec, overlays=False)
             parallel_flagged.append(res_flat.status == "failed")
@@ -246,7 +259,8 @@ def _rms(a) -> np.ndarray:
 
 def summarize(run: dict) -> dict:
     """The figures of one :func:`run_cases`: rms errors, sigma / rms, rms / bound, the
-    baseline's rms over CADRA's (per view, over both views' u, v and axis), the same in 3-D,
+    baseline's rms over CADRA's (per view, over both views' u, v and axis; with its bootstrap
+    standard error, images resampled together), the same in 3-D,
     and the parallel assumption's mean and largest 3-D error, and how often stage one's
     two-view check flags its stations (the views' x disagree)."""
     ok = [s for s in run["scores"] if s["ok"]]
@@ -259,7 +273,8 @@ def summarize(run: dict) -> dict:
     rms = _rms(err)
     out.update(view_rms=rms.tolist(), view_sigma_ratio=(np.sqrt(np.mean(sig ** 2, axis=0))
                                                         / rms).tolist(),
-               otsu_rms=_rms(otsu).tolist(), otsu_ratio=(_rms(otsu) / rms).tolist())
+               otsu_rms=_rms(otsu).tolist(), otsu_ratio=(_rms(otsu) / rms).tolist(),
+               otsu_ratio_se=ratio_se(otsu, err).tolist())
     e3, s3 = np.array([s["error_3d"] for s in ok]), np.array([s["sigma_3d"] for s in ok])
     rms3 = _rms(e3)
     out.update(rms_3d=rms3.tolist(), mean_3d=np.mean(e3, axis=0).tolist(),
@@ -339,5 +354,5 @@ def e2e_draws(draws: int, verbose: bool = True) -> dict:
                                                     / np.array(scatter))) if chi2 else None)}
 
 
-__all__ = ["BODIES", "FACILITY", "e2e_draws", "StationCase", "crb_3d", "parallel_station", "random_case", "run_cases",
-           "score_case", "station_case", "summarize"]
+__all__ = ["BODIES", "FACILITY", "StationCase", "crb_3d", "e2e_draws", "parallel_station",
+           "random_case", "run_cases", "score_case", "station_case", "summarize"]

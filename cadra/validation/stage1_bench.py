@@ -101,7 +101,7 @@ def _rms(a):
     return np.sqrt(np.mean(np.square(a), axis=0))
 
 
-def _ratio_se(B, E, n_boot=400, seed=0):
+def ratio_se(B, E, n_boot=400, seed=0):
     """Bootstrap standard error of rms(B) / rms(E) per channel (renders resampled together)."""
     rng = np.random.default_rng(seed)
     idx = rng.integers(0, len(E), (n_boot, len(E)))
@@ -132,7 +132,7 @@ def accuracy(n_default, n_variant, n_crb):
              "crb": crb.tolist(), "crb_ratio": (rms / crb).tolist(),
              "baseline_rms": _rms(B).tolist(), "baseline_bias": B.mean(axis=0).tolist(),
              "baseline_ratio": (_rms(B) / rms).tolist(),
-             "baseline_ratio_se": _ratio_se(B, E).tolist(),
+             "baseline_ratio_se": ratio_se(B, E).tolist(),
              "ms_per_view": 1e3 * float(np.mean(T)),
              "seconds": time.perf_counter() - t0, "variants": {}}
         for vname, cfg in variants.items():
