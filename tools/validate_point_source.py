@@ -14,7 +14,10 @@ Sections, all on station 3 of the bundled point-source range ``facilities/brl_sp
 2. **depth**: the M-80 off the line of flight by 50 mm in y and in z (the four corners):
    its 3-D error over the bound, and the same images measured as if the optics were
    parallel (the sparks taken away): that assumption's error in x, y, z;
-3. **end to end** (``--e2e-draws``; 0 skips it): the two M-80 sample rounds flown through
+3. **calibration**: the three biased sphere sample shots flown through this range, rendered,
+   measured and calibrated: the injected station biases recovered (within 2 sigma, flags),
+   as tools/bench_calibration.py --e2e does on the parallel range;
+4. **end to end** (``--e2e-draws``; 0 skips it): the two M-80 sample rounds flown through
    this range, rendered, measured and fitted (6-DOF, both rounds, as tools/validate_m80.py
    does on the parallel range): pulls of the free coefficients, the fraction within
    2 sigma, chi^2/nu against its expected scatter.
@@ -38,6 +41,7 @@ one_thread()
 from cadra.validation.point_source import (  # noqa: E402 (after one_thread)
     BODIES,
     FACILITY,
+    calibration_e2e,
     e2e_draws,
     run_cases,
     summarize,
@@ -83,6 +87,8 @@ def run(args) -> dict:
                                 offsets=DEPTH_OFFSETS_M, n_crb=min(args.crb, 4), parallel=True))
     out["depth"] = _round(depth)
     print(f"depth: {json.dumps(out['depth'])}", flush=True)
+    out["calibration"] = _round(calibration_e2e())
+    print(f"calibration: {json.dumps(out['calibration'])}", flush=True)
     if args.e2e_draws > 0:
         out["e2e"] = _round(e2e_draws(args.e2e_draws))
     out.update(figures(out))
@@ -105,6 +111,9 @@ def figures(out: dict) -> dict:
            "ps_parallel_error_max_mm": 1e3 * max(d.get("parallel_max_abs_3d", [float("nan")])),
            "ps_parallel_flagged_frac": d.get("parallel_flagged_frac"),
            "ps_failed_cases": sum(b["n"] - b["n_ok"] for b in acc.values()) + d["n"] - d["n_ok"]}
+    c = out["calibration"]
+    fig.update(ps_calibration_within_2sigma_frac=c["injected_within_2sigma_frac"],
+               ps_calibration_false_flags=c["false_flags"])
     if "e2e" in out:
         fig.update(ps_e2e_within_2sigma_frac=out["e2e"]["within_2sigma_frac"],
                    ps_e2e_chi2_nu_median=out["e2e"]["chi2_nu_median"],

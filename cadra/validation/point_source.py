@@ -354,5 +354,46 @@ def e2e_draws(draws: int, verbose: bool = True) -> dict:
                                                     / np.array(scatter))) if chi2 else None)}
 
 
-__all__ = ["BODIES", "FACILITY", "StationCase", "crb_3d", "e2e_draws", "parallel_station",
-           "random_case", "run_cases", "score_case", "station_case", "summarize"]
+def calibration_e2e(verbose: bool = True) -> dict:
+    """The sphere calibration from point-source images: the three biased sphere sample shots
+    (``sample_shots/specs/sphere_bias_{1,2,3}.toml``, their station biases injected in the
+    rendered scenes) flown through the point-source range, measured by stage one and
+    calibrated (:func:`cadra.calibration.sphere.estimate_station_biases`); the recovered
+    biases against the injected ones, as ``tools/bench_calibration.py --e2e`` scores them on
+    the parallel range."""
+    import dataclasses
+
+    from cadra.calibration.sphere import estimate_station_biases
+    from cadra.imaging.shot import measure_shot
+    from cadra.synthetic.simulate import load_shot_spec, render_images, simulate_shot
+    from cadra.validation.m80 import SPECS_DIR
+
+    shots, injected = [], {}
+    for k in (1, 2, 3):
+        spec = load_shot_spec(SPECS_DIR / f"sphere_bias_{k}.toml")
+        spec = dataclasses.replace(spec, facility=FACILITY)
+        injected = spec.station_biases
+        flown = render_images(simulate_shot(spec), progress=False)
+        shots.append(measure_shot(flown.shot_file(), images=flown.images, workers=1,
+                                  progress=False, overlays=False).shot_data())
+    est = estimate_station_biases(shots, facility=FACILITY)
+    b = np.array([injected.get(int(s), (0.0, 0.0, 0.0, 0.0)) for s in est.stations])
+    z = (est.bias - b) / est.sigma
+    inj = b != 0
+    flagged = np.abs(est.bias / est.sigma) > 3
+    if verbose:
+        for k, c in np.argwhere(inj | flagged):
+            f, u = (1e6, "us") if c == 3 else (1e3, "mm")
+            print(f"  station {est.stations[k]:2d} {('x', 'y', 'z', 'time')[c]:4s} "
+                  f"{b[k, c] * f:+.4f} {u} -> {est.bias[k, c] * f:+.4f} +- "
+                  f"{est.sigma[k, c] * f:.4f}{'  FLAGGED' if flagged[k, c] else ''}")
+    return {"injected_within_2sigma_frac": float(np.mean(np.abs(z[inj]) <= 2)),
+            "max_abs_pull_injected": float(np.max(np.abs(z[inj]))),
+            "all_within_2sigma_frac": float(np.mean(np.abs(z) <= 2)),
+            "false_flags": int((flagged & ~inj).sum()), "detected": int((flagged & inj).sum()),
+            "injected": int(inj.sum()), "chi2_nu": float(est.chi2 / est.dof)}
+
+
+__all__ = ["BODIES", "FACILITY", "StationCase", "calibration_e2e", "crb_3d", "e2e_draws",
+           "parallel_station", "random_case", "run_cases", "score_case", "station_case",
+           "summarize"]
