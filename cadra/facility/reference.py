@@ -453,8 +453,11 @@ def brl_spark_text() -> str:
     the line of flight, in the 1.0-1.3 of the standard method. Film scanned at 0.127 mm/px
     (1600 x 1200 px). Per view two wires across the range (0.07 m either side of the
     station) 0.12 m beyond the line of flight, toward the film, and two along it 0.20 m
-    beyond: two depths, so that the wires' images also carry the spark's position. Survey
-    errors as the other ranges', from another seed.
+    beyond: two depths, so that the wires' images also carry the spark's position. The wires
+    are 0.225 mm and 0.236 mm thick, so that their shadows are as wide as the other ranges'
+    0.25 mm wires at unit magnification (stage one's wire tests are tuned to images about
+    2 px wide: docs/stage1.md, "Wires"). Survey errors as the other ranges', from another
+    seed.
     """
     return _range_text(
         "brl_spark",
@@ -536,8 +539,12 @@ def _range_text(name: str, description: str, *, spacing: float, n_st: int,
             for name, p0, p1 in nominal:
                 q0 = [p + next(offs) for p in p0]
                 q1 = [p + next(offs) for p in p1]
+                dia = 0.00025
+                if point_source is not None:   # its shadow as wide as the others' wires
+                    depth = off if name in ("x-", "x+") else off_along
+                    dia = round(dia * (point_source[0] + depth) / point_source[1], 6)
                 lines.append(f'    {{ name = "{name}", p0_m = {vec(q0)}, p1_m = {vec(q1)}, '
-                             f"diameter_m = 0.00025 }},")
+                             f"diameter_m = {dia!r} }},")
             lines.append("]")
     return "\n".join(lines) + "\n"
 
