@@ -81,7 +81,9 @@ PARSERS = ("expression", "model_file", "trajectory_file", "shot_file", "facility
 
 
 def facility_seeds() -> list[str]:
-    return [FACILITY.read_text(encoding="utf-8")]
+    """The parallel HFFAF and the point-source range (its sparks and films mutated too)."""
+    return [FACILITY.read_text(encoding="utf-8"),
+            (FACILITY.parent / "brl_spark.toml").read_text(encoding="utf-8")]
 
 
 def spec_seeds() -> list[str]:
