@@ -19,6 +19,7 @@ This module holds the facility's geometry and data objects; reading and validati
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,6 +56,11 @@ def nominal_image_to_plane(x_station_m: float, scale_m_per_px: float, width_px: 
     s = float(scale_m_per_px)
     cu, cv = (width_px - 1) / 2.0, (height_px - 1) / 2.0
     return np.array([[s, 0.0, x_station_m - s * cu], [0.0, -s, s * cv]])
+
+
+def sight_axis(axes: tuple[int, int]) -> int:
+    """The facility axis a view seeing ``axes`` looks along: z (2) for top, y (1) for side."""
+    return ({0, 1, 2} - set(axes)).pop()
 
 
 def _clip_segment(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.ndarray):
@@ -164,7 +170,7 @@ class View:
     @property
     def sight_axis(self) -> int:
         """The facility axis the view looks along (the one it does not see): z for top."""
-        return ({0, 1, 2} - set(self.axes)).pop()
+        return sight_axis(self.axes)
 
     @property
     def film_origin_m(self) -> np.ndarray:
@@ -191,15 +197,23 @@ class View:
     def optics(self, affine: np.ndarray | None = None):
         """This view's :class:`~cadra.optics.projection.Projection` (docs/conventions.md,
         "Projections"): a ``ParallelProjection``, or a ``PointSourceProjection`` from the spark
-        onto the film, with the nominal image->plane affine or ``affine`` (e.g. the one solved
-        from the image's wires)."""
+        onto the film, with the nominal image->plane affine (made once per view: projections
+        are immutable) or ``affine`` (e.g. the one solved from the image's wires)."""
+        if affine is None:
+            return self._nominal_optics
+        return self._make_optics(affine)
+
+    @functools.cached_property
+    def _nominal_optics(self):
+        return self._make_optics(self.image_to_plane)
+
+    def _make_optics(self, affine):
         from cadra.optics.projection import ParallelProjection, PointSourceProjection
 
         if self.projection == "point_source":
             return PointSourceProjection(
                 spark_m=self.source_position_m, film_origin_m=self.film_origin_m,
-                plane_basis=self.P_view,
-                image_to_plane=self.image_to_plane if affine is None else affine)
+                plane_basis=self.P_view, image_to_plane=affine)
         return ParallelProjection.from_view(self, affine)
 
     def project_points(self, r_F: np.ndarray) -> np.ndarray:
@@ -553,5 +567,5 @@ __all__ = [
     "VIEW_AXES", "AffineFit", "Facility", "ReferenceMark", "Station", "View", "Wire",
     "brl_spark_text", "default_hffaf_text", "fit_affine_to_wires", "small_arms_range_text",
     "spark_range_text",
-    "nominal_image_to_plane", "SCHEMA_VERSION",
+    "nominal_image_to_plane", "sight_axis", "SCHEMA_VERSION",
 ]

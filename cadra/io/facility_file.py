@@ -32,6 +32,7 @@ from cadra.facility.reference import (
     default_hffaf_text,
     fit_affine_to_wires,
     nominal_image_to_plane,
+    sight_axis,
 )
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
 
@@ -82,7 +83,7 @@ def _point_source(merged: Mapping, key_path, vpath: str, axes: tuple[int, int], 
     if np.any(np.abs(S) > 1e4):
         raise _err(key_path("source_position_m"), f"{S.tolist()} is not a position in metres")
     film = _positive(merged["film_distance_m"], key_path("film_distance_m"), 1e2)
-    sight = ({0, 1, 2} - set(axes)).pop()
+    sight = sight_axis(axes)
     stand_off = abs(float(S[sight]))
     if stand_off < 0.1:
         raise _err(key_path("source_position_m"),

@@ -24,7 +24,8 @@ onto a film): the view plane is the film's plane, rays run from the spark S thro
 and a point P lands at P' = S + λ (P − S), λ = n·(O − S) / n·(P − S) (O a point of the film, n
 its normal; λ is the magnification, typically 1.0–1.3): a conical projection, whose Jacobians
 depend on the point. The renderer draws through it (:meth:`PointSourceProjection.outline`, the
-exact shadow of a body); stage one does not measure such views yet.
+exact shadow of a body) and stage one measures through it (docs/stage1.md, "Point-source
+stations").
 
 :func:`intersect_rays` is the weighted least-squares intersection of several views' rays, the
 combination step of stage one.

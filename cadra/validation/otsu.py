@@ -24,6 +24,7 @@ from cadra.geometry import polygon_area_centroid
 
 __all__ = [
     "BaselinePose",
+    "baseline_error",
     "otsu_moments",
     "polygon_centroid_offset",
     "reference_from_centroid",
@@ -173,3 +174,21 @@ def reference_from_centroid(
     along, across = offset
     c, s = math.cos(angle_rad), math.sin(angle_rad)
     return u_px - (c * along - s * across), v_px - (s * along + c * across)
+
+
+def baseline_error(image, polygon_px, ref_px, axis_angle_rad: float, sphere: bool
+                   ) -> list[float]:
+    """The baseline's error on one rendered view whose exact outline ``polygon_px``,
+    reference point ``ref_px`` and image axis angle are known: u, v px (and, unless
+    ``sphere``, the axis angle, deg). It is given every help: the exact outline's centroid
+    offset, and of the nose directions along the blob's major and minor axes the one closest
+    to the truth (a capsule's major axis runs across the body, a bullet's along it)."""
+    b = otsu_moments(image)
+    u_ref, v_ref = float(ref_px[0]), float(ref_px[1])
+    if sphere:
+        return [b.u_px - u_ref, b.v_px - v_ref]
+    ang = min((b.angle_rad + k * math.pi / 2 for k in range(4)),
+              key=lambda g: abs(math.remainder(g - axis_angle_rad, 2 * math.pi)))
+    off = polygon_centroid_offset(polygon_px, (u_ref, v_ref), axis_angle_rad)
+    u, v = reference_from_centroid(b.u_px, b.v_px, ang, off)
+    return [u - u_ref, v - v_ref, math.degrees(math.remainder(ang - axis_angle_rad, 2 * math.pi))]

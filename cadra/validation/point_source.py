@@ -131,26 +131,12 @@ def parallel_station(station: Station) -> Station:
 
 def _otsu_error(case: StationCase, name: str, sphere: bool) -> list[float]:
     """The Otsu + moments baseline's error on one view: u, v px (and the axis, deg)."""
-    from cadra.validation.otsu import (
-        otsu_moments,
-        polygon_centroid_offset,
-        reference_from_centroid,
-    )
+    from cadra.validation.otsu import baseline_error
 
     tr = case.truth[name]
-    b = otsu_moments(case.images[name])
-    if sphere:
-        return [b.u_px - tr["u_ref_px"], b.v_px - tr["v_ref_px"]]
-    truth_ang = math.radians(tr["axis_angle_image_deg"])
-    # the body axis is the outline's major or minor axis; take the nose direction of the
-    # two closest to the truth (generous to the baseline)
-    ang = min((b.angle_rad + k * math.pi / 2 for k in range(4)),
-              key=lambda g: abs(math.remainder(g - truth_ang, 2 * math.pi)))
-    off = polygon_centroid_offset(tr["scene"].bodies[0], (tr["u_ref_px"], tr["v_ref_px"]),
-                                  truth_ang)
-    u, v = reference_from_centroid(b.u_px, b.v_px, ang, off)
-    return [u - tr["u_ref_px"], v - tr["v_ref_px"],
-            math.degrees(math.remainder(ang - truth_ang, 2 * math.pi))]
+    return baseline_error(case.images[name], tr["scene"].bodies[0],
+                          (tr["u_ref_px"], tr["v_ref_px"]),
+                          math.radians(tr["axis_angle_image_deg"]), sphere)
 
 
 def truth_inclinations(case: StationCase) -> tuple[float, float]:
@@ -366,6 +352,7 @@ def calibration_e2e(verbose: bool = True) -> dict:
     from cadra.calibration.sphere import estimate_station_biases
     from cadra.imaging.shot import measure_shot
     from cadra.synthetic.simulate import load_shot_spec, render_images, simulate_shot
+    from cadra.validation.calibration_trials import recovery
     from cadra.validation.m80 import SPECS_DIR
 
     shots, injected = [], {}
@@ -378,20 +365,9 @@ def calibration_e2e(verbose: bool = True) -> dict:
                                   progress=False, overlays=False).shot_data())
     est = estimate_station_biases(shots, facility=FACILITY)
     b = np.array([injected.get(int(s), (0.0, 0.0, 0.0, 0.0)) for s in est.stations])
-    z = (est.bias - b) / est.sigma
-    inj = b != 0
-    flagged = np.abs(est.bias / est.sigma) > 3
-    if verbose:
-        for k, c in np.argwhere(inj | flagged):
-            f, u = (1e6, "us") if c == 3 else (1e3, "mm")
-            print(f"  station {est.stations[k]:2d} {('x', 'y', 'z', 'time')[c]:4s} "
-                  f"{b[k, c] * f:+.4f} {u} -> {est.bias[k, c] * f:+.4f} +- "
-                  f"{est.sigma[k, c] * f:.4f}{'  FLAGGED' if flagged[k, c] else ''}")
-    return {"injected_within_2sigma_frac": float(np.mean(np.abs(z[inj]) <= 2)),
-            "max_abs_pull_injected": float(np.max(np.abs(z[inj]))),
-            "all_within_2sigma_frac": float(np.mean(np.abs(z) <= 2)),
-            "false_flags": int((flagged & ~inj).sum()), "detected": int((flagged & inj).sum()),
-            "injected": int(inj.sum()), "chi2_nu": float(est.chi2 / est.dof)}
+    return {**recovery(est, b, verbose),
+            "all_within_2sigma_frac": float(np.mean(np.abs((est.bias - b) / est.sigma) <= 2)),
+            "chi2_nu": float(est.chi2 / est.dof)}
 
 
 __all__ = ["BODIES", "FACILITY", "StationCase", "calibration_e2e", "crb_3d", "e2e_draws",

@@ -60,26 +60,10 @@ def _cases(body, n, config, seed, keep=0, baseline=False):
 
 def _baseline_error(body, case):
     """Error of the Otsu + moments baseline on one case: u, v px (and axis deg)."""
-    from cadra.validation.otsu import (
-        otsu_moments,
-        polygon_centroid_offset,
-        reference_from_centroid,
-    )
+    from cadra.validation.otsu import baseline_error
 
-    b = otsu_moments(case.image_u8)
-    if body.kind == "sphere":
-        return [b.u_px - case.u_ref_px, b.v_px - case.v_ref_px]
-    # the major axis of an M2 capsule runs across the body: the axis is 90 deg from it;
-    # pick the nose direction closest to the truth (generous to the baseline)
-    ang = b.angle_rad + math.pi / 2
-    if math.cos(ang - case.axis_angle_px_rad) < 0:
-        ang += math.pi
-    poly = case.scene.bodies[0]
-    off = polygon_centroid_offset(poly, (case.u_ref_px, case.v_ref_px),
-                                  case.axis_angle_px_rad)
-    u, v = reference_from_centroid(b.u_px, b.v_px, ang, off)
-    return [u - case.u_ref_px, v - case.v_ref_px,
-            math.degrees(math.remainder(ang - case.axis_angle_px_rad, 2 * math.pi))]
+    return baseline_error(case.image_u8, case.scene.bodies[0], (case.u_ref_px, case.v_ref_px),
+                          case.axis_angle_px_rad, body.kind == "sphere")
 
 
 def _crb(body, cases):
