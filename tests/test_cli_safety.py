@@ -619,3 +619,34 @@ def test_overwrite_replaces_only_an_output_of_its_own_kind(work, tmp_path, capsy
     assert tree_hash(shot) == before
     assert cadra2(["simulate", str(work / "specs" / "small.toml"), "-o", str(shot),
                    "--no-images", "-q", "--overwrite"]) == 0        # its own kind: replaced
+
+
+def _masks_in_worker(queue):
+    """A pool initializer: the worker's blocked signals as forked, then after its set-up."""
+    from cadra.imaging import shot as shot_module
+
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    shot_module._worker_init(os.getppid())
+    after = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    queue.put((signal.SIGTERM in before, signal.SIGINT in before,
+               signal.SIGTERM in after, signal.SIGINT in after))
+
+
+@linux_only
+def test_pool_workers_take_no_signal_before_their_own_handlers():
+    """A worker forked while the pool is made (or to replace one) holds SIGINT and SIGTERM
+    until it has set its own handlers: a terminate that meets it half-started must not raise
+    the command line's exception in it (a traceback on stderr). The parent's mask is back."""
+    import multiprocessing as mp
+
+    from cadra.imaging.shot import _pool_held_signals
+
+    ctx = mp.get_context("fork")
+    queue = ctx.SimpleQueue()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+    with _pool_held_signals():
+        pool = ctx.Pool(1, initializer=_masks_in_worker, initargs=(queue,))
+    with pool:
+        got = queue.get()
+    assert got == (True, True, False, False)
+    assert signal.pthread_sigmask(signal.SIG_BLOCK, []) == mask

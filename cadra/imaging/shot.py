@@ -15,6 +15,7 @@ parent, even a SIGKILLed one (:func:`_worker_init`).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from collections.abc import Mapping
@@ -225,6 +226,23 @@ def _watch_parent(parent_pid: int, period_s: float = 0.5) -> None:
             os._exit(1)
 
 
+@contextlib.contextmanager
+def _pool_held_signals():
+    """SIGINT and SIGTERM blocked while a pool is made: its workers, and the thread that
+    forks their replacements, start with them blocked until :func:`_worker_init` has set the
+    workers' own handlers. Here they are held pending and taken as soon as the pool exists."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _worker_init(parent_pid: int) -> None:
     """Pool worker set-up: die with the parent, leave Ctrl-C to the parent.
 
@@ -234,7 +252,10 @@ def _worker_init(parent_pid: int) -> None:
     ignored here: a terminal's Ctrl-C reaches the whole process group, and the parent alone
     handles it (it terminates the pool and exits with status 130). SIGTERM gets its default
     action back (a command line turns it into an exception, which a worker must not inherit:
-    the pool ends its workers with it).
+    the pool ends its workers with it). Both arrive blocked (:func:`_pool_held_signals`) and
+    are unblocked only now, so a signal that reaches a worker between its fork and this set-up
+    (the pool's terminate meeting a worker it has just forked to replace one) waits for the
+    worker's own handlers instead of raising the command line's exception there.
     """
     import signal
     import sys
@@ -242,6 +263,8 @@ def _worker_init(parent_pid: int) -> None:
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)   # the pool ends its workers by SIGTERM
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
     armed = False
     if sys.platform.startswith("linux"):
         try:
@@ -367,7 +390,9 @@ def _run(tasks: list, workers: int | None, label: str | None) -> list[StationRes
             ctx = mp.get_context(method)
             # leaving the block (done, failed or interrupted) terminates the workers at once;
             # each worker also dies with this process (_worker_init)
-            with ctx.Pool(workers, initializer=_worker_init, initargs=(os.getpid(),)) as pool:
+            with _pool_held_signals():
+                pool = ctx.Pool(workers, initializer=_worker_init, initargs=(os.getpid(),))
+            with pool:
                 for res in pool.imap(_task, tasks):
                     results.append(res)
                     if bar is not None:
