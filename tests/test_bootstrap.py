@@ -10,13 +10,15 @@ known shape; the residual resampling draws the fit's own standardized residuals.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from cadra.campaign.bootstrap import bootstrap
 from cadra.fitting.solver import fit
 from cadra.flight.data import FILM_SIGMAS
-from cadra.studies.bootstrap import MIN_TO_FLAG, _figures, replicate, replicate_data
+from cadra.studies.bootstrap import MIN_TO_FLAG, _figures, interval_ends, replicate, replicate_data
 from cadra.validation.stage2_bench import SINGLE, make_problem
 
 N_REFITS = 30
@@ -107,6 +109,32 @@ def test_percentile_figures_and_the_non_gaussian_flag_on_known_samples():
     assert _figures("few", 1.0, 0.1, rng.standard_normal(10))["non_gaussian"] is None
 
 
+def test_the_interval_ends_are_the_b_plus_one_alpha_ordered_refits():
+    """Davison & Hinkley's (B + 1) alpha-th ordered value: with 39 refits the 95 % ends are
+    exactly the smallest and the largest, with 79 the 2nd and the 78th."""
+    rng = np.random.default_rng(7)
+    x = rng.standard_normal(39)
+    assert interval_ends(x) == pytest.approx((x.min(), x.max()), rel=1e-12)
+    y = np.sort(rng.standard_normal(79))
+    assert interval_ends(rng.permutation(y)) == pytest.approx((y[1], y[77]), rel=1e-12)
+
+
+def test_the_percentile_interval_covers_at_its_nominal_rate_with_100_refits():
+    """An estimate theta + e and refits theta_hat + e_b, e and e_b exchangeable: the
+    percentile interval covers theta exactly when -e ranks among the e_b inside the ends, so
+    the (B + 1) alpha ends cover 95 % at B = 100. numpy's default quantile (one order
+    statistic inside) covers 93.5 % there: the shortfall the ends are chosen against."""
+    rng = np.random.default_rng(11)
+    n, b = 20000, 100
+    e, eb = rng.standard_normal(n), rng.standard_normal((n, b))
+    ends = np.array([interval_ends(row) for row in eb])
+    hit = np.mean((ends[:, 0] <= -e) & (-e <= ends[:, 1]))
+    se = math.sqrt(0.95 * 0.05 / n)
+    assert abs(hit - 0.95) < 4 * se
+    lo, hi = np.quantile(eb, [0.025, 0.975], axis=1)
+    assert np.mean((lo <= -e) & (-e <= hi)) < 0.95 - 6 * se
+
+
 def test_the_studentized_interval_reflects_the_refits_t():
     """Bootstrap-t: t_b = (x_b - value) / s_b with each refit's own sigma s_b; the interval
     [value - t_97.5 sigma, value - t_2.5 sigma]. Refits whose sigma grows with their value
@@ -115,7 +143,7 @@ def test_the_studentized_interval_reflects_the_refits_t():
     x = 1.0 + 0.1 * rng.standard_normal(4000)
     s = 0.1 * x
     f = _figures("t", 1.0, 0.1, x, s)
-    t_lo, t_hi = np.quantile((x - 1.0) / s, [0.025, 0.975])
+    t_lo, t_hi = interval_ends((x - 1.0) / s)
     assert f["t_lower"] == pytest.approx(1.0 - 0.1 * t_hi, rel=1e-12)
     assert f["t_upper"] == pytest.approx(1.0 - 0.1 * t_lo, rel=1e-12)
     # a refit sigma equal to the fit's: the interval is the basic one, reflected about value
