@@ -21,6 +21,7 @@ from cadra.synthetic.simulate import load_shot_spec, simulate_shot
 from cadra.validation.gap_cases import BODY_PAIRS
 from cadra.validation.gap_scoring import (
     body_truth_in_fit_frame,
+    effect_size_ok,
     exceed_pvalue,
     linear_shrink,
     magnitude_within_2sigma,
@@ -295,6 +296,35 @@ def test_validation_turns_body_truth_into_the_fits_frame():
                                  sim, 0.03, q(a_fit))
     assert pr["Ixy_kg_m2@S"] == pytest.approx(ex @ P @ ey, rel=1e-9)
     assert pr["Ixz_kg_m2@S"] == pytest.approx(ex @ P @ ez, rel=1e-9)
+
+
+def test_a_perfect_diagnosis_passes_the_effect_vector_score_at_two_sigmas_rate():
+    """Sizes drawn from N(truth, C), a perfect diagnosis: as one vector with its covariance
+    an effect of k parameters passes 95.45 % of the time for any k and any correlation;
+    "every parameter within 2 sigma" passes 0.9545^k independent, and correlated between
+    those and 0.9545. A one-parameter effect is scored alone."""
+    rng = np.random.default_rng(3)
+    n = 4000
+    se = math.sqrt(0.9545 * 0.0455 / n)
+    for k, rho in ((2, 0.0), (2, 0.9), (6, 0.3)):
+        names = tuple(f"p{i}" for i in range(k))
+        sig = np.geomspace(1e-3, 1.0, k)
+        cov = (rho + (1 - rho) * np.eye(k)) * np.outer(sig, sig)
+        truth = dict(zip(names, rng.standard_normal(k), strict=True))
+        draws = rng.multivariate_normal([truth[p] for p in names], cov, n)
+        vec = per = 0
+        for d in draws:
+            added = {"params": names, "size": list(d), "sigma": list(sig),
+                     "covariance": cov.tolist()}
+            vec += effect_size_ok(added, truth)
+            per += size_within_2sigma(added, truth)
+        assert abs(vec / n - 0.9545) < 4 * se
+        if rho == 0.0:
+            assert abs(per / n - 0.9545 ** k) < 4 * se
+        assert per / n < 0.9545 - 4 * se
+    one = {"params": ("q",), "size": [2.1], "sigma": [1.0], "covariance": [[1.0]]}
+    assert not effect_size_ok(one, {"q": 0.0})
+    assert effect_size_ok(one, {"q": 0.2})
 
 
 def test_validation_compares_body_pairs_as_vectors_with_their_covariance():

@@ -18,7 +18,8 @@ from scipy import stats
 
 __all__ = ["SHRINK_DRAWS", "SHRINK_LIMIT", "body_truth_in_fit_frame", "dchi2_expected",
            "exceed_expected", "exceed_observed", "exceed_pvalue", "fit_from_truth",
-           "linear_shrink", "magnitude_within_2sigma", "pooled_shrink", "size_within_2sigma"]
+           "effect_size_ok", "linear_shrink", "magnitude_within_2sigma", "pooled_shrink",
+           "size_within_2sigma"]
 
 #: the shrink criterion (rms per channel after / clean within 10 %), and the noise
 #: vectors drawn to estimate how often a perfect diagnosis fails it (``linear_shrink``)
@@ -196,6 +197,20 @@ def magnitude_within_2sigma(added: dict, truth: dict, groups) -> bool:
         if float(np.min(np.einsum("ni,ij,nj->n", D, Ci, D))) > 4.0:
             return False
     return True
+
+
+def effect_size_ok(added: dict, truth: dict, groups=None) -> bool:
+    """The size score of an added effect. A body pair (``groups``) by its magnitude
+    (:func:`magnitude_within_2sigma`, frame-free); any other effect of k > 1 parameters (a
+    cross-flow's two winds, a cg offset per shot of a set) as one vector with the refit's
+    covariance against the chi-square quantile of two sigma for k (:func:`size_within_2sigma`):
+    a perfect diagnosis passes that 95.45 % of the time whatever k and the correlations,
+    where "every parameter within 2 sigma" passes 0.9545^k or less. One parameter: within its
+    2 sigma (or its profile interval)."""
+    if groups is not None:
+        return magnitude_within_2sigma(added, truth, groups)
+    params = tuple(added["params"])
+    return size_within_2sigma(added, truth, [params] if len(params) > 1 else None)
 
 
 def size_within_2sigma(added: dict, truth: dict, groups=None) -> bool:

@@ -128,6 +128,9 @@ def case_line(case: str, rows, n_redrawn: int = 0) -> str:
                 f"{exceed_pvalue(rows):.2g}), effect matters "
                 f"{np.mean([r['matters'] for r in rows]):.2f} ({n_redrawn} draws "
                 "that did not matter drawn again)")
+    per_p = [r["size_ok_per_parameter"] for r in rows if "size_ok_per_parameter" in r]
+    if per_p and case not in BODY_PAIRS:
+        line += f"; each parameter alone within 2 sigma {np.sum(per_p) / len(rows):.2f}"
     vec = [r["size_ok_vector"] for r in rows if "size_ok_vector" in r]
     if vec:
         line += (f"; the pair as a vector in the fit's frame (direction too) "
@@ -186,6 +189,11 @@ def summarize(per: dict, redrawn: dict, trials: int) -> dict:
                                    default=math.nan),
         "size_within_2sigma_by_case": {c: float(np.mean([r["size_ok"] for r in per[c]]))
                                        for c in eff},
+        # each parameter alone within 2 sigma: what the effect-as-a-vector score replaced
+        # for effects of more than one parameter (kept to compare)
+        "size_per_parameter_by_case": {
+            c: float(np.sum([r["size_ok_per_parameter"] for r in per[c]
+                             if "size_ok_per_parameter" in r]) / len(per[c])) for c in eff},
         "size_as_vector_by_case": {
             c: float(np.sum([r["size_ok_vector"] for r in per[c]
                              if "size_ok_vector" in r]) / len(per[c]))

@@ -45,9 +45,9 @@ from cadra.validation.gap_cases import (
 from cadra.validation.gap_measure import measure
 from cadra.validation.gap_scoring import (
     body_truth_in_fit_frame,
+    effect_size_ok,
     fit_from_truth,
     linear_shrink,
-    magnitude_within_2sigma,
     size_within_2sigma,
 )
 
@@ -219,12 +219,12 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0):
                 truth = body_truth_in_fit_frame(case, truth, first_sim, sf.t0_s,
                                                 sf.state[6:10])
                 out["truth_fit_frame"] = truth
-            if groups is None:
-                out["size_ok"] = size_within_2sigma(first, truth)
-            else:
-                # the size of a body pair is its magnitude (frame-free); the pair as a vector
-                # in the fit's frame (direction too) is printed beside it
-                out["size_ok"] = magnitude_within_2sigma(first, truth, groups)
+            # the size of a body pair is its magnitude (frame-free), the pair as a vector in
+            # the fit's frame (direction too) printed beside it; any other multi-parameter
+            # effect one vector; each parameter alone within 2 sigma is kept beside it
+            out["size_ok"] = effect_size_ok(first, truth, groups)
+            out["size_ok_per_parameter"] = size_within_2sigma(first, truth)
+            if groups is not None:
                 out["size_ok_vector"] = size_within_2sigma(first, truth, groups)
             # the literal reference: the clean shots' fit (base model); and the diagnosis'
             # final model fitted to the same data from the truth (the injected sizes, the
@@ -297,8 +297,8 @@ def score_extended(case, out, dg, res, expected, truth, where, named, groups, su
         if sub in BODY_CASES:
             sf = next(f for f in dg.fit_after.shots if f.shot_id == sid)
             truth = body_truth_in_fit_frame(sub, truth, first_sim, sf.t0_s, sf.state[6:10])
-        out["size_ok"] = (size_within_2sigma(first, truth) if groups is None
-                          else magnitude_within_2sigma(first, truth, groups))
+        out["size_ok"] = effect_size_ok(first, truth, groups)
+        out["size_ok_per_parameter"] = size_within_2sigma(first, truth)
     return out
 
 
