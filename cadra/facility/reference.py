@@ -135,6 +135,10 @@ class View:
         the view's sight axis (z for top, y for side); the film lies beyond the line of
         flight, perpendicular to that axis, and ``image_to_plane`` maps pixels to its
         points' facility coordinates along the view's axes (docs/facility_file.md).
+    distortion : the image's calibrated distortion
+        (:class:`~cadra.optics.distortion.Distortion`), or None (none). Every other map of
+        the view (``image_to_plane``, the wires' lines, :meth:`optics`) is of the *ideal*
+        image; the recorded image is the ideal one distorted.
     """
 
     station: int
@@ -150,6 +154,7 @@ class View:
     reference_mark: ReferenceMark
     source_position_m: np.ndarray | None = None
     film_distance_m: float | None = None
+    distortion: object | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "image_to_plane", _ro(np.reshape(self.image_to_plane, (2, 3))))

@@ -44,6 +44,7 @@ from cadra.body import FinnedBody
 from cadra.conventions import axis_from_inclinations, axis_from_projected_angles
 from cadra.facility.reference import Station
 from cadra.imaging.combine import StationPose, ViewPose, combine_views
+from cadra.imaging.distorted import distortion_pose_sigma, ideal_image
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 from cadra.imaging.silhouette.template import (
@@ -52,6 +53,7 @@ from cadra.imaging.silhouette.template import (
     outline_px,
 )
 from cadra.io.images import load_station_image, station_image
+from cadra.optics.distortion import distorted
 from cadra.optics.projection import Projection
 
 VIEWS = ("top", "side")
@@ -195,17 +197,20 @@ def _station_pose3d(poses: Mapping[str, ViewPose], sphere: bool):
     return (p.x_m, p.y_m, p.z_m), axis
 
 
-def _view_pose(fit: ViewFit, wires) -> ViewPose:
-    """The view's pose for combination: the silhouette fit's sigma and the wire affine's
-    uncertainty at the model's position, added in quadrature."""
+def _view_pose(fit: ViewFit, wires, distortion=None) -> ViewPose:
+    """The view's pose for combination: the silhouette fit's sigma, the wire affine's
+    uncertainty at the model's position and a calibrated distortion's (its coefficients'
+    covariance carried to the model's point and direction, :func:`distortion_pose_sigma`),
+    added in quadrature."""
     s_ang = math.sqrt(fit.cov[2, 2])
     finite = math.isfinite(s_ang)   # a sphere's angle is not measured: placeholder 0 +- 0
     s_aff = wires.position_sigma_m(fit.ref_px)
+    s_dis = distortion_pose_sigma(distortion, wires.projection, fit.pose)
     return ViewPose(a_m=fit.pose[0], b_m=fit.pose[1], angle_rad=fit.pose[2] if finite else 0.0,
-                    sigma_a_m=math.hypot(math.sqrt(fit.cov[0, 0]), s_aff[0]),
-                    sigma_b_m=math.hypot(math.sqrt(fit.cov[1, 1]), s_aff[1]),
-                    sigma_angle_rad=s_ang if finite else 0.0, projection=wires.projection,
-                    tilt_sensitivity=fit.tilt_sensitivity)
+                    sigma_a_m=math.sqrt(fit.cov[0, 0] + s_aff[0] ** 2 + s_dis[0] ** 2),
+                    sigma_b_m=math.sqrt(fit.cov[1, 1] + s_aff[1] ** 2 + s_dis[1] ** 2),
+                    sigma_angle_rad=math.hypot(s_ang, s_dis[2]) if finite else 0.0,
+                    projection=wires.projection, tilt_sensitivity=fit.tilt_sensitivity)
 
 
 def _wire_crossings(fit: ViewFit, template, projection, wires) -> list[str]:
@@ -249,14 +254,16 @@ def _model_box(img: np.ndarray, coarse, margin: int = 12) -> np.ndarray:
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
                   coarse=None, final: bool = True, masks: dict | None = None,
                   roll: float = 0.0, restart: bool = False, formation=None,
-                  pose3d=None) -> _Attempt:
+                  pose3d=None, ideal=None) -> _Attempt:
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
     ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
     so template, changed much since ``prev``: its edge profile was fitted to mismatched fins);
     ``formation``: the view's wire formation shared over the shot (None: this image's own);
-    ``pose3d``: a point-source view's expected 3-D pose (:func:`_view_templates`)."""
+    ``pose3d``: a point-source view's expected 3-D pose (:func:`_view_templates`);
+    ``ideal``: a distorted view's ideal image (:func:`ideal_image`), where its wires are
+    fitted (the silhouette is fitted in ``img``, the recorded one)."""
     from cadra.imaging.wires.fit import measure_wires
     from cadra.imaging.wires.mask import wire_mask
 
@@ -268,12 +275,14 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
             coarse = locate_model(img, template, view.optics())
         if not coarse.ok:
             return _Attempt(None, coarse.reason)
-        wires = measure_wires(img, view, exclude=_model_box(img, coarse), formation=formation)
+        wires = measure_wires(img if ideal is None else ideal, view,
+                              exclude=_model_box(img, coarse), formation=formation)
         if not wires.ok:
             return _Attempt(None, wires.reason, wires)
         affine = wires.affine
-        pose0 = pose_from_coarse(coarse, template, wires.projection)
-        mask = masks[view.name] = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
+        pose0 = pose_from_coarse(coarse, template, distorted(wires.projection, view.distortion))
+        mask = masks[view.name] = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX,
+                                            distortion=view.distortion)
         # a quick first pass when a refit with better tilts follows
         # (its sigma is not used: the offsets' correlation is left to the final fit)
         settings_used = settings if final else replace(
@@ -285,12 +294,14 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
         pose0 = prev.fit.pose
         mask = masks.get(view.name)
         if mask is None:
-            mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX)
+            mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX,
+                             distortion=view.distortion)
         settings_used = settings
     if prev is not None and not restart:   # a refit after a small tilt change: few iterations
         settings_used = replace(settings, max_iter=min(settings.max_iter, 4))
     warm = prev is not None and not restart
-    fit = fit_silhouette(img, template, wires.projection, pose0, exclude=mask,
+    fit = fit_silhouette(img, template, distorted(wires.projection, view.distortion), pose0,
+                         exclude=mask,
                          settings=settings_used,
                          edge_sigma0=prev.fit.edge_sigma_px if warm else 0.9,
                          noise_coef=prev.fit.noise_coef if warm else None,
@@ -350,7 +361,8 @@ def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: flo
             return ViewResult(view.name, name, False, img.reason)
     coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
     att = _measure_view(img, view, body, float(tilt_rad), settings, coarse=coarse, final=True,
-                        roll=float(roll_rad), formation=formation)
+                        roll=float(roll_rad), formation=formation,
+                        ideal=ideal_image(view, img) if view.distortion is not None else None)
     ok = att.fit is not None and att.fit.ok
     return ViewResult(view.name, name, ok, att.reason, att.fit, att.wires, att.affine,
                       float(tilt_rad), att.warnings, time.perf_counter() - t0,
@@ -391,7 +403,8 @@ def view_formation(sources, body_spec):
     profiles, n = [], 0
     for view, src in sources:
         try:
-            img = _view_image(view, src, f"station {view.station} {view.name} image")
+            img = ideal_image(view, _view_image(view, src,
+                                                f"station {view.station} {view.name} image"))
             if not isinstance(img, np.ndarray):
                 continue
             coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
@@ -449,8 +462,11 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
             results[name] = ViewResult(name, image_names[name], False, img.reason)
             continue
         images[name] = img
+    # a distorted view's wires are fitted in its ideal image (made once)
+    ideals = {n: ideal_image(station.views[n], img) for n, img in images.items()
+              if station.views[n].distortion is not None}
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
-    nominal = {n: v.optics() for n, v in station.views.items()}
+    nominal = {n: distorted(v.optics(), v.distortion) for n, v in station.views.items()}
     coarse = {n: locate_model(img, _template(body, n, 0.0, 256), nominal[n])
               for n, img in images.items()}
     tilts = {"top": 0.0, "side": 0.0}
@@ -491,6 +507,7 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                         img, station.views[name], body, tilts[name], settings, prev,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
                         formation=(formations or {}).get(name), pose3d=pose3d,
+                        ideal=ideals.get(name),
                         restart=prev is not None and abs(_wrap_period(view_roll - prev.roll_rad))
                         > ROLL_RESTART_RAD)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
@@ -508,8 +525,8 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
             break
         moved_m = 0.0
         if conical:     # the shadow templates follow the pose the views now give
-            new3d = _station_pose3d({n: _view_pose(fits[n].fit, fits[n].wires) for n in VIEWS},
-                                    sphere)
+            new3d = _station_pose3d({n: _view_pose(fits[n].fit, fits[n].wires)
+                                     for n in VIEWS}, sphere)
             moved_m = float(np.linalg.norm(np.subtract(new3d[0], pose3d[0])))
             pose3d = new3d
             new = _tilts_of(station, pose3d[1])
@@ -547,7 +564,9 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
             r = results[name]
             tpl = (_view_templates(body, station.views[name], r.tilt_rad, r.roll_rad, pose3d,
                                    False)[0] if r.fit is not None and r.fit.ok else None)
-            png = encode_png(view_overlay(img, r, tpl, station_id))
+            # drawn on a distorted view's ideal image, where its wires, outline and
+            # reference point are
+            png = encode_png(view_overlay(ideals.get(name, img), r, tpl, station_id))
             results[name] = ViewResult(**{**r.__dict__, "overlay_png": png})
     ok_views = [n for n in VIEWS if n in results and results[n].ok]
     warnings = tuple(f"{n}: {w}" for n in ok_views for w in results[n].warnings)
@@ -556,13 +575,20 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
         reason = "; ".join(f"{n} view: {results[n].reason}" for n in failed if n in results)
         return StationResult(station_id, "failed", reason or "no usable view", None, results,
                              warnings)
-    top, side = results["top"].fit, results["side"].fit
-    pose = combine_views(_view_pose(top, results["top"].wires),
-                         _view_pose(side, results["side"].wires))
+    pose = combine_views(*(_view_pose(results[n].fit, results[n].wires,
+                                      station.views[n].distortion) for n in VIEWS))
     if sphere:
         pose = StationPose(**{**pose.__dict__, "theta_rad": math.nan, "psi_rad": math.nan,
                               "sigma_theta_rad": math.nan, "sigma_psi_rad": math.nan})
-    wrong = _views_disagree(pose, results)
+    def radial(name):   # an undeclared distortion? only for a view declaring none
+        from cadra.imaging.wires.distortion import radial_from_wires
+
+        view = station.views[name]
+        if view.distortion is not None or not coarse.get(name, None) or not coarse[name].ok:
+            return None
+        return radial_from_wires(images[name], view, _model_box(images[name], coarse[name]))
+
+    wrong = _views_disagree(pose, results, radial)
     if wrong:
         return StationResult(station_id, "failed", wrong, pose, results, warnings,
                              roll=station_roll)
@@ -592,16 +618,34 @@ def _tilts_of(station: Station, axis) -> dict[str, float]:
             for n in VIEWS}
 
 
-def _views_disagree(pose: StationPose, results: dict) -> str:
+def _views_disagree(pose: StationPose, results: dict, radial=None) -> str:
     """Why a station's views cannot both be its own ("" if they can): their x beyond
     :data:`X_CONSISTENCY_MAX` sigmas apart, or a view's wires off their surveyed lines beyond
-    :data:`WIRE_RMS_MAX_PX` (a swapped, foreign or repeated image; flagged, never used)."""
+    :data:`WIRE_RMS_MAX_PX` (a swapped, foreign or repeated image, or an undeclared image
+    distortion when ``radial(view name)``, a
+    :func:`~cadra.imaging.wires.distortion.radial_from_wires` result, explains the wires;
+    flagged, never used)."""
     why = []
     for name in VIEWS:
         rms = results[name].wires.affine_rms_px
         if rms > WIRE_RMS_MAX_PX:
+            found = radial(name) if radial is not None else None
+            removing = (None if found is None else
+                        f"removing a radial distortion k1 = {found.k1:.3g} ("
+                        f"{found.max_angle_deg:.2g} deg at most on a line's direction) "
+                        f"brings them to {found.rms_after_px:.2g} px")
+            if found is not None and found.explains(WIRE_RMS_MAX_PX):
+                cause = (f"{removing}: an image distortion the facility file does not "
+                         f"declare (calibrate it: docs/calibration.md, \"Distortion from a "
+                         f"grid\")")
+            elif found is not None and found.rms_after_px < 0.5 * found.rms_before_px:
+                cause = (f"{removing}, not within {WIRE_RMS_MAX_PX:g}: an undeclared image "
+                         f"distortion with more than a radial term, or another station's or "
+                         f"view's image?")
+            else:
+                cause = "another station's or view's image?"
             why.append(f"{name} view: its wires miss their surveyed lines by {rms:.3g} px rms "
-                       f"(> {WIRE_RMS_MAX_PX:g}): another station's or view's image?")
+                       f"(> {WIRE_RMS_MAX_PX:g}): {cause}")
     xc = pose.x_consistency_sigma
     if xc > X_CONSISTENCY_MAX:
         why.append(f"the two views disagree on x by {xc:.3g} sigma (> {X_CONSISTENCY_MAX:g}): "

@@ -35,6 +35,7 @@ from cadra.facility.reference import (
     sight_axis,
 )
 from cadra.io.toml_file import Fields, prefixed_by, read_toml
+from cadra.optics.distortion import COEFFICIENTS, Distortion
 
 #: Projections the loader knows.
 PROJECTIONS_KNOWN = ("parallel", "point_source")
@@ -61,7 +62,12 @@ def _vec(value, n: int, path: str) -> np.ndarray:
 
 _VIEW_KEYS = {"projection", "width_px", "height_px", "bit_depth", "scale_m_per_px",
               "image_to_plane", "wires", "reference_mark", "source_position_m",
-              "film_distance_m"}
+              "film_distance_m", "distortion"}
+_DISTORTION_KEYS = {"k1", "k2", "p1", "p2", "centre_px", "radius_px", "covariance"}
+#: the largest distortion displacement the file accepts, as a fraction of the normalising
+#: radius (seed 002's 0.3 deg at the corners is 0.5 %): beyond it the coefficients' units or
+#: normalisation are wrong
+MAX_DISTORTION_FRACTION = 0.05
 _DEFAULT_KEYS = _VIEW_KEYS - {"image_to_plane", "wires", "projection"}
 
 
@@ -103,6 +109,43 @@ def _point_source(merged: Mapping, key_path, vpath: str, axes: tuple[int, int], 
                    f"the spark at x = {S[0]:g} m is more than its stand-off ({stand_off:g} m) "
                    f"from its station at x = {x_m:g} m")
     return S, film
+
+
+def _distortion(value, path: str, width: int, height: int) -> Distortion:
+    """A view's ``distortion`` table (docs/facility_file.md, "Distortion"), checked: finite
+    coefficients, a centre and a positive radius, a symmetric positive semi-definite
+    covariance, a map that keeps its orientation over the image and moves no point by more
+    than :data:`MAX_DISTORTION_FRACTION` of the radius."""
+    table = _table(value, path)
+    pre = f"{path}."
+    _check_unknown(table, _DISTORTION_KEYS, pre)
+    nominal = Distortion.for_image(width, height)
+    coef = [_number(table.get(k, 0.0), f"{pre}{k}") for k in COEFFICIENTS]
+    centre = (_vec(table["centre_px"], 2, f"{pre}centre_px") if "centre_px" in table
+              else np.array(nominal.centre_px))
+    radius = (_positive(table["radius_px"], f"{pre}radius_px", 1e6) if "radius_px" in table
+              else nominal.radius_px)
+    cov = None
+    if "covariance" in table:
+        raw = table["covariance"]
+        if not isinstance(raw, list | tuple) or len(raw) != 4:
+            raise _err(f"{pre}covariance", f"expected 4 rows of 4 numbers (k1, k2, p1, p2), "
+                                           f"got {raw!r}")
+        cov = np.array([_vec(r, 4, f"{pre}covariance[{i}]") for i, r in enumerate(raw)])
+        if not np.allclose(cov, cov.T, rtol=1e-9, atol=0.0):
+            raise _err(f"{pre}covariance", "is not symmetric")
+        if np.min(np.linalg.eigvalsh(cov)) < -1e-12 * max(np.max(np.abs(cov)), 1e-300):
+            raise _err(f"{pre}covariance", "is not positive semi-definite")
+    d = Distortion(*coef, centre_px=tuple(centre), radius_px=radius, covariance=cov)
+    if not d.is_invertible_on(width, height):
+        raise _err(path, "folds the image over (its Jacobian's determinant is not positive "
+                         "everywhere on it); check the coefficients' signs and radius_px")
+    moved = d.max_displacement_px(width, height)
+    if moved > MAX_DISTORTION_FRACTION * radius:
+        raise _err(path, f"moves image points by up to {moved:.3g} px, more than "
+                         f"{MAX_DISTORTION_FRACTION:g} of radius_px = {radius:g} px "
+                         f"(check the coefficients' normalisation: r in units of radius_px)")
+    return d
 
 
 def _reference_mark(value, path: str, width: int, height: int) -> ReferenceMark:
@@ -193,6 +236,8 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
     else:
         M = nominal_image_to_plane(x_m, scale, width, height)
     mark = _reference_mark(get("reference_mark"), key_path("reference_mark"), width, height)
+    distortion = (_distortion(merged["distortion"], key_path("distortion"), width, height)
+                  if "distortion" in merged else None)
     wires_raw = get("wires")
     wpath = key_path("wires")
     if not isinstance(wires_raw, list | tuple):
@@ -208,7 +253,7 @@ def _view(data, path: str, name: str, station_id: int, x_m: float, defaults: Map
     v = View(station=station_id, name=name, projection=projection, axes=axes, width_px=width,
              height_px=height, bit_depth=int(bit_depth), scale_m_per_px=scale,
              image_to_plane=M, wires=wires, reference_mark=mark, source_position_m=spark,
-             film_distance_m=film)
+             film_distance_m=film, distortion=distortion)
     if spark is not None:
         axis_px = v.optics().to_image(np.array([x_m, 0.0, 0.0]))
         if not (0.0 <= axis_px[0] <= width - 1 and 0.0 <= axis_px[1] <= height - 1):

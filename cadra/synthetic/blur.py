@@ -205,18 +205,19 @@ def _blurred_coverage(polys, width: int, height: int, config: RenderConfig) -> n
 
 def _wire_opacity(scene: Scene, config: RenderConfig) -> np.ndarray | None:
     """Blurred opacity (H, W) of the fiducial wires (pixel grid, no motion); None if none."""
-    if not scene.wires:
+    if not scene.wires and not scene.wire_outlines:
         return None
-    polys = [wire_polygon(p0, p1, w) for p0, p1, w in scene.wires]
+    polys = [wire_polygon(p0, p1, w) for p0, p1, w in scene.wires] + list(scene.wire_outlines)
     return _blurred_coverage(polys, scene.width_px, scene.height_px, config)
 
 
 def _add_mark(o_fixed: np.ndarray | None, scene: Scene, config: RenderConfig) -> np.ndarray | None:
     """Union of ``o_fixed`` with the blurred reference mark (computed in a box around it)."""
-    if scene.reference_mark is None:
+    if scene.reference_mark is None and scene.mark_outline is None:
         return o_fixed
     H, W = scene.height_px, scene.width_px
-    poly = reference_mark_polygon(*scene.reference_mark)
+    poly = (scene.mark_outline if scene.reference_mark is None
+            else reference_mark_polygon(*scene.reference_mark))
     box = _box_around(poly, _psf_radius_px(config) + 3.0, W, H)
     if box is None:
         return o_fixed

@@ -15,7 +15,7 @@ import numpy as np
 
 from cadra.geometry import as_polygon as _as_polygon
 
-__all__ = ["Scene", "reference_mark_polygon", "wire_polygon"]
+__all__ = ["Scene", "distort_scene", "reference_mark_polygon", "wire_polygon"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +44,11 @@ class Scene:
         ``(u_centre, v_centre, axis_du, axis_dv, radius_px)``: where to draw bow-shock and wake
         clutter; the axis (normalized here) points in the flight direction. ``None``: no flow
         clutter.
+    wire_outlines
+        Fiducial wires given as closed polygons instead (a distorted image's wires are
+        curved: :func:`distort_scene`); drawn like ``wires``.
+    mark_outline
+        The reference mark as a closed polygon instead of ``reference_mark`` (distorted).
     """
 
     width_px: int
@@ -53,6 +58,8 @@ class Scene:
     reference_mark: tuple[float, float, float, float] | None = None
     motion_blur_px: tuple[float, float] = (0.0, 0.0)
     body_hint: tuple[float, float, float, float, float] | None = None
+    wire_outlines: tuple[np.ndarray, ...] = ()
+    mark_outline: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in ("width_px", "height_px"):
@@ -80,6 +87,11 @@ class Scene:
             p1.setflags(write=False)
             wires.append((p0, p1, width))
         object.__setattr__(self, "wires", tuple(wires))
+        object.__setattr__(self, "wire_outlines", tuple(
+            _as_polygon(w, f"Scene.wire_outlines[{i}]") for i, w in enumerate(self.wire_outlines)))
+        if self.mark_outline is not None:
+            object.__setattr__(self, "mark_outline",
+                               _as_polygon(self.mark_outline, "Scene.mark_outline"))
         if self.reference_mark is not None:
             mark = tuple(float(x) for x in self.reference_mark)
             if len(mark) != 4 or not all(map(math.isfinite, mark)):
@@ -119,3 +131,39 @@ def reference_mark_polygon(u: float, v: float, arm_px: float, width_px: float) -
          (-a, h), (-a, -h), (-h, -h), (-h, -a), (h, -a), (h, -h)]
     )  # fmt: skip
     return off + np.array([u, v])
+
+
+def distort_scene(scene: Scene, distortion) -> Scene:
+    """``scene`` (ideal pixel coordinates) as a distorted image records it
+    (:class:`cadra.optics.distortion.Distortion`): every outline's edges cut to
+    :data:`~cadra.optics.distortion.DENSIFY_PX` and its vertices mapped through ``D``; the
+    straight wires and the mark become polygons (``wire_outlines``, ``mark_outline``); the
+    motion blur and the flow hint follow ``D``'s Jacobian at the bodies' centre. None: the
+    scene itself."""
+    if distortion is None:
+        return scene
+    from dataclasses import replace
+
+    from cadra.optics.distortion import densify
+
+    def d(poly):
+        return distortion.distort(densify(poly))
+
+    bodies = tuple(d(p) for p in scene.bodies)
+    wires = tuple(d(wire_polygon(p0, p1, w)) for p0, p1, w in scene.wires)
+    wires += tuple(d(p) for p in scene.wire_outlines)
+    mark = scene.mark_outline
+    if scene.reference_mark is not None:
+        mark = reference_mark_polygon(*scene.reference_mark)
+    centre = (np.mean(np.concatenate(scene.bodies), axis=0) if scene.bodies
+              else np.array([scene.width_px, scene.height_px]) / 2.0)
+    J = distortion.jacobian(centre)
+    hint = scene.body_hint
+    if hint is not None:
+        c = distortion.distort(np.array(hint[:2]))
+        a = J @ np.array(hint[2:4])
+        hint = (float(c[0]), float(c[1]), float(a[0]), float(a[1]), hint[4])
+    blur = J @ np.array(scene.motion_blur_px)
+    return replace(scene, bodies=bodies, wires=(), wire_outlines=wires, reference_mark=None,
+                   mark_outline=None if mark is None else d(mark),
+                   motion_blur_px=(float(blur[0]), float(blur[1])), body_hint=hint)

@@ -293,12 +293,15 @@ def view_scene(body: Body | FinnedBody, view, affine: np.ndarray, R_FB: np.ndarr
     the attitude, ``r_ref_F`` the reference point (m), ``v_F`` the velocity (m/s, for motion
     blur and the flow-clutter direction). Points reach the image through the view's
     :class:`~cadra.optics.projection.Projection` with that affine (``view.optics``). Truth:
-    reference-point pixel position, image-plane axis angle (atan2(dv, du) of the nose
+    reference-point pixel position (of the ideal image where the view has a distortion: the
+    scene itself is distorted, :func:`~cadra.synthetic.scene.distort_scene`), image-plane
+    axis angle (atan2(dv, du) of the nose
     direction), motion blur, the affine's entries; for a finned body also ``roll_deg``, the
     aircraft roll angle of ``R_FB`` (``conventions.quat_to_euler``: about the nose axis, 0 =
     z_b vertical and down), which places the fins (docs/bodies.md, "Roll convention").
     """
     from cadra.synthetic.render import Scene
+    from cadra.synthetic.scene import distort_scene
 
     projection = view.optics(affine)
 
@@ -334,7 +337,8 @@ def view_scene(body: Body | FinnedBody, view, affine: np.ndarray, R_FB: np.ndarr
     }
     if isinstance(body, FinnedBody):
         truth["roll_deg"] = float(np.degrees(roll_from_matrix(R_FB)))
-    return scene, truth
+    # a view with a distortion records the scene distorted; the truth stays ideal pixels
+    return distort_scene(scene, view.distortion), truth
 
 
 def roll_from_matrix(R_FB: np.ndarray) -> float:

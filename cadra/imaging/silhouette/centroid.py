@@ -17,6 +17,7 @@ from scipy.special import ndtr
 
 from cadra.imaging.silhouette.edges import EdgeSegments
 from cadra.imaging.silhouette.template import Template, outline_px, pose_px, rot
+from cadra.optics.distortion import ideal_projection
 from cadra.optics.projection import Projection
 
 __all__ = ["centroid_pose"]
@@ -77,7 +78,7 @@ def centroid_pose(img, template: Template, projection: Projection, pose, seg: Ed
         phi_img = math.nan
         c_plane = projection.to_plane(np.array([cu, cv]))
         ref_plane = c_plane - template.centroid_m
-        ref_px = projection.from_plane(ref_plane)
+        ref_px = ideal_projection(projection).from_plane(ref_plane)
         return (float(ref_px[0]), float(ref_px[1])), phi_img, (float(ref_plane[0]),
                                                                float(ref_plane[1]), math.nan)
     # principal axis in the image, then the nose direction closest to the fitted one
@@ -92,6 +93,9 @@ def centroid_pose(img, template: Template, projection: Projection, pose, seg: Ed
     phi = math.atan2(dirp[1], dirp[0])
     c_plane = projection.to_plane(c_uv)
     ref_plane = c_plane - rot(phi) @ template.centroid_m
-    ref_px = projection.from_plane(ref_plane)
-    return ((float(ref_px[0]), float(ref_px[1])), float(math.atan2(ax[1], ax[0])),
+    ideal = ideal_projection(projection)
+    ref_px = ideal.from_plane(ref_plane)
+    ang = (math.atan2(ax[1], ax[0]) if ideal is projection     # (the ideal image's angle)
+           else pose_px((*ref_plane, phi), ideal)[1])
+    return ((float(ref_px[0]), float(ref_px[1])), float(ang),
             (float(ref_plane[0]), float(ref_plane[1]), float(phi)))

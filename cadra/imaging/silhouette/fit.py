@@ -60,6 +60,7 @@ from cadra.imaging.silhouette.noise import (
     segment_covariance,
 )
 from cadra.imaging.silhouette.template import Template, outline_px, pose_px
+from cadra.optics.distortion import ideal_projection
 from cadra.optics.projection import Projection
 
 __all__ = ["FitSettings", "ViewFit", "fit_silhouette"]
@@ -312,12 +313,15 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             cov_b = bread @ (XV.T @ C @ XV) @ bread * max(1.0, chi2p / max(n_k - npar, 1))
         idx = [0, 1, 2] if fit_phi else [0, 1]
         cov[np.ix_(idx, idx)] = cov_b[: len(idx), : len(idx)]
-    ref_px, ang_px = pose_px(pose, projection)
+    # the pixel pose and its sigmas in the ideal image (a distorted view's recorded image is
+    # only where the offsets are measured)
+    ideal = ideal_projection(projection)
+    ref_px, ang_px = pose_px(pose, ideal)
     # pixel-space sigmas by linear propagation
     Jp = np.zeros((3, 3))
-    Jp[:2, :2] = A_lin
+    Jp[:2, :2] = ideal.from_plane_jacobian(pose[:2])
     h = 1e-7
-    _, a_plus = pose_px(pose + [0, 0, h], projection)
+    _, a_plus = pose_px(pose + [0, 0, h], ideal)
     Jp[2, 2] = (a_plus - ang_px) / h
     cov_fin = np.where(np.isfinite(cov), cov, 0.0)
     cov_px = Jp @ cov_fin @ Jp.T

@@ -106,7 +106,8 @@ def outline_px(template: Template, pose: tuple[float, float, float],
     """The template at ``pose = (a_m, b_m, phi_rad)`` in pixels ``(N, 2)`` (u, v)."""
     a, b, phi = pose
     plane = template.outline_m @ rot(phi).T + np.array([a, b])
-    return projection.from_plane(plane)
+    # a distorted view's (cadra.optics.distortion.DistortedProjection): edges cut first
+    return getattr(projection, "polygon_from_plane", projection.from_plane)(plane)
 
 
 def pose_px(pose, projection: Projection) -> tuple[np.ndarray, float]:

@@ -9,12 +9,13 @@ import cv2
 import numpy as np
 
 from cadra.facility.reference import View
+from cadra.optics.distortion import densify
 
 __all__ = ["wire_mask"]
 
 
 def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
-              half_width_px: float = 4.0) -> np.ndarray:
+              half_width_px: float = 4.0, distortion=None) -> np.ndarray:
     """True on pixels within ``half_width_px`` of any wire's image edge.
 
     Parameters
@@ -24,6 +25,8 @@ def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
         None for the nominal one.
     shape : (H, W) of the mask.
     half_width_px : distance (px) beyond each wire's edge (its half-diameter) to mark.
+    distortion : the recorded image's :class:`~cadra.optics.distortion.Distortion` (the
+        mask is of the recorded image, its wires curved), or None.
     """
     H, W = shape
     mask = np.zeros((H, W), np.uint8)
@@ -37,6 +40,10 @@ def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
         n = np.array([-t[1], t[0]]) * half
         poly = np.array([p0 + n, p1 + n, p1 - n, p0 - n])
         # sub-pixel vertices (4 fractional bits); pixel centres inside are marked
-        cv2.fillConvexPoly(mask, np.rint(poly * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+        if distortion is None:
+            cv2.fillConvexPoly(mask, np.rint(poly * 16).astype(np.int32), 1, cv2.LINE_8, 4)
+        else:
+            curved = distortion.distort(densify(poly, 4.0))
+            cv2.fillPoly(mask, [np.rint(curved * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
     return mask.astype(bool)
 

@@ -1,0 +1,160 @@
+"""A view's image distortion calibrated from the image of a dot grid (docs/calibration.md,
+"Distortion from a grid").
+
+Seed 002 calibrated its biplanar system "point by point" from the image of an accurate grid.
+Here a plate of dots at a known pitch is recorded in the view's window
+(:func:`grid_scene` draws one for the renderer); :func:`find_dots` finds the dots' centres in
+the image (a moment centroid of each dot's darkness above its local background); and
+:func:`fit_distortion` fits the Brown–Conrady coefficients
+(:class:`~cadra.optics.distortion.Distortion`) together with the plate's placement (an
+affine from plate millimetres to ideal pixels: its position, scale, rotation and tilt are not
+known to the pixel), by Gauss–Newton on ``recorded = D(A g)``. The coefficients' covariance
+comes from the fit (its residuals' scatter, the affine marginalized) and goes into the
+facility file, from where stage one carries it into the stations' sigmas
+(:func:`cadra.imaging.distorted.distortion_pose_sigma`).
+
+A dot's centroid in the recorded image is ``D`` of its centre to second order in the dot's
+size: ~ r^2 |D''| ~ 1e-3 px for 5 px dots under a seed-002-size distortion, below the centroid's
+own noise. Pixels throughout.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from cadra.optics.distortion import Distortion
+
+__all__ = ["DistortionFit", "find_dots", "fit_distortion", "grid_points", "grid_scene"]
+
+#: polygon vertices of one rendered dot
+_DOT_VERTICES = 96
+
+
+def grid_points(width_px: int, height_px: int, pitch_px: float, margin_px: float
+                ) -> np.ndarray:
+    """The ideal image points (N, 2) of a square grid of ``pitch_px`` centred on the image,
+    at least ``margin_px`` inside its border."""
+    cu, cv = (width_px - 1) / 2.0, (height_px - 1) / 2.0
+    nu = int((cu - margin_px) // pitch_px)
+    nv = int((cv - margin_px) // pitch_px)
+    u = cu + pitch_px * np.arange(-nu, nu + 1)
+    v = cv + pitch_px * np.arange(-nv, nv + 1)
+    return np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)
+
+
+def grid_scene(width_px: int, height_px: int, points_px: np.ndarray, dot_radius_px: float,
+               distortion: Distortion | None):
+    """A :class:`~cadra.synthetic.scene.Scene` of dark dots of ``dot_radius_px`` at the ideal
+    image points ``points_px``, recorded through ``distortion`` (None: none)."""
+    from cadra.synthetic.scene import Scene, distort_scene
+
+    a = np.linspace(0.0, 2 * math.pi, _DOT_VERTICES, endpoint=False)
+    ring = dot_radius_px * np.stack([np.cos(a), np.sin(a)], axis=1)
+    scene = Scene(width_px=width_px, height_px=height_px,
+                  bodies=tuple(p + ring for p in np.asarray(points_px, dtype=float)))
+    return distort_scene(scene, distortion)
+
+
+def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,
+              search_px: float = 12.0) -> tuple[np.ndarray, np.ndarray]:
+    """The recorded centres (N, 2) of the dots expected near ``approx_px`` (N, 2), and which
+    were found (N,) bool, in ``image`` (integer, or float in [0, 1]). Each: the darkest
+    point within ``search_px``, then a centroid of the darkness ``1 - I / b`` in a disc of
+    1.8 dot radii re-centred until it settles, ``b`` the median of a ring beyond it (the
+    local background)."""
+    image = np.asarray(image)
+    img = image.astype(np.float64)
+    if image.dtype.kind in "ui":            # an integer image: its full scale is 1
+        img /= float(np.iinfo(image.dtype).max)
+    H, W = img.shape
+    smooth = cv2.GaussianBlur(img, (0, 0), max(dot_radius_px / 2.0, 0.8))
+    r_in, r_bg0, r_bg1 = 1.8 * dot_radius_px, 2.4 * dot_radius_px, 3.2 * dot_radius_px
+    half = int(math.ceil(max(search_px, r_bg1))) + 2
+    out = np.full((len(approx_px), 2), np.nan)
+    ok = np.zeros(len(approx_px), bool)
+    for i, (u0, v0) in enumerate(np.asarray(approx_px, dtype=float)):
+        iu, iv = int(round(u0)), int(round(v0))
+        if not (half <= iu < W - half and half <= iv < H - half):
+            continue
+        s = int(math.ceil(search_px))
+        win = smooth[iv - s:iv + s + 1, iu - s:iu + s + 1]
+        dv, du = np.unravel_index(np.argmin(win), win.shape)
+        c = np.array([iu - s + du, iv - s + dv], dtype=float)
+        for _ in range(6):
+            ju, jv = int(round(c[0])), int(round(c[1]))
+            if not (half <= ju < W - half and half <= jv < H - half):
+                break
+            patch = img[jv - half:jv + half + 1, ju - half:ju + half + 1]
+            yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
+            uu, vv = xx + ju, yy + jv
+            rr = np.hypot(uu - c[0], vv - c[1])
+            bg = np.median(patch[(rr >= r_bg0) & (rr <= r_bg1)])
+            w = np.clip(1.0 - patch / bg, 0.0, None) * (rr <= r_in)
+            if not w.sum() > 0:
+                break
+            new = np.array([(w * uu).sum(), (w * vv).sum()]) / w.sum()
+            done = np.hypot(*(new - c)) < 1e-4
+            c = new
+            if done:
+                out[i], ok[i] = c, True
+                break
+    return out, ok
+
+
+@dataclass(frozen=True, eq=False)
+class DistortionFit:
+    """A distortion calibrated from a grid: the :class:`Distortion` (its covariance that of
+    the fit), the plate's affine (2, 3) plate units -> ideal px, the residuals' rms (px),
+    the dots used and the fit's degrees of freedom."""
+
+    distortion: Distortion
+    affine: np.ndarray
+    rms_px: float
+    n_points: int
+    dof: int
+
+
+def fit_distortion(plate_xy: np.ndarray, recorded_px: np.ndarray, width_px: int,
+                   height_px: int, affine0: np.ndarray, iterations: int = 8) -> DistortionFit:
+    """Fit ``recorded = D(A g)`` for the distortion's four coefficients (about the image's
+    centre, radius its half-diagonal) and the plate's affine ``A`` (2, 3) from plate points
+    ``g`` = ``plate_xy`` (N, 2) (any unit) to ideal pixels, starting from ``affine0``; by
+    Gauss–Newton. The covariance of the coefficients is the fit's, scaled by the residuals'
+    reduced chi^2 (the centroids' noise is not assumed)."""
+    g = np.asarray(plate_xy, dtype=float)
+    y = np.asarray(recorded_px, dtype=float)
+    if g.shape != y.shape or g.ndim != 2 or g.shape[1] != 2:
+        raise ValueError("plate_xy and recorded_px must both be (N, 2)")
+    n = len(g)
+    if n < 8:
+        raise ValueError(f"{n} grid points; the fit has 10 unknowns and needs at least 8 "
+                         f"points (16 equations)")
+    base = Distortion.for_image(width_px, height_px)
+    A = np.array(affine0, dtype=float).reshape(2, 3)
+    k = np.zeros(4)
+    G = np.column_stack([g, np.ones(n)])                        # (n, 3)
+    def residual_and_design(A, k):
+        d = base.with_coefficients(k)
+        ideal = G @ A.T
+        r = (y - d.distort(ideal)).reshape(-1)
+        # d recorded / d A[i, j] = J_D[:, :, i] G[:, j]; d recorded / d k = the basis
+        JA = np.einsum("nai,nj->naij", d.jacobian(ideal), G).reshape(n, 2, 6)
+        return r, np.concatenate([JA, d.basis(ideal)], axis=2).reshape(2 * n, 10)
+
+    for _ in range(iterations):
+        r, X = residual_and_design(A, k)
+        step, *_ = np.linalg.lstsq(X, r, rcond=None)
+        A += step[:6].reshape(2, 3)
+        k += step[6:]
+        if np.max(np.abs(X @ step)) < 1e-9:
+            break
+    r, X = residual_and_design(A, k)
+    dof = 2 * n - 10
+    s2 = float(r @ r) / max(dof, 1)
+    cov = np.linalg.pinv(X.T @ X) * s2
+    return DistortionFit(distortion=base.with_coefficients(k, cov[6:, 6:]), affine=A,
+                         rms_px=float(math.sqrt(np.mean(r * r))), n_points=n, dof=dof)

@@ -1,0 +1,299 @@
+"""A view's image distortion: the Brown–Conrady model of a lens or mirror train, in pixels.
+
+An ideal image point ``(u, v)`` (the one the view's projection gives: straight wires, the
+facility file's ``image_to_plane``) is recorded at ``D(u, v)``. With ``x = (u - u_c) / R``,
+``y = (v - v_c) / R`` (``(u_c, v_c)`` the distortion centre, ``R`` a normalising radius, both
+px) and ``r^2 = x^2 + y^2``::
+
+    x_d = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y + p2 (r^2 + 2 x^2)
+    y_d = y (1 + k1 r^2 + k2 r^4) + p1 (r^2 + 2 y^2) + 2 p2 x y
+    D(u, v) = (u_c + R x_d, v_c + R y_d)
+
+Brown (1966), in the form OpenCV's camera model uses (``k1, k2, p1, p2``; its ``k3`` is not
+carried: a seed-002-size distortion needs no sixth-order term). The model is linear in its
+four coefficients, so a calibration from points is a linear least squares
+(:mod:`cadra.calibration.distortion`) and its covariance propagates exactly to the
+displacement of any point (:meth:`Distortion.displacement_sigma_px`).
+
+Seed 002's biplanar tunnel calibrated its distortion "up to 0.3° in angle" from a grid. A
+line's angle changes by the distortion Jacobian's skew part: for the radial term that is
+``k1 r^2`` radians for a line at 45° to the radius (:meth:`Distortion.max_angle_change_rad`),
+so ``k1 = 5.2e-3`` with ``R`` the image's half-diagonal is 0.3° at the corners.
+
+The renderer draws a distorted view by mapping every outline's vertices through ``D`` (edges
+first cut to :data:`DENSIFY_PX`); stage one removes it by resampling the recorded image at
+``D`` of each ideal pixel (:meth:`Distortion.undistort_image`), so everything downstream sees
+the ideal image. Pure numpy and OpenCV; depends on nothing else in CADRA.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+__all__ = ["COEFFICIENTS", "DENSIFY_PX", "DistortedProjection", "Distortion", "densify",
+           "distorted", "ideal_projection"]
+
+#: the model's coefficients, in the order of its covariance
+COEFFICIENTS = ("k1", "k2", "p1", "p2")
+#: an outline's edges are cut to at most this length (px) before they are distorted: a
+#: distorted straight edge bows by ~ s^2 kappa / 8 between vertices s apart, kappa the image
+#: of a line's curvature (~3e-5 /px for 0.3 deg at the corners of a 1600 x 1200 image):
+#: 4e-6 px at 1 px
+DENSIFY_PX = 1.0
+#: Newton steps of the inverse map (each squares the error; 1e-12 px in four for any
+#: distortion the facility file accepts)
+_NEWTON_STEPS = 8
+
+
+@dataclass(frozen=True, eq=False)
+class Distortion:
+    """Brown–Conrady distortion of one view's image (module doc).
+
+    Attributes
+    ----------
+    k1, k2 : radial coefficients (dimensionless, ``r`` in units of ``radius_px``).
+    p1, p2 : tangential (decentring) coefficients.
+    centre_px : ``(u_c, v_c)``, px.
+    radius_px : the normalising radius ``R``, px (the image's half-diagonal by convention).
+    covariance : (4, 4) covariance of ``(k1, k2, p1, p2)`` from its calibration, or None
+        (a distortion taken as exact).
+    """
+
+    k1: float = 0.0
+    k2: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+    centre_px: tuple[float, float] = (0.0, 0.0)
+    radius_px: float = 1.0
+    covariance: np.ndarray | None = None
+
+    def __post_init__(self):
+        for k in COEFFICIENTS:
+            object.__setattr__(self, k, float(getattr(self, k)))
+        c = tuple(float(x) for x in self.centre_px)
+        if len(c) != 2 or not all(map(math.isfinite, c)):
+            raise ValueError(f"Distortion.centre_px must be (u, v) px, got {self.centre_px!r}")
+        object.__setattr__(self, "centre_px", c)
+        if not (math.isfinite(self.radius_px) and self.radius_px > 0):
+            raise ValueError(f"Distortion.radius_px must be > 0, got {self.radius_px!r}")
+        object.__setattr__(self, "radius_px", float(self.radius_px))
+        if not all(math.isfinite(getattr(self, k)) for k in COEFFICIENTS):
+            raise ValueError("Distortion coefficients must be finite")
+        if self.covariance is not None:
+            cov = np.array(self.covariance, dtype=float).reshape(4, 4)
+            if not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T, rtol=1e-9,
+                                                                 atol=0.0):
+                raise ValueError("Distortion.covariance must be a finite symmetric 4x4")
+            cov.setflags(write=False)
+            object.__setattr__(self, "covariance", cov)
+
+    @classmethod
+    def for_image(cls, width_px: int, height_px: int, **coefficients) -> Distortion:
+        """A distortion centred on a ``width_px`` x ``height_px`` image, ``R`` its
+        half-diagonal (the convention of the facility file's defaults)."""
+        return cls(centre_px=((width_px - 1) / 2.0, (height_px - 1) / 2.0),
+                   radius_px=0.5 * math.hypot(width_px, height_px), **coefficients)
+
+    @property
+    def coefficients(self) -> np.ndarray:
+        """``(k1, k2, p1, p2)``."""
+        return np.array([getattr(self, k) for k in COEFFICIENTS])
+
+    def with_coefficients(self, values, covariance=None) -> Distortion:
+        """The same centre and radius with other coefficients (and their covariance)."""
+        return Distortion(*(float(x) for x in values), centre_px=self.centre_px,
+                          radius_px=self.radius_px, covariance=covariance)
+
+    def _normalised(self, uv):
+        uv = np.asarray(uv, dtype=float)
+        return (uv[..., 0] - self.centre_px[0]) / self.radius_px, \
+               (uv[..., 1] - self.centre_px[1]) / self.radius_px
+
+    def basis(self, uv) -> np.ndarray:
+        """``(..., 2, 4)``: the displacement ``D(uv) - uv`` (px) per unit of each coefficient
+        (the model is linear in them)."""
+        x, y = self._normalised(uv)
+        r2 = x * x + y * y
+        R = self.radius_px
+        out = np.empty(np.shape(x) + (2, 4))
+        out[..., 0, 0], out[..., 1, 0] = R * x * r2, R * y * r2
+        out[..., 0, 1], out[..., 1, 1] = R * x * r2 * r2, R * y * r2 * r2
+        out[..., 0, 2], out[..., 1, 2] = R * 2 * x * y, R * (r2 + 2 * y * y)
+        out[..., 0, 3], out[..., 1, 3] = R * (r2 + 2 * x * x), R * 2 * x * y
+        return out
+
+    def distort(self, uv) -> np.ndarray:
+        """Ideal image points ``(..., 2)`` px -> where the distorted image records them."""
+        uv = np.asarray(uv, dtype=float)
+        return uv + self.basis(uv) @ self.coefficients
+
+    def jacobian(self, uv) -> np.ndarray:
+        """``(..., 2, 2)``: d D / d (u, v) at ideal points ``uv``."""
+        x, y = self._normalised(uv)
+        k1, k2, p1, p2 = self.coefficients
+        r2 = x * x + y * y
+        radial = 1 + k1 * r2 + k2 * r2 * r2
+        dr = 2 * k1 + 4 * k2 * r2          # d radial / d (r^2) times 2
+        J = np.empty(np.shape(x) + (2, 2))
+        J[..., 0, 0] = radial + x * dr * x + 2 * p1 * y + 6 * p2 * x
+        J[..., 0, 1] = x * dr * y + 2 * p1 * x + 2 * p2 * y
+        J[..., 1, 0] = y * dr * x + 2 * p1 * x + 2 * p2 * y
+        J[..., 1, 1] = radial + y * dr * y + 6 * p1 * y + 2 * p2 * x
+        return J
+
+    def undistort(self, uv_recorded) -> np.ndarray:
+        """Recorded image points ``(..., 2)`` px -> the ideal points (Newton on ``D``)."""
+        target = np.asarray(uv_recorded, dtype=float)
+        uv = target.copy()
+        for _ in range(_NEWTON_STEPS):
+            r = self.distort(uv) - target
+            if not np.any(np.abs(r) > 1e-13 * self.radius_px):
+                break
+            uv = uv - np.linalg.solve(self.jacobian(uv), r[..., None])[..., 0]
+        return uv
+
+    def displacement_sigma_px(self, uv) -> np.ndarray:
+        """``(..., 2, 2)``: covariance (px^2) of the displacement at ideal points ``uv`` from
+        the coefficients' covariance (zeros without one)."""
+        B = self.basis(uv)
+        if self.covariance is None:
+            return np.zeros(B.shape[:-1] + (2,))
+        return B @ self.covariance @ np.swapaxes(B, -1, -2)
+
+    def max_displacement_px(self, width_px: int, height_px: int, n: int = 65) -> float:
+        """The largest ``|D(uv) - uv|`` over the image (an ``n`` x ``n`` grid, corners in)."""
+        uv = _grid(width_px, height_px, n)
+        return float(np.max(np.hypot(*np.moveaxis(self.distort(uv) - uv, -1, 0))))
+
+    def max_angle_change_rad(self, width_px: int, height_px: int, n: int = 65) -> float:
+        """The largest change of a short line's direction over the image: the largest
+        half-difference of the Jacobian's rotations of two perpendicular directions, i.e.
+        ``max |angle(J t) - angle(t)|`` over the directions t, on an ``n`` x ``n`` grid."""
+        J = self.jacobian(_grid(width_px, height_px, n)).reshape(-1, 2, 2)
+        th = np.linspace(0.0, math.pi, 181)
+        t = np.stack([np.cos(th), np.sin(th)])
+        Jt = J @ t
+        d = np.arctan2(Jt[:, 1], Jt[:, 0]) - th
+        return float(np.max(np.abs((d + math.pi) % (2 * math.pi) - math.pi)))
+
+    def is_invertible_on(self, width_px: int, height_px: int, n: int = 65) -> bool:
+        """Does ``D`` keep its orientation (Jacobian determinant > 0) over the image?"""
+        J = self.jacobian(_grid(width_px, height_px, n))
+        return bool(np.all(np.linalg.det(J) > 0.0))
+
+    def undistort_image(self, image: np.ndarray) -> np.ndarray:
+        """The ideal image of a recorded one: each ideal pixel sampled at ``D`` of its
+        centre, by OpenCV's Lanczos (8 x 8) interpolation, float32; pixels whose ``D`` falls
+        off the record take the nearest edge pixel's value."""
+        H, W = image.shape
+        uv = _pixel_grid(W, H)
+        m = self.distort(uv).astype(np.float32)
+        return cv2.remap(np.asarray(image, dtype=np.float32), m[..., 0], m[..., 1],
+                         interpolation=cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+
+    def to_dict(self) -> dict:
+        """The facility file's table (``docs/facility_file.md``, "Distortion")."""
+        out = {k: float(getattr(self, k)) for k in COEFFICIENTS}
+        out["centre_px"] = [float(c) for c in self.centre_px]
+        out["radius_px"] = float(self.radius_px)
+        if self.covariance is not None:
+            out["covariance"] = [[float(c) for c in row] for row in self.covariance]
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping, width_px: int, height_px: int) -> Distortion:
+        """From the facility file's table; the centre and radius default to the image's
+        centre and half-diagonal."""
+        d = cls.for_image(width_px, height_px)
+        return cls(*(float(data.get(k, 0.0)) for k in COEFFICIENTS),
+                   centre_px=tuple(data.get("centre_px", d.centre_px)),
+                   radius_px=float(data.get("radius_px", d.radius_px)),
+                   covariance=data.get("covariance"))
+
+
+class DistortedProjection:
+    """A view's projection as its distorted image records it: the ideal projection
+    (``ideal``, any :class:`~cadra.optics.projection.Projection`) followed by the
+    :class:`Distortion` ``distortion``. Image <-> plane maps and their Jacobians are chained
+    through ``D``; everything else (the view plane, rays, magnification, outlines in the
+    plane) is the ideal projection's. Stage one's silhouette fit measures the recorded image
+    through it, so the image is never resampled (docs/stage1.md, "Distorted images")."""
+
+    def __init__(self, ideal, distortion: Distortion):
+        self.ideal = ideal
+        self.distortion = distortion
+        self.plane_basis = ideal.plane_basis
+
+    def __getattr__(self, name):       # rays, magnification, outline: the ideal optics'
+        return getattr(self.ideal, name)
+
+    def from_plane(self, ab) -> np.ndarray:
+        return self.distortion.distort(self.ideal.from_plane(ab))
+
+    def to_plane(self, uv) -> np.ndarray:
+        return self.ideal.to_plane(self.distortion.undistort(uv))
+
+    def to_image(self, r_F) -> np.ndarray:
+        return self.distortion.distort(self.ideal.to_image(r_F))
+
+    def ray(self, uv):
+        return self.ideal.ray(self.distortion.undistort(uv))
+
+    def from_plane_jacobian(self, ab) -> np.ndarray:
+        return self.distortion.jacobian(self.ideal.from_plane(ab)) @ \
+            self.ideal.from_plane_jacobian(ab)
+
+    def to_plane_jacobian(self, uv) -> np.ndarray:
+        q = self.distortion.undistort(uv)
+        return self.ideal.to_plane_jacobian(q) @ np.linalg.inv(self.distortion.jacobian(q))
+
+    def to_image_jacobian(self, r_F) -> np.ndarray:
+        return self.distortion.jacobian(self.ideal.to_image(r_F)) @ \
+            self.ideal.to_image_jacobian(r_F)
+
+    def polygon_from_plane(self, ab_poly) -> np.ndarray:
+        """A closed view-plane polygon (N, 2) in the recorded image: its edges cut to
+        :data:`DENSIFY_PX` in the ideal image first, so a straight flank comes out curved
+        as the distortion draws it."""
+        return self.distortion.distort(densify(self.ideal.from_plane(ab_poly)))
+
+
+def distorted(projection, distortion: Distortion | None):
+    """``projection`` as the distorted image records it (:class:`DistortedProjection`);
+    ``projection`` itself without a distortion."""
+    return projection if distortion is None else DistortedProjection(projection, distortion)
+
+
+def ideal_projection(projection):
+    """The ideal projection under a :class:`DistortedProjection` (else ``projection``)."""
+    return projection.ideal if isinstance(projection, DistortedProjection) else projection
+
+
+def densify(poly: np.ndarray, max_edge_px: float = DENSIFY_PX, closed: bool = True
+            ) -> np.ndarray:
+    """``poly`` (N, 2) with every edge cut into pieces of at most ``max_edge_px``."""
+    poly = np.asarray(poly, dtype=float)
+    ends = np.roll(poly, -1, axis=0) if closed else poly[1:]
+    starts = poly if closed else poly[:-1]
+    n = np.maximum(1, np.ceil(np.hypot(*(ends - starts).T) / max_edge_px)).astype(int)
+    pieces = [s + (e - s) * (np.arange(k)[:, None] / k) for s, e, k in zip(starts, ends, n,
+                                                                            strict=True)]
+    if not closed:
+        pieces.append(poly[-1:])
+    return np.concatenate(pieces)
+
+
+def _grid(width_px: int, height_px: int, n: int) -> np.ndarray:
+    u = np.linspace(-0.5, width_px - 0.5, n)
+    v = np.linspace(-0.5, height_px - 0.5, n)
+    return np.stack(np.meshgrid(u, v), axis=-1)
+
+
+def _pixel_grid(width_px: int, height_px: int) -> np.ndarray:
+    u, v = np.meshgrid(np.arange(width_px, dtype=float), np.arange(height_px, dtype=float))
+    return np.stack([u, v], axis=-1)
