@@ -63,6 +63,8 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "validate_point_source": ("Point-source (direct-shadowgraph) stations: stage one against "
                               "the exact truth and the perspective bound, depth, end to end",
                               "stage1.md"),
+    "gap_scoring": ("The size of an added effect of several parameters, scored as a vector",
+                    "gap.md"),
     "validate_distortion": ("Distorted records: a seed-002-size distortion calibrated from "
                             "a grid, removed by stage one, or undeclared", "stage1.md"),
     "bench_starts": ("Starting values: epicyclic arms against damped sines", "fitting.md"),

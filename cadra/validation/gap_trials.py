@@ -224,6 +224,7 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0):
             # effect one vector; each parameter alone within 2 sigma is kept beside it
             out["size_ok"] = effect_size_ok(first, truth, groups)
             out["size_ok_per_parameter"] = size_within_2sigma(first, truth)
+            out["n_params"] = len(first["params"])
             if groups is not None:
                 out["size_ok_vector"] = size_within_2sigma(first, truth, groups)
             # the literal reference: the clean shots' fit (base model); and the diagnosis'
@@ -299,6 +300,7 @@ def score_extended(case, out, dg, res, expected, truth, where, named, groups, su
             truth = body_truth_in_fit_frame(sub, truth, first_sim, sf.t0_s, sf.state[6:10])
         out["size_ok"] = effect_size_ok(first, truth, groups)
         out["size_ok_per_parameter"] = size_within_2sigma(first, truth)
+        out["n_params"] = len(first["params"])
     return out
 
 
