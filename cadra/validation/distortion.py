@@ -99,10 +99,12 @@ def run(station, n_cases: int, n_undeclared: int, seed: int, progress=None) -> d
         plain = station_case(station, BODY, r, a, np.random.default_rng(seed_i), roll_rad=roll)
         dist = station_case(truth_st, BODY, r, a, np.random.default_rng(seed_i), roll_rad=roll)
         # the recorded images resampled to ideal ones with the calibrated distortion and
-        # measured as undistorted: the alternative stage one does not take
-        resampled = {n: cal[n]["distortion"].undistort_image(
+        # measured as undistorted: the alternative stage one does not take (saved at the
+        # record's 8 bits, as a resampling tool would write it)
+        resampled = {n: np.clip(np.rint(255.0 * cal[n]["distortion"].undistort_image(
             station_image(im, station.views[n].width_px, station.views[n].height_px,
-                          station.views[n].bit_depth, n)) for n, im in dist.images.items()}
+                          station.views[n].bit_depth, n))), 0, 255).astype(np.uint8)
+            for n, im in dist.images.items()}
         row = {"plain": score_case(plain, measure_station(station, plain.images, BODY,
                                                           overlays=False), False),
                "calibrated": score_case(dist, measure_station(cal_st, dist.images, BODY,
@@ -134,6 +136,9 @@ def summarize(out: dict) -> dict:
     both = [r for r in out["rows"] if r["plain"]["ok"] and r["calibrated"]["ok"]
             and r["resampled"]["ok"]]
     fig = {"cases": len(out["rows"]), "cases_both_ok": len(both)}
+    if len(both) < 2:
+        raise RuntimeError(f"{len(both)} of {len(out['rows'])} cases measured every way: "
+                           f"nothing to compare")
     for kind in ("plain", "calibrated", "resampled"):
         e = np.array([r[kind][v]["error"] for r in both for v in ("top", "side")])
         s = np.array([r[kind][v]["sigma"] for r in both for v in ("top", "side")])
