@@ -156,5 +156,6 @@ def fit_distortion(plate_xy: np.ndarray, recorded_px: np.ndarray, width_px: int,
     dof = 2 * n - 10
     s2 = float(r @ r) / max(dof, 1)
     cov = np.linalg.pinv(X.T @ X) * s2
+    cov = 0.5 * (cov + cov.T)                  # exactly symmetric (pinv's rounding is not)
     return DistortionFit(distortion=base.with_coefficients(k, cov[6:, 6:]), affine=A,
                          rms_px=float(math.sqrt(np.mean(r * r))), n_points=n, dof=dof)

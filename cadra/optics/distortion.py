@@ -86,8 +86,9 @@ class Distortion:
             raise ValueError("Distortion coefficients must be finite")
         if self.covariance is not None:
             cov = np.array(self.covariance, dtype=float).reshape(4, 4)
+            scale = float(np.max(np.abs(np.diag(cov)))) if np.all(np.isfinite(cov)) else 0.0
             if not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T, rtol=1e-9,
-                                                                 atol=0.0):
+                                                                 atol=1e-12 * scale):
                 raise ValueError("Distortion.covariance must be a finite symmetric 4x4")
             cov.setflags(write=False)
             object.__setattr__(self, "covariance", cov)
