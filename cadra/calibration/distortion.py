@@ -64,15 +64,15 @@ def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,
     """The recorded centres (N, 2) of the dots expected near ``approx_px`` (N, 2), and which
     were found (N,) bool, in ``image`` (integer, or float in [0, 1]). Each: the darkest
     point within ``search_px``, then a centroid of the darkness ``1 - I / b`` in a disc of
-    1.8 dot radii re-centred until it settles, ``b`` the median of a ring beyond it (the
-    local background)."""
+    1.4 dot radii re-centred on it twice, ``b`` the local background: a plane fitted to
+    a ring beyond the dot (:func:`_background_plane`)."""
     image = np.asarray(image)
     img = image.astype(np.float64)
     if image.dtype.kind in "ui":            # an integer image: its full scale is 1
         img /= float(np.iinfo(image.dtype).max)
     H, W = img.shape
     smooth = cv2.GaussianBlur(img, (0, 0), max(dot_radius_px / 2.0, 0.8))
-    r_in, r_bg0, r_bg1 = 1.8 * dot_radius_px, 2.4 * dot_radius_px, 3.2 * dot_radius_px
+    r_in, r_bg0, r_bg1 = 1.4 * dot_radius_px, 2.0 * dot_radius_px, 3.0 * dot_radius_px
     half = int(math.ceil(max(search_px, r_bg1))) + 2
     out = np.full((len(approx_px), 2), np.nan)
     ok = np.zeros(len(approx_px), bool)
@@ -84,7 +84,10 @@ def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,
         win = smooth[iv - s:iv + s + 1, iu - s:iu + s + 1]
         dv, du = np.unravel_index(np.argmin(win), win.shape)
         c = np.array([iu - s + du, iv - s + dv], dtype=float)
-        for _ in range(6):
+        # three passes, each window centred on the last centroid: the dot lies whole inside
+        # the disc from the first (its edge 1.4 radii out) and the background beyond it
+        # averages to zero, so the passes only take out the start's offset
+        for p in range(3):
             ju, jv = int(round(c[0])), int(round(c[1]))
             if not (half <= ju < W - half and half <= jv < H - half):
                 break
@@ -92,17 +95,34 @@ def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,
             yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
             uu, vv = xx + ju, yy + jv
             rr = np.hypot(uu - c[0], vv - c[1])
-            bg = np.median(patch[(rr >= r_bg0) & (rr <= r_bg1)])
-            w = np.clip(1.0 - patch / bg, 0.0, None) * (rr <= r_in)
+            bg = _background_plane(patch, uu - c[0], vv - c[1], (rr >= r_bg0) & (rr <= r_bg1))
+            # unclipped: the background's noise and its residual slope average out instead
+            # of pulling the centroid toward the darker side
+            w = (1.0 - patch / bg) * (rr <= r_in)
             if not w.sum() > 0:
                 break
-            new = np.array([(w * uu).sum(), (w * vv).sum()]) / w.sum()
-            done = np.hypot(*(new - c)) < 1e-4
-            c = new
-            if done:
+            c = np.array([(w * uu).sum(), (w * vv).sum()]) / w.sum()
+            if p == 2:
                 out[i], ok[i] = c, True
-                break
     return out, ok
+
+
+def _background_plane(patch: np.ndarray, du: np.ndarray, dv: np.ndarray,
+                      ring: np.ndarray) -> np.ndarray:
+    """The local background under a dot: a plane fitted to the ring's pixels (twice, the
+    second time without those beyond 3 robust sigmas: dust, a neighbour's edge). An
+    illumination gradient under a constant background would move the centroid toward the
+    darker side by a few thousandths of a pixel, the same way in neighbouring dots: a smooth
+    error the distortion fit would take for a distortion term."""
+    A = np.column_stack([np.ones(ring.sum()), du[ring], dv[ring]])
+    y = patch[ring]
+    keep = np.ones(len(y), bool)
+    for _ in range(2):
+        coef, *_ = np.linalg.lstsq(A[keep], y[keep], rcond=None)
+        r = y - A @ coef
+        mad = 1.4826 * np.median(np.abs(r[keep] - np.median(r[keep])))
+        keep = np.abs(r) <= 3.0 * max(mad, 1e-12)
+    return coef[0] + coef[1] * du + coef[2] * dv
 
 
 @dataclass(frozen=True, eq=False)

@@ -197,7 +197,7 @@ def _station_pose3d(poses: Mapping[str, ViewPose], sphere: bool):
     return (p.x_m, p.y_m, p.z_m), axis
 
 
-def _view_pose(fit: ViewFit, wires, distortion=None) -> ViewPose:
+def _view_pose(fit: ViewFit, wires, view=None) -> ViewPose:
     """The view's pose for combination: the silhouette fit's sigma, the wire affine's
     uncertainty at the model's position and a calibrated distortion's (its coefficients'
     covariance carried to the model's point and direction, :func:`distortion_pose_sigma`),
@@ -205,7 +205,8 @@ def _view_pose(fit: ViewFit, wires, distortion=None) -> ViewPose:
     s_ang = math.sqrt(fit.cov[2, 2])
     finite = math.isfinite(s_ang)   # a sphere's angle is not measured: placeholder 0 +- 0
     s_aff = wires.position_sigma_m(fit.ref_px)
-    s_dis = distortion_pose_sigma(distortion, wires.projection, fit.pose)
+    distortion = None if view is None else view.distortion
+    s_dis = distortion_pose_sigma(distortion, view, wires, fit.pose)
     return ViewPose(a_m=fit.pose[0], b_m=fit.pose[1], angle_rad=fit.pose[2] if finite else 0.0,
                     sigma_a_m=math.sqrt(fit.cov[0, 0] + s_aff[0] ** 2 + s_dis[0] ** 2),
                     sigma_b_m=math.sqrt(fit.cov[1, 1] + s_aff[1] ** 2 + s_dis[1] ** 2),
@@ -575,8 +576,8 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
         reason = "; ".join(f"{n} view: {results[n].reason}" for n in failed if n in results)
         return StationResult(station_id, "failed", reason or "no usable view", None, results,
                              warnings)
-    pose = combine_views(*(_view_pose(results[n].fit, results[n].wires,
-                                      station.views[n].distortion) for n in VIEWS))
+    pose = combine_views(*(_view_pose(results[n].fit, results[n].wires, station.views[n])
+                           for n in VIEWS))
     if sphere:
         pose = StationPose(**{**pose.__dict__, "theta_rad": math.nan, "psi_rad": math.nan,
                               "sigma_theta_rad": math.nan, "sigma_psi_rad": math.nan})
