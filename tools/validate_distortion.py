@@ -22,7 +22,7 @@ import json
 import sys
 from pathlib import Path
 
-from cadra.validation.tool import one_thread, run_tool
+from cadra.validation.tool import one_thread, round_figures, run_tool
 
 one_thread()
 
@@ -30,16 +30,6 @@ from cadra.validation.distortion import run as run_cases  # noqa: E402 (after on
 from cadra.validation.distortion import summarize  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _round(x, digits=4):
-    if isinstance(x, dict):
-        return {k: _round(v, digits) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_round(v, digits) for v in x]
-    if isinstance(x, float):
-        return float(f"{x:.{digits}g}")
-    return x
 
 
 def main(argv=None) -> int:
@@ -63,7 +53,7 @@ def run(args) -> dict:
                     progress=lambda i: bar.update(1))
     bar.close()
     s = summarize(out)
-    print(json.dumps(_round(s)), flush=True)
+    print(json.dumps(round_figures(s)), flush=True)
     fig = {"distortion_max_angle_deg": s["max_angle_deg"],
            "distortion_angle_rms_ratio": s["angle_rms_ratio"],
            "distortion_angle_rms_ratio_se": s["angle_rms_ratio_se"],
@@ -79,8 +69,8 @@ def run(args) -> dict:
            "distortion_calibration_pull_mean_abs_max": s["calibration_pull_mean_abs_max"],
            "distortion_cases_both_ok": s["cases_both_ok"],
            "distortion_undeclared_named_frac": s.get("undeclared_named_frac")}
-    return {"summary": _round(s), "calibration": out["calibration"], "fitted": out["fitted"],
-            **_round(fig)}
+    return {"summary": round_figures(s), "calibration": out["calibration"], "fitted": out["fitted"],
+            **round_figures(fig)}
 
 
 if __name__ == "__main__":

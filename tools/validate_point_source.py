@@ -34,7 +34,7 @@ import json
 import sys
 from pathlib import Path
 
-from cadra.validation.tool import one_thread, run_tool
+from cadra.validation.tool import one_thread, round_figures, run_tool
 
 one_thread()
 
@@ -64,16 +64,6 @@ def main(argv=None) -> int:
     return 0 if s.get("e2e", {}).get("failures", []) == [] else 1
 
 
-def _round(x, digits=4):
-    if isinstance(x, dict):
-        return {k: _round(v, digits) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_round(v, digits) for v in x]
-    if isinstance(x, float):
-        return float(f"{x:.{digits}g}")
-    return x
-
-
 def run(args) -> dict:
     from cadra.io.facility_file import load_facility
 
@@ -81,16 +71,16 @@ def run(args) -> dict:
     out = {"facility": FACILITY, "station": station.id, "accuracy": {}}
     for k, (name, spec) in enumerate(BODIES.items()):
         s = summarize(run_cases(station, spec, args.cases, seed=100 + k, n_crb=args.crb))
-        out["accuracy"][name] = _round(s)
+        out["accuracy"][name] = round_figures(s)
         print(f"{name}: {json.dumps(out['accuracy'][name])}", flush=True)
     depth = summarize(run_cases(station, BODIES["bullet"], args.depth_cases, seed=200,
                                 offsets=DEPTH_OFFSETS_M, n_crb=min(args.crb, 4), parallel=True))
-    out["depth"] = _round(depth)
+    out["depth"] = round_figures(depth)
     print(f"depth: {json.dumps(out['depth'])}", flush=True)
-    out["calibration"] = _round(calibration_e2e())
+    out["calibration"] = round_figures(calibration_e2e())
     print(f"calibration: {json.dumps(out['calibration'])}", flush=True)
     if args.e2e_draws > 0:
-        out["e2e"] = _round(e2e_draws(args.e2e_draws))
+        out["e2e"] = round_figures(e2e_draws(args.e2e_draws))
     out.update(figures(out))
     return out
 
@@ -118,7 +108,7 @@ def figures(out: dict) -> dict:
         fig.update(ps_e2e_within_2sigma_frac=out["e2e"]["within_2sigma_frac"],
                    ps_e2e_chi2_nu_median=out["e2e"]["chi2_nu_median"],
                    ps_e2e_chi2_nu_max_dev_sigmas=out["e2e"]["chi2_nu_max_dev_sigmas"])
-    return _round(fig)
+    return round_figures(fig)
 
 
 if __name__ == "__main__":

@@ -40,4 +40,16 @@ def run_tool(tool: str, root, compute: Callable[[], dict], *, argv=None,
     return out
 
 
-__all__ = ["THREAD_VARIABLES", "one_thread", "run_tool"]
+def round_figures(x, digits: int = 4):
+    """``x`` (nested dicts and lists) with every float to ``digits`` significant digits: a
+    tool's printed and recorded figures, no longer than they are meaningful."""
+    if isinstance(x, dict):
+        return {k: round_figures(v, digits) for k, v in x.items()}
+    if isinstance(x, list):
+        return [round_figures(v, digits) for v in x]
+    if isinstance(x, float):
+        return float(f"{x:.{digits}g}")
+    return x
+
+
+__all__ = ["THREAD_VARIABLES", "one_thread", "round_figures", "run_tool"]
