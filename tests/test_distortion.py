@@ -24,12 +24,12 @@ import cv2
 import numpy as np
 import pytest
 
-from cadra.calibration.distortion import find_dots, fit_distortion, grid_points, grid_scene
+from cadra.calibration.distortion import find_dots, fit_distortion, grid_points
 from cadra.facility.reference import default_hffaf_text
 from cadra.io.facility_file import FacilityFileError, facility_from_dict
 from cadra.optics.distortion import Distortion
 from cadra.synthetic.render import RenderConfig, render, render_clean
-from cadra.synthetic.scene import Scene, distort_scene
+from cadra.synthetic.scene import Scene, distort_scene, dot_grid_scene
 
 W, H = 1600, 1200
 D = Distortion.for_image(W, H, k1=5.2e-3, k2=-1e-3, p1=4e-4, p2=-3e-4)
@@ -153,7 +153,7 @@ def test_the_grid_calibration_recovers_its_distortion_within_its_sigmas():
 def test_the_dots_of_a_rendered_grid_are_found_where_the_distortion_puts_them():
     pts = grid_points(W, H, 50.0, 30.0)
     rng = np.random.default_rng(3)
-    img = render(grid_scene(W, H, pts, 5.0, D), RenderConfig(seed=4), rng)
+    img = render(dot_grid_scene(W, H, pts, 5.0, D), RenderConfig(seed=4), rng)
     found, ok = find_dots(img, pts, 5.0)
     assert ok.mean() > 0.98
     err = np.hypot(*(found[ok] - D.distort(pts[ok])).T)

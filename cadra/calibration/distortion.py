@@ -3,8 +3,9 @@
 
 Seed 002 calibrated its biplanar system "point by point" from the image of an accurate grid.
 Here a plate of dots at a known pitch is recorded in the view's window
-(:func:`grid_scene` draws one for the renderer); :func:`find_dots` finds the dots' centres in
-the image (a moment centroid of each dot's darkness above its local background); and
+(:func:`cadra.synthetic.scene.dot_grid_scene` draws one for the renderer);
+:func:`find_dots` finds the dots' centres in the image (a moment centroid of each dot's
+darkness above its local background); and
 :func:`fit_distortion` fits the Brown–Conrady coefficients
 (:class:`~cadra.optics.distortion.Distortion`) together with the plate's placement (an
 affine from plate millimetres to ideal pixels: its position, scale, rotation and tilt are not
@@ -28,11 +29,7 @@ import numpy as np
 
 from cadra.optics.distortion import Distortion
 
-__all__ = ["DistortionFit", "find_dots", "fit_distortion", "grid_points", "grid_scene"]
-
-#: polygon vertices of one rendered dot
-_DOT_VERTICES = 96
-
+__all__ = ["DistortionFit", "find_dots", "fit_distortion", "grid_points"]
 
 def grid_points(width_px: int, height_px: int, pitch_px: float, margin_px: float
                 ) -> np.ndarray:
@@ -44,19 +41,6 @@ def grid_points(width_px: int, height_px: int, pitch_px: float, margin_px: float
     u = cu + pitch_px * np.arange(-nu, nu + 1)
     v = cv + pitch_px * np.arange(-nv, nv + 1)
     return np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)
-
-
-def grid_scene(width_px: int, height_px: int, points_px: np.ndarray, dot_radius_px: float,
-               distortion: Distortion | None):
-    """A :class:`~cadra.synthetic.scene.Scene` of dark dots of ``dot_radius_px`` at the ideal
-    image points ``points_px``, recorded through ``distortion`` (None: none)."""
-    from cadra.synthetic.scene import Scene, distort_scene
-
-    a = np.linspace(0.0, 2 * math.pi, _DOT_VERTICES, endpoint=False)
-    ring = dot_radius_px * np.stack([np.cos(a), np.sin(a)], axis=1)
-    scene = Scene(width_px=width_px, height_px=height_px,
-                  bodies=tuple(p + ring for p in np.asarray(points_px, dtype=float)))
-    return distort_scene(scene, distortion)
 
 
 def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,

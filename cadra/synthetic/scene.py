@@ -15,7 +15,7 @@ import numpy as np
 
 from cadra.geometry import as_polygon as _as_polygon
 
-__all__ = ["Scene", "distort_scene", "reference_mark_polygon", "wire_polygon"]
+__all__ = ["Scene", "distort_scene", "dot_grid_scene", "reference_mark_polygon", "wire_polygon"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,3 +167,15 @@ def distort_scene(scene: Scene, distortion) -> Scene:
     return replace(scene, bodies=bodies, wires=(), wire_outlines=wires, reference_mark=None,
                    mark_outline=None if mark is None else d(mark),
                    motion_blur_px=(float(blur[0]), float(blur[1])), body_hint=hint)
+
+
+def dot_grid_scene(width_px: int, height_px: int, points_px: np.ndarray, dot_radius_px: float,
+                   distortion=None) -> Scene:
+    """A calibration plate's image: dark dots of ``dot_radius_px`` (96-gons) at the ideal
+    image points ``points_px`` (N, 2), recorded through ``distortion`` (None: none;
+    :func:`distort_scene`). What :mod:`cadra.calibration.distortion` calibrates from."""
+    a = np.linspace(0.0, 2 * math.pi, 96, endpoint=False)
+    ring = dot_radius_px * np.stack([np.cos(a), np.sin(a)], axis=1)
+    scene = Scene(width_px=width_px, height_px=height_px,
+                  bodies=tuple(p + ring for p in np.asarray(points_px, dtype=float)))
+    return distort_scene(scene, distortion)

@@ -26,12 +26,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from cadra.calibration.distortion import find_dots, fit_distortion, grid_points, grid_scene
+from cadra.calibration.distortion import find_dots, fit_distortion, grid_points
 from cadra.conventions import axis_from_inclinations
 from cadra.imaging.station import measure_station
 from cadra.io.images import station_image
 from cadra.optics.distortion import Distortion
 from cadra.synthetic.render import RenderConfig, render
+from cadra.synthetic.scene import dot_grid_scene
 from cadra.validation.point_source import score_case, station_case
 
 __all__ = ["BODY", "TRUE_DISTORTIONS", "calibrate_view", "run", "summarize"]
@@ -64,7 +65,7 @@ def calibrate_view(view, rng: np.random.Generator) -> dict:
     A = np.array([[s * math.cos(ang), -s * math.sin(ang), (W - 1) / 2.0 + rng.uniform(-2, 2)],
                   [s * math.sin(ang), s * math.cos(ang), (H - 1) / 2.0 + rng.uniform(-2, 2)]])
     ideal = plate @ A[:, :2].T + A[:, 2]
-    img = render(grid_scene(W, H, ideal, GRID_DOT_PX, true),
+    img = render(dot_grid_scene(W, H, ideal, GRID_DOT_PX, true),
                  RenderConfig(seed=int(rng.integers(1 << 30))), rng)
     img = station_image(img, W, H, view.bit_depth, "grid")
     # the dots looked for where the plate's nominal placement puts them, undistorted
