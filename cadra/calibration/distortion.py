@@ -122,44 +122,62 @@ class DistortionFit:
     dof: int
 
 
-def fit_distortion(plate_xy: np.ndarray, recorded_px: np.ndarray, width_px: int,
-                   height_px: int, affine0: np.ndarray, iterations: int = 8) -> DistortionFit:
+def fit_distortion(plate_xy, recorded_px, width_px: int, height_px: int, affine0,
+                   iterations: int = 8) -> DistortionFit:
     """Fit ``recorded = D(A g)`` for the distortion's four coefficients (about the image's
     centre, radius its half-diagonal) and the plate's affine ``A`` (2, 3) from plate points
     ``g`` = ``plate_xy`` (N, 2) (any unit) to ideal pixels, starting from ``affine0``; by
-    Gauss–Newton. The covariance of the coefficients is the fit's, scaled by the residuals'
-    reduced chi^2 (the centroids' noise is not assumed)."""
-    g = np.asarray(plate_xy, dtype=float)
-    y = np.asarray(recorded_px, dtype=float)
-    if g.shape != y.shape or g.ndim != 2 or g.shape[1] != 2:
-        raise ValueError("plate_xy and recorded_px must both be (N, 2)")
-    n = len(g)
-    if n < 8:
-        raise ValueError(f"{n} grid points; the fit has 10 unknowns and needs at least 8 "
-                         f"points (16 equations)")
+    Gauss–Newton. Several images of the plate (moved between them): lists of ``plate_xy``,
+    ``recorded_px`` and ``affine0``, one affine each, one distortion for all (``affine``
+    then the list of them). The covariance of the coefficients is the fit's, scaled by the
+    residuals' reduced chi^2 (the centroids' noise is not assumed)."""
+    several = isinstance(plate_xy, list | tuple)
+    gs = [np.asarray(g, dtype=float) for g in (plate_xy if several else [plate_xy])]
+    ys = [np.asarray(y, dtype=float) for y in (recorded_px if several else [recorded_px])]
+    A0 = list(affine0) if several else [affine0]
+    if not (len(gs) == len(ys) == len(A0)) or any(
+            g.shape != y.shape or g.ndim != 2 or g.shape[1] != 2 for g, y in zip(gs, ys,
+                                                                                 strict=True)):
+        raise ValueError("plate_xy and recorded_px must both be (N, 2) (or lists of them, "
+                         "with an affine0 each)")
+    m = len(gs)
+    n_unknown = 4 + 6 * m
+    n = sum(len(g) for g in gs)
+    if 2 * n < n_unknown + 6:
+        raise ValueError(f"{n} grid points; the fit has {n_unknown} unknowns and needs at "
+                         f"least {(n_unknown + 7) // 2} points")
     base = Distortion.for_image(width_px, height_px)
-    A = np.array(affine0, dtype=float).reshape(2, 3)
+    A = [np.array(a, dtype=float).reshape(2, 3) for a in A0]
     k = np.zeros(4)
-    G = np.column_stack([g, np.ones(n)])                        # (n, 3)
+    Gs = [np.column_stack([g, np.ones(len(g))]) for g in gs]    # (n_i, 3)
+
     def residual_and_design(A, k):
         d = base.with_coefficients(k)
-        ideal = G @ A.T
-        r = (y - d.distort(ideal)).reshape(-1)
-        # d recorded / d A[i, j] = J_D[:, :, i] G[:, j]; d recorded / d k = the basis
-        JA = np.einsum("nai,nj->naij", d.jacobian(ideal), G).reshape(n, 2, 6)
-        return r, np.concatenate([JA, d.basis(ideal)], axis=2).reshape(2 * n, 10)
+        rs, Xs = [], []
+        for i, (G, y) in enumerate(zip(Gs, ys, strict=True)):
+            ideal = G @ A[i].T
+            rs.append((y - d.distort(ideal)).reshape(-1))
+            # d recorded / d A[i][a, j] = J_D[:, :, a] G[:, j]; d recorded / d k: the basis
+            JA = np.einsum("nai,nj->naij", d.jacobian(ideal), G).reshape(len(G), 2, 6)
+            X = np.zeros((len(G), 2, n_unknown))
+            X[:, :, 4 + 6 * i:10 + 6 * i] = JA
+            X[:, :, :4] = d.basis(ideal)
+            Xs.append(X.reshape(2 * len(G), n_unknown))
+        return np.concatenate(rs), np.vstack(Xs)
 
     for _ in range(iterations):
         r, X = residual_and_design(A, k)
         step, *_ = np.linalg.lstsq(X, r, rcond=None)
-        A += step[:6].reshape(2, 3)
-        k += step[6:]
+        k += step[:4]
+        for i in range(m):
+            A[i] += step[4 + 6 * i:10 + 6 * i].reshape(2, 3)
         if np.max(np.abs(X @ step)) < 1e-9:
             break
     r, X = residual_and_design(A, k)
-    dof = 2 * n - 10
+    dof = 2 * n - n_unknown
     s2 = float(r @ r) / max(dof, 1)
     cov = np.linalg.pinv(X.T @ X) * s2
     cov = 0.5 * (cov + cov.T)                  # exactly symmetric (pinv's rounding is not)
-    return DistortionFit(distortion=base.with_coefficients(k, cov[6:, 6:]), affine=A,
+    return DistortionFit(distortion=base.with_coefficients(k, cov[:4, :4]),
+                         affine=A if several else A[0],
                          rms_px=float(math.sqrt(np.mean(r * r))), n_points=n, dof=dof)
