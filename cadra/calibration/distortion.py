@@ -29,7 +29,12 @@ import numpy as np
 
 from cadra.optics.distortion import Distortion
 
-__all__ = ["DistortionFit", "find_dots", "fit_distortion", "grid_points"]
+#: a dot counts as found when its darkness ``1 - I / b`` sums to at least this fraction of
+#: its area (a rendered or printed dot: 0.6-0.9)
+MIN_DOT_DARKNESS = 0.25
+
+__all__ = ["DistortionFit", "calibrate_from_grids", "find_dots", "fit_distortion",
+           "grid_points"]
 
 def grid_points(width_px: int, height_px: int, pitch_px: float, margin_px: float
                 ) -> np.ndarray:
@@ -86,7 +91,8 @@ def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,
             if not w.sum() > 0:
                 break
             c = np.array([(w * uu).sum(), (w * vv).sum()]) / w.sum()
-            if p == 2:
+            # a dot: darker than its background by MIN_DOT_DARKNESS over its area at least
+            if p == 2 and w.sum() >= MIN_DOT_DARKNESS * math.pi * dot_radius_px ** 2:
                 out[i], ok[i] = c, True
     return out, ok
 
@@ -181,3 +187,40 @@ def fit_distortion(plate_xy, recorded_px, width_px: int, height_px: int, affine0
     return DistortionFit(distortion=base.with_coefficients(k, cov[:4, :4]),
                          affine=A if several else A[0],
                          rms_px=float(math.sqrt(np.mean(r * r))), n_points=n, dof=dof)
+
+
+def calibrate_from_grids(images, pitch_px: float, dot_radius_px: float, centres_px=None,
+                         margin_px: float = 30.0) -> DistortionFit:
+    """A view's distortion from recorded images of a dot plate: the whole method in one call.
+
+    ``images``: one or more grid images of the view (integer, or float in [0, 1]), the plate
+    moved between them; its dots on a square grid of ``pitch_px`` (the plate's pitch over the
+    view's scale, ``pitch_m / scale_m_per_px``), ``dot_radius_px`` in radius, nominally
+    centred on each image (or on ``centres_px[i]``, (u, v) px). The dots are looked for where
+    that nominal placement puts them (:func:`find_dots`, 12 px of search), and the
+    distortion and each image's placement fitted (:func:`fit_distortion`, the plate in
+    pixels of the nominal scale). Returns the :class:`DistortionFit`; its ``distortion``
+    (covariance included) is the facility file's ``distortion`` table
+    (``Distortion.to_dict``)."""
+    images = list(images) if isinstance(images, list | tuple) else [images]
+    if not images:
+        raise ValueError("no grid image given")
+    H, W = np.asarray(images[0]).shape
+    centres = ([((W - 1) / 2.0, (H - 1) / 2.0)] * len(images) if centres_px is None
+               else [tuple(map(float, c)) for c in centres_px])
+    if len(centres) != len(images):
+        raise ValueError(f"{len(centres)} centres for {len(images)} images")
+    plates, found_all, starts = [], [], []
+    for img, c in zip(images, centres, strict=True):
+        if np.asarray(img).shape != (H, W):
+            raise ValueError("the grid images differ in size")
+        pts = grid_points(W, H, pitch_px, margin_px) + (np.array(c) - [(W - 1) / 2.0,
+                                                                         (H - 1) / 2.0])
+        found, ok = find_dots(img, pts, dot_radius_px)
+        if ok.sum() < 8:
+            raise ValueError(f"only {int(ok.sum())} dots found where a {pitch_px:g} px grid "
+                             f"centred at ({c[0]:.0f}, {c[1]:.0f}) puts them")
+        plates.append(pts[ok] - np.array(c))
+        found_all.append(found[ok])
+        starts.append(np.array([[1.0, 0.0, c[0]], [0.0, 1.0, c[1]]]))
+    return fit_distortion(plates, found_all, W, H, starts)

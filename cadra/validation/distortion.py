@@ -26,7 +26,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from cadra.calibration.distortion import find_dots, fit_distortion, grid_points
+from cadra.calibration.distortion import calibrate_from_grids, grid_points
 from cadra.conventions import axis_from_inclinations
 from cadra.imaging.station import measure_station
 from cadra.io.images import station_image
@@ -42,9 +42,9 @@ BODY = {"kind": "capsule", "preset": "M2"}
 #: most on a line's direction, 5-6 px of displacement at the corners of 1600 x 1200
 TRUE_DISTORTIONS = {"top": dict(k1=5.2e-3, p1=2e-4, p2=-1.5e-4),
                     "side": dict(k1=4.5e-3, k2=6e-4, p1=-1e-4, p2=2e-4)}
-#: the calibration grid: dot pitch and radius (px), margin from the border (px), and the
-#: plate's scale (px per mm of the plate: 6.35 mm pitch)
-GRID_PITCH_PX, GRID_DOT_PX, GRID_MARGIN_PX, GRID_MM = 50.0, 5.0, 30.0, 6.35
+#: the calibration grid: dot pitch and radius (px at the view's scale), margin from the
+#: border (px)
+GRID_PITCH_PX, GRID_DOT_PX, GRID_MARGIN_PX = 50.0, 5.0, 30.0
 #: grid images a view is calibrated from (the plate moved between them): one leaves the
 #: calibration's error at the model near the stage-one error in the axis' direction
 GRID_IMAGES = 4
@@ -58,39 +58,29 @@ def true_distortion(view) -> Distortion:
 
 def calibrate_view(view, rng: np.random.Generator, images: int = GRID_IMAGES) -> dict:
     """Render ``images`` dot-grid images through ``view``'s true distortion (the plate moved
-    by a fraction of a pitch between them, with a small rotation and offset each), find
-    their dots and fit the distortion to all: the fitted :class:`Distortion` and its
+    by a fraction of a pitch between them, with a small rotation and offset each) and
+    calibrate from them (:func:`calibrate_from_grids`): the fitted :class:`Distortion` and its
     coefficients' errors in sigmas."""
     W, H = view.width_px, view.height_px
     true = true_distortion(view)
-    pts = grid_points(W, H, GRID_PITCH_PX, GRID_MARGIN_PX)
-    plate = (pts - [(W - 1) / 2.0, (H - 1) / 2.0]) / GRID_PITCH_PX * GRID_MM
-    s = GRID_PITCH_PX / GRID_MM
-    plates, found_all, starts, n_dots = [], [], [], 0
+    plate = grid_points(W, H, GRID_PITCH_PX, GRID_MARGIN_PX) - [(W - 1) / 2.0, (H - 1) / 2.0]
+    imgs, centres = [], []
     for i in range(images):
         # each image's plate moved by i / images of a pitch along the diagonal
-        shift = GRID_PITCH_PX * i / images
+        c = np.array([(W - 1) / 2.0, (H - 1) / 2.0]) + GRID_PITCH_PX * i / images
         ang = rng.uniform(-0.005, 0.005)
-        c = np.array([(W - 1) / 2.0 + shift + rng.uniform(-2, 2),
-                      (H - 1) / 2.0 + shift + rng.uniform(-2, 2)])
-        A = np.array([[s * math.cos(ang), -s * math.sin(ang), c[0]],
-                      [s * math.sin(ang), s * math.cos(ang), c[1]]])
-        ideal = plate @ A[:, :2].T + A[:, 2]
+        R = np.array([[math.cos(ang), -math.sin(ang)], [math.sin(ang), math.cos(ang)]])
+        ideal = plate @ R.T + c + rng.uniform(-2, 2, 2)
         img = render(dot_grid_scene(W, H, ideal, GRID_DOT_PX, true),
                      RenderConfig(seed=int(rng.integers(1 << 30))), rng)
-        img = station_image(img, W, H, view.bit_depth, "grid")
-        # the dots looked for where the plate's nominal placement puts them, undistorted
-        A0 = np.array([[s, 0.0, (W - 1) / 2.0 + shift], [0.0, s, (H - 1) / 2.0 + shift]])
-        found, ok = find_dots(img, plate @ A0[:, :2].T + A0[:, 2], GRID_DOT_PX)
-        plates.append(plate[ok])
-        found_all.append(found[ok])
-        starts.append(A0)
-        n_dots += int(ok.sum())
-    fit = fit_distortion(plates, found_all, W, H, starts)
+        imgs.append(station_image(img, W, H, view.bit_depth, "grid"))
+        centres.append(c)
+    fit = calibrate_from_grids(imgs, GRID_PITCH_PX, GRID_DOT_PX, centres, GRID_MARGIN_PX)
     d = fit.distortion
     pulls = (d.coefficients - true.coefficients) / np.sqrt(np.diag(d.covariance))
     return {"distortion": d, "pulls": pulls.tolist(), "rms_px": fit.rms_px,
-            "n_dots": n_dots, "max_angle_deg": math.degrees(true.max_angle_change_rad(W, H))}
+            "n_dots": fit.n_points,
+            "max_angle_deg": math.degrees(true.max_angle_change_rad(W, H))}
 
 
 def _pose(station, rng):
