@@ -16,9 +16,22 @@ __all__ = [
     "affine_inverse",
     "apply_affine",
     "as_polygon",
+    "densify_polygon",
     "polygon_area_centroid",
     "polygon_moments",
 ]
+
+
+def densify_polygon(poly: np.ndarray, max_edge_px: float = 1.0) -> np.ndarray:
+    """``poly`` (N, 2), closed, with points inserted along every edge longer than
+    ``max_edge_px``: each edge cut into equal pieces of at most that length, its start
+    vertex kept (an outline's flats are single long edges; a distortion bends them)."""
+    poly = np.asarray(poly, dtype=float)
+    E = np.roll(poly, -1, axis=0) - poly
+    n = np.maximum(np.ceil(np.hypot(E[:, 0], E[:, 1]) / max_edge_px).astype(int), 1)
+    i = np.repeat(np.arange(len(poly)), n)
+    f = (np.arange(i.size) - np.repeat(np.cumsum(n) - n, n)) / n[i]
+    return poly[i] + f[:, None] * E[i]
 
 
 def as_polygon(poly, what: str = "polygon") -> np.ndarray:

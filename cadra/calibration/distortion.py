@@ -29,12 +29,13 @@ import numpy as np
 
 from cadra.optics.distortion import Distortion
 
+__all__ = ["MIN_DOT_DARKNESS", "DistortionFit", "calibrate_from_grids", "find_dots",
+           "fit_distortion", "grid_points"]
+
 #: a dot counts as found when its darkness ``1 - I / b`` sums to at least this fraction of
 #: its area (a rendered or printed dot: 0.6-0.9)
 MIN_DOT_DARKNESS = 0.25
 
-__all__ = ["DistortionFit", "calibrate_from_grids", "find_dots", "fit_distortion",
-           "grid_points"]
 
 def grid_points(width_px: int, height_px: int, pitch_px: float, margin_px: float
                 ) -> np.ndarray:
@@ -63,6 +64,7 @@ def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,
     smooth = cv2.GaussianBlur(img, (0, 0), max(dot_radius_px / 2.0, 0.8))
     r_in, r_bg0, r_bg1 = 1.4 * dot_radius_px, 2.0 * dot_radius_px, 3.0 * dot_radius_px
     half = int(math.ceil(max(search_px, r_bg1))) + 2
+    yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
     out = np.full((len(approx_px), 2), np.nan)
     ok = np.zeros(len(approx_px), bool)
     for i, (u0, v0) in enumerate(np.asarray(approx_px, dtype=float)):
@@ -81,7 +83,6 @@ def find_dots(image: np.ndarray, approx_px: np.ndarray, dot_radius_px: float,
             if not (half <= ju < W - half and half <= jv < H - half):
                 break
             patch = img[jv - half:jv + half + 1, ju - half:ju + half + 1]
-            yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
             uu, vv = xx + ju, yy + jv
             rr = np.hypot(uu - c[0], vv - c[1])
             bg = _background_plane(patch, uu - c[0], vv - c[1], (rr >= r_bg0) & (rr <= r_bg1))

@@ -18,21 +18,24 @@ def ideal_image(view, img):
     the wires are straight. The silhouette is fitted in the recorded image itself, through
     the distorted projection (docs/stage1.md, "Distorted images"). Unchanged without a
     distortion (or for a loader's failure)."""
-    if getattr(view, "distortion", None) is None or not isinstance(img, np.ndarray):
+    if view.distortion is None or not isinstance(img, np.ndarray):
         return img
     return view.distortion.undistort_image(img)
 
 
-def distortion_pose_sigma(distortion, view, wires, pose) -> tuple[float, float, float]:
-    """The sigmas (m, m, rad) a calibrated distortion's coefficient covariance puts on a view
-    pose ``(a, b, phi)``. A coefficient error ``dk`` moves every ideal point by
-    ``F dk = -J^-1 B dk`` (``B`` the recorded displacement per coefficient,
-    :meth:`~cadra.optics.distortion.Distortion.basis`): the model's, and the wires' too, whose
-    affine (re-solved here from their lines so moved, :func:`fit_affine_to_wires`) then
-    takes up the part of the field it can. The pose's change per coefficient is the
-    difference; its covariance follows. Zeros without a distortion or its covariance."""
+def distortion_pose_sigma(view, wires, pose) -> tuple[float, float, float]:
+    """The sigmas (m, m, rad) ``view``'s calibrated distortion (its coefficient covariance)
+    puts on the view pose ``(a, b, phi)`` measured with ``wires``. A coefficient error
+    ``dk`` moves every ideal point by ``F dk = -J^-1 B dk`` (``B`` the recorded displacement
+    per coefficient, :meth:`~cadra.optics.distortion.Distortion.basis`): the model's, and the
+    wires' too, whose affine (re-solved here from their lines so moved,
+    :func:`fit_affine_to_wires`) then takes up the part of the field it can. The pose's
+    change per coefficient is the difference; its covariance follows. Zeros without a
+    distortion or its covariance."""
+
     from cadra.facility.reference import fit_affine_to_wires
 
+    distortion = view.distortion
     if distortion is None or distortion.covariance is None or wires.affine is None:
         return 0.0, 0.0, 0.0
     # each found wire as points along the stretch it was measured over: its line is fitted

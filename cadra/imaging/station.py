@@ -205,8 +205,7 @@ def _view_pose(fit: ViewFit, wires, view=None) -> ViewPose:
     s_ang = math.sqrt(fit.cov[2, 2])
     finite = math.isfinite(s_ang)   # a sphere's angle is not measured: placeholder 0 +- 0
     s_aff = wires.position_sigma_m(fit.ref_px)
-    distortion = None if view is None else view.distortion
-    s_dis = distortion_pose_sigma(distortion, view, wires, fit.pose)
+    s_dis = (0.0, 0.0, 0.0) if view is None else distortion_pose_sigma(view, wires, fit.pose)
     return ViewPose(a_m=fit.pose[0], b_m=fit.pose[1], angle_rad=fit.pose[2] if finite else 0.0,
                     sigma_a_m=math.sqrt(fit.cov[0, 0] + s_aff[0] ** 2 + s_dis[0] ** 2),
                     sigma_b_m=math.sqrt(fit.cov[1, 1] + s_aff[1] ** 2 + s_dis[1] ** 2),

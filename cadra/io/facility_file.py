@@ -132,11 +132,10 @@ def _distortion(value, path: str, width: int, height: int) -> Distortion:
             raise _err(f"{pre}covariance", f"expected 4 rows of 4 numbers (k1, k2, p1, p2), "
                                            f"got {raw!r}")
         cov = np.array([_vec(r, 4, f"{pre}covariance[{i}]") for i, r in enumerate(raw)])
-        if not np.allclose(cov, cov.T, rtol=1e-9, atol=0.0):
-            raise _err(f"{pre}covariance", "is not symmetric")
-        if np.min(np.linalg.eigvalsh(cov)) < -1e-12 * max(np.max(np.abs(cov)), 1e-300):
-            raise _err(f"{pre}covariance", "is not positive semi-definite")
-    d = Distortion(*coef, centre_px=tuple(centre), radius_px=radius, covariance=cov)
+    try:        # the model's own checks (a symmetric, positive semi-definite covariance)
+        d = Distortion(*coef, centre_px=tuple(centre), radius_px=radius, covariance=cov)
+    except ValueError as exc:
+        raise _err(f"{pre}covariance" if "covariance" in str(exc) else path, str(exc)) from None
     if not d.is_invertible_on(width, height):
         raise _err(path, "folds the image over (its Jacobian's determinant is not positive "
                          "everywhere on it); check the coefficients' signs and radius_px")

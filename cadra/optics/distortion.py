@@ -13,7 +13,7 @@ Brown (1966), in the form OpenCV's camera model uses (``k1, k2, p1, p2``; its ``
 carried: a seed-002-size distortion needs no sixth-order term). The model is linear in its
 four coefficients, so a calibration from points is a linear least squares
 (:mod:`cadra.calibration.distortion`) and its covariance propagates exactly to the
-displacement of any point (:meth:`Distortion.displacement_sigma_px`).
+displacement of any point (:meth:`Distortion.basis`).
 
 Seed 002's biplanar tunnel calibrated its distortion "up to 0.3° in angle" from a grid. A
 line's angle changes by the distortion Jacobian's skew part: for the radial term that is
@@ -29,14 +29,15 @@ the ideal image. Pure numpy and OpenCV; depends on nothing else in CADRA.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-__all__ = ["COEFFICIENTS", "DENSIFY_PX", "DistortedProjection", "Distortion", "densify",
-           "distorted", "ideal_projection"]
+from cadra.geometry import densify_polygon
+
+__all__ = ["COEFFICIENTS", "DENSIFY_PX", "DistortedProjection", "Distortion", "distorted",
+           "ideal_projection"]
 
 #: the model's coefficients, in the order of its covariance
 COEFFICIENTS = ("k1", "k2", "p1", "p2")
@@ -85,11 +86,14 @@ class Distortion:
         if not all(math.isfinite(getattr(self, k)) for k in COEFFICIENTS):
             raise ValueError("Distortion coefficients must be finite")
         if self.covariance is not None:
-            cov = np.array(self.covariance, dtype=float).reshape(4, 4)
-            scale = float(np.max(np.abs(np.diag(cov)))) if np.all(np.isfinite(cov)) else 0.0
-            if not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T, rtol=1e-9,
-                                                                 atol=1e-12 * scale):
-                raise ValueError("Distortion.covariance must be a finite symmetric 4x4")
+            cov = np.array(self.covariance, dtype=float)
+            if cov.shape != (4, 4) or not np.all(np.isfinite(cov)):
+                raise ValueError("the covariance must be a finite 4 x 4 (k1, k2, p1, p2)")
+            scale = float(np.max(np.abs(np.diag(cov))))
+            if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 * scale):
+                raise ValueError("the covariance is not symmetric")
+            if np.min(np.linalg.eigvalsh(cov)) < -1e-12 * max(scale, 1e-300):
+                raise ValueError("the covariance is not positive semi-definite")
             cov.setflags(write=False)
             object.__setattr__(self, "covariance", cov)
 
@@ -158,14 +162,6 @@ class Distortion:
             uv = uv - np.linalg.solve(self.jacobian(uv), r[..., None])[..., 0]
         return uv
 
-    def displacement_sigma_px(self, uv) -> np.ndarray:
-        """``(..., 2, 2)``: covariance (px^2) of the displacement at ideal points ``uv`` from
-        the coefficients' covariance (zeros without one)."""
-        B = self.basis(uv)
-        if self.covariance is None:
-            return np.zeros(B.shape[:-1] + (2,))
-        return B @ self.covariance @ np.swapaxes(B, -1, -2)
-
     def max_displacement_px(self, width_px: int, height_px: int, n: int = 65) -> float:
         """The largest ``|D(uv) - uv|`` over the image (an ``n`` x ``n`` grid, corners in)."""
         uv = _grid(width_px, height_px, n)
@@ -205,16 +201,6 @@ class Distortion:
         if self.covariance is not None:
             out["covariance"] = [[float(c) for c in row] for row in self.covariance]
         return out
-
-    @classmethod
-    def from_dict(cls, data: Mapping, width_px: int, height_px: int) -> Distortion:
-        """From the facility file's table; the centre and radius default to the image's
-        centre and half-diagonal."""
-        d = cls.for_image(width_px, height_px)
-        return cls(*(float(data.get(k, 0.0)) for k in COEFFICIENTS),
-                   centre_px=tuple(data.get("centre_px", d.centre_px)),
-                   radius_px=float(data.get("radius_px", d.radius_px)),
-                   covariance=data.get("covariance"))
 
 
 class DistortedProjection:
@@ -261,7 +247,7 @@ class DistortedProjection:
         """A closed view-plane polygon (N, 2) in the recorded image: its edges cut to
         :data:`DENSIFY_PX` in the ideal image first, so a straight flank comes out curved
         as the distortion draws it."""
-        return self.distortion.distort(densify(self.ideal.from_plane(ab_poly)))
+        return self.distortion.distort(densify_polygon(self.ideal.from_plane(ab_poly), DENSIFY_PX))
 
 
 def distorted(projection, distortion: Distortion | None):
@@ -273,20 +259,6 @@ def distorted(projection, distortion: Distortion | None):
 def ideal_projection(projection):
     """The ideal projection under a :class:`DistortedProjection` (else ``projection``)."""
     return projection.ideal if isinstance(projection, DistortedProjection) else projection
-
-
-def densify(poly: np.ndarray, max_edge_px: float = DENSIFY_PX, closed: bool = True
-            ) -> np.ndarray:
-    """``poly`` (N, 2) with every edge cut into pieces of at most ``max_edge_px``."""
-    poly = np.asarray(poly, dtype=float)
-    ends = np.roll(poly, -1, axis=0) if closed else poly[1:]
-    starts = poly if closed else poly[:-1]
-    n = np.maximum(1, np.ceil(np.hypot(*(ends - starts).T) / max_edge_px)).astype(int)
-    pieces = [s + (e - s) * (np.arange(k)[:, None] / k) for s, e, k in zip(starts, ends, n,
-                                                                            strict=True)]
-    if not closed:
-        pieces.append(poly[-1:])
-    return np.concatenate(pieces)
 
 
 def _grid(width_px: int, height_px: int, n: int) -> np.ndarray:

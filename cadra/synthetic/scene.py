@@ -144,10 +144,11 @@ def distort_scene(scene: Scene, distortion) -> Scene:
         return scene
     from dataclasses import replace
 
-    from cadra.optics.distortion import densify
+    from cadra.geometry import densify_polygon
+    from cadra.optics.distortion import DENSIFY_PX
 
     def d(poly):
-        return distortion.distort(densify(poly))
+        return distortion.distort(densify_polygon(poly, DENSIFY_PX))
 
     bodies = tuple(d(p) for p in scene.bodies)
     wires = tuple(d(wire_polygon(p0, p1, w)) for p0, p1, w in scene.wires)

@@ -52,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from cadra.geometry import densify_polygon
 from cadra.imaging.silhouette.centroid import centroid_pose
 from cadra.imaging.silhouette.edges import outline_geometry, stage_a
 from cadra.imaging.silhouette.noise import (
@@ -354,23 +355,13 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         edge_profile=tuple(float(x) for x in seg.profile), tilt_sensitivity=tilt_sens)
 
 
-def _densified(poly: np.ndarray, max_edge_px: float = 1.0) -> np.ndarray:
-    """``poly`` with points inserted along every edge longer than ``max_edge_px`` (the
-    outline's flats are single long edges)."""
-    E = np.roll(poly, -1, axis=0) - poly
-    n = np.maximum(np.ceil(np.hypot(E[:, 0], E[:, 1]) / max_edge_px).astype(int), 1)
-    i = np.repeat(np.arange(len(poly)), n)
-    f = (np.arange(i.size) - np.repeat(np.cumsum(n) - n, n)) / n[i]
-    return poly[i] + f[:, None] * E[i]
-
-
 def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
                   reach_px: float = 3.0) -> np.ndarray:
     """Signed distance t (px) from each foot along its normal to the closed polyline ``poly``
     (the crossing nearest the foot within ``reach_px``; NaN if none). The polyline is
     densified to 1-px edges and only the edges at a foot's 24 nearest points (a k-d tree)
     are tried."""
-    P = _densified(poly)
+    P = densify_polygon(poly)
     E = np.roll(P, -1, axis=0) - P
     k_near = min(24, len(P))
     _, idx = cKDTree(P).query(feet, k=k_near)

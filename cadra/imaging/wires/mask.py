@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from cadra.facility.reference import View
-from cadra.optics.distortion import densify
+from cadra.geometry import densify_polygon
 
 __all__ = ["wire_mask"]
 
@@ -43,7 +43,7 @@ def wire_mask(view: View, affine: np.ndarray | None, shape: tuple[int, int],
         if distortion is None:
             cv2.fillConvexPoly(mask, np.rint(poly * 16).astype(np.int32), 1, cv2.LINE_8, 4)
         else:
-            curved = distortion.distort(densify(poly, 4.0))
+            curved = distortion.distort(densify_polygon(poly, 4.0))
             cv2.fillPoly(mask, [np.rint(curved * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
     return mask.astype(bool)
 
