@@ -25,7 +25,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from cadra.validation.tool import one_thread, run_tool
+from cadra.validation.tool import binomial_rate, one_thread, run_tool
 
 one_thread()
 
@@ -36,14 +36,6 @@ from cadra.validation.gap_trials import run_case  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 #: a perfect diagnosis' pass rate of the vector score
 TWO_SIGMA = 0.9545
-
-
-def _rate(hits: int, n: int) -> dict:
-    from scipy.stats import binomtest
-
-    ci = binomtest(hits, n).proportion_ci(0.95, method="exact") if n else None
-    return {"rate": hits / n if n else None, "n": n,
-            "ci95": [round(ci.low, 4), round(ci.high, 4)] if ci else None}
 
 
 def main(argv=None) -> int:
@@ -73,8 +65,8 @@ def run(args) -> dict:
             by_case[case] = {
                 "trials": len(rows), "named_first": len(named), "multi_parameter": len(multi),
                 "parameters": sorted(set(k)),
-                "vector": _rate(sum(bool(r["size_ok"]) for r in multi), len(multi)),
-                "per_parameter": _rate(sum(bool(r["size_ok_per_parameter"]) for r in multi),
+                "vector": binomial_rate(sum(bool(r["size_ok"]) for r in multi), len(multi)),
+                "per_parameter": binomial_rate(sum(bool(r["size_ok_per_parameter"]) for r in multi),
                                        len(multi)),
                 "per_parameter_perfect": float(np.mean([TWO_SIGMA ** n for n in k]))
                 if k else None}

@@ -36,6 +36,7 @@ import numpy as np
 from cadra.facility.reference import REPO_ROOT
 from cadra.flight.data import FILM_SIGMAS
 from cadra.validation.stage2_bench import M1_SET, M2_SET, make_problem
+from cadra.validation.tool import binomial_rate
 
 #: the C_mq parameters the M2 plans target
 M2_TARGETS = ("Cmq_A1", "Cmq_A2")
@@ -121,14 +122,6 @@ def _coverage_draw(args) -> dict:
             "params": rows}
 
 
-def _rate(hits: int, n: int) -> dict:
-    from scipy.stats import binomtest
-
-    ci = binomtest(hits, n).proportion_ci(0.95, method="exact") if n else None
-    return {"rate": hits / n if n else math.nan, "n": n,
-            "ci95": [round(ci.low, 4), round(ci.high, 4)] if ci else None}
-
-
 def _by_draw(rows: list[dict], kind: str) -> dict:
     """Coverage with its 95 % interval from the draws as the independent units: a draw's
     parameters share its noise, so the binomial interval over all cells is too narrow. Each
@@ -174,8 +167,8 @@ def coverage_figures(draws: int, refits: int, workers: int, seed: int = 0,
             "by_draw": {k: _by_draw(ok, k) for k in kinds},
             "undetermined_cells": sum(1 for r in ok for p in r["params"].values()
                                       if not p["determined"]),
-            **{k: _rate(sum(p[k] for p in cells), len(cells)) for k in kinds},
-            "peak": {k: _rate(sum(p[k] for p in peak), len(peak)) for k in kinds},
+            **{k: binomial_rate(sum(p[k] for p in cells), len(cells)) for k in kinds},
+            "peak": {k: binomial_rate(sum(p[k] for p in peak), len(peak)) for k in kinds},
             "by_parameter": by_param,
             "draw_cells_note": "each draw counts once per determined free parameter "
                                "(correlated within a draw); by_parameter gives each "

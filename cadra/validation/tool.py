@@ -1,10 +1,12 @@
 """What every script in ``tools/`` does around its own work: one thread per process where the
 figures are per core, the run timed, its figures printed as the last line (a JSON object) and
-recorded in ``results/<tool>.json`` (:func:`cadra.validation.results.record`)."""
+recorded in ``results/<tool>.json`` (:func:`cadra.validation.results.record`); the figures
+rounded to their meaningful digits, and a rate given with its binomial interval."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from collections.abc import Callable
@@ -52,4 +54,14 @@ def round_figures(x, digits: int = 4):
     return x
 
 
-__all__ = ["THREAD_VARIABLES", "one_thread", "round_figures", "run_tool"]
+def binomial_rate(hits: int, n: int) -> dict:
+    """A rate with its 95 % Clopper-Pearson interval: ``{"rate", "n", "ci95"}`` (NaN and None
+    without trials)."""
+    from scipy.stats import binomtest
+
+    ci = binomtest(hits, n).proportion_ci(0.95, method="exact") if n else None
+    return {"rate": hits / n if n else math.nan, "n": n,
+            "ci95": [round(ci.low, 4), round(ci.high, 4)] if ci else None}
+
+
+__all__ = ["THREAD_VARIABLES", "binomial_rate", "one_thread", "round_figures", "run_tool"]
