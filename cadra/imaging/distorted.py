@@ -1,6 +1,8 @@
 """Stage one on a view whose image is distorted (docs/stage1.md, "Distorted images"): the
-ideal image its wires are fitted in, and the sigma a calibrated distortion's uncertainty puts
-on a view's pose. The silhouette itself is fitted in the recorded image through
+sigma a calibrated distortion's uncertainty puts on a view's pose; a distortion the facility
+file does not declare, found from the bow of the wires and removed; the ideal image the
+overlay is drawn on. The wires are fitted in the recorded image through the distortion
+(:func:`cadra.imaging.wires.fit.measure_wires`), the silhouette through
 :class:`cadra.optics.distortion.DistortedProjection`."""
 
 from __future__ import annotations
@@ -9,41 +11,47 @@ import math
 
 import numpy as np
 
-__all__ = ["distortion_pose_sigma", "ideal_image"]
+__all__ = ["BOW_PASSES", "add_bows", "bow_warning", "declare_bows", "distortion_pose_jacobian",
+           "distortion_pose_sigma", "ideal_image", "undeclared_bows", "wires_miss_cause"]
 
 
 def ideal_image(view, img):
-    """``img`` with the view's distortion removed, for the wires' fit: resampled at ``D`` of
+    """``img`` with the view's distortion removed, for the overlay: resampled at ``D`` of
     every ideal pixel (:meth:`cadra.optics.distortion.Distortion.undistort_image`), where
-    the wires are straight. The silhouette is fitted in the recorded image itself, through
-    the distorted projection (docs/stage1.md, "Distorted images"). Unchanged without a
-    distortion (or for a loader's failure)."""
+    the wires are straight and the fitted lines, outline and reference point are drawn. The
+    measurement itself never resamples: the wires and the silhouette are fitted in the
+    recorded image, through the distortion (docs/stage1.md, "Distorted images"). Unchanged
+    without a distortion (or for a loader's failure)."""
     if view.distortion is None or not isinstance(img, np.ndarray):
         return img
     return view.distortion.undistort_image(img)
 
 
-def distortion_pose_sigma(view, wires, pose) -> tuple[float, float, float]:
-    """The sigmas (m, m, rad) ``view``'s calibrated distortion (its coefficient covariance)
-    puts on the view pose ``(a, b, phi)`` measured with ``wires``. A coefficient error
-    ``dk`` moves every ideal point by ``F dk = -J^-1 B dk`` (``B`` the recorded displacement
-    per coefficient, :meth:`~cadra.optics.distortion.Distortion.basis`): the model's, and the
-    wires' too, whose affine (re-solved here from their lines so moved,
-    :func:`fit_affine_to_wires`) then takes up the part of the field it can. The pose's
-    change per coefficient is the difference; its covariance follows. Zeros without a
-    distortion or its covariance."""
+def _line_points(wire) -> np.ndarray:
+    """A found wire's points on its fitted line where its centres were used (the centres
+    projected onto the line; 33 points between its ends if it carries none)."""
+    c = np.asarray(wire.centres_px, float)
+    p, t = np.asarray(wire.point_px, float), np.asarray(wire.direction_px, float)
+    if len(c) < 2:
+        e = np.asarray(wire.ends_px, float)
+        return e[0] + np.linspace(0.0, 1.0, 33)[:, None] * (e[1] - e[0])
+    return p + ((c - p) @ t)[:, None] * t
 
+
+def distortion_pose_jacobian(view, wires, pose, distortion) -> np.ndarray:
+    """(3, 4) d(a, b, phi) / d(coefficient) of the view pose ``(a, b, phi)`` (m, m, rad)
+    measured with ``wires`` when ``distortion``'s coefficients, which stage one removed,
+    are off by ``dk``. Such an error moves every ideal point by ``F dk = -J^-1 B dk`` (``B``
+    the recorded displacement per coefficient, :meth:`~cadra.optics.distortion.Distortion.
+    basis`): the model's, and the wires' too, whose affine (re-solved here from their lines
+    so moved, :func:`fit_affine_to_wires`) then takes up the part of the field it can. The
+    pose's change is the difference."""
     from cadra.facility.reference import fit_affine_to_wires
 
-    distortion = view.distortion
-    if distortion is None or distortion.covariance is None or wires.affine is None:
-        return 0.0, 0.0, 0.0
-    # each found wire as points along the stretch it was measured over: its line is fitted
-    # to all its centres, so it moves with the field's mean along it, not its ends'
+    # each found wire as the centres its line was fitted to (stretches left out stay out):
+    # the line moves with the field's mean over them, not its ends'
     by_name = {w.name: w for w in wires.wires if w.found}
-    s = np.linspace(0.0, 1.0, 33)[:, None]
-    lines = [None if w.name not in by_name else
-             (lambda e: e[0] + s * (e[1] - e[0]))(np.asarray(by_name[w.name].ends_px, float))
+    lines = [None if w.name not in by_name else _line_points(by_name[w.name])
              for w in view.wires]
 
     def field(points):                       # (..., 2, 4): ideal px per unit coefficient
@@ -69,5 +77,100 @@ def distortion_pose_sigma(view, wires, pose) -> tuple[float, float, float]:
         ab1, ang1 = plane_pose(M1, uv + h * F_uv[:, j], t + h * dF[:, j])
         G[:2, j] = (ab1 - ab0) / h
         G[2, j] = math.remainder(ang1 - ang0, 2 * math.pi) / h
+    return G
+
+
+def distortion_pose_sigma(view, wires, pose) -> tuple[float, float, float]:
+    """The sigmas (m, m, rad) ``view``'s calibrated distortion (its coefficient covariance)
+    puts on the view pose ``(a, b, phi)`` measured with ``wires``: the covariance carried by
+    :func:`distortion_pose_jacobian`. Zeros without a distortion or its covariance."""
+    distortion = view.distortion
+    if distortion is None or distortion.covariance is None or wires.affine is None:
+        return 0.0, 0.0, 0.0
+    G = distortion_pose_jacobian(view, wires, pose, distortion)
     C = G @ distortion.covariance @ G.T
     return tuple(float(math.sqrt(max(C[i, i], 0.0))) for i in range(3))
+
+
+#: passes a station is measured again in with the distortion its wires show: the first bow
+#: is measured on straight predicted paths, a few hundredths off for a bow of pixels; each
+#: pass measures what the last one left, along the curved paths
+BOW_PASSES = 3
+
+
+def add_bows(found: dict, bows: dict) -> dict:
+    """The distortions ``found`` so far (view name -> ``WireBow``) with the residual ``bows``
+    a measurement with them declared shows added (radial terms about one centre add to first
+    order); the sigma is the last residual's, the ``k1`` before it being held."""
+    from dataclasses import replace
+
+    out = dict(found)
+    for name, bow in bows.items():
+        if name in out:
+            k1 = out[name].k1 + bow.k1
+            bow = replace(bow, k1=k1, max_angle_deg=bow.max_angle_deg * abs(k1 / bow.k1))
+        out[name] = bow
+    return out
+
+
+def undeclared_bows(station, views) -> dict:
+    """The views of ``station`` that declare no distortion but whose wires, as measured
+    (``views``: name -> :class:`cadra.imaging.station.ViewResult`, measured as declared or
+    with a distortion found before), bow as one radial distortion bows them
+    (:func:`cadra.imaging.wires.distortion.radial_from_centres`,
+    :attr:`~cadra.imaging.wires.distortion.WireBow.found`): name -> the
+    :class:`~cadra.imaging.wires.distortion.WireBow`. The wires' centres are measured to
+    thousandths of a pixel, so a bow of a few hundredths is found before it biases the pose
+    beyond its sigma; left alone, the straight-line fits of bowed wires, which leave their
+    bent stretches out as a shock's, bias it by several (docs/stage1.md, "An undeclared
+    distortion")."""
+    from cadra.imaging.wires.distortion import radial_from_centres
+
+    out = {}
+    for name, result in views.items():
+        view = station.views.get(name)
+        wires = getattr(result, "wires", None)
+        if view is None or view.distortion is not None or wires is None:
+            continue
+        bow = radial_from_centres(view, wires)
+        if bow is not None and bow.found:
+            out[name] = bow
+    return out
+
+
+def declare_bows(station, bows: dict):
+    """``station`` with each view of ``bows`` declaring the distortion its wires show, its
+    ``k1``'s variance as its covariance (so it reaches the pose's sigma)."""
+    from dataclasses import replace
+
+    views = dict(station.views)
+    for name, bow in bows.items():
+        v = views[name]
+        views[name] = replace(v, distortion=bow.distortion(v.width_px, v.height_px))
+    return replace(station, views=views)
+
+
+def bow_warning(bow) -> str:
+    """What a station's warnings say of a view measured with the distortion its wires
+    showed."""
+    return (f"its wires bow as a radial image distortion k1 = {bow.k1:.3g} +- "
+            f"{bow.sigma_k1:.2g} ({bow.max_angle_deg:.2g} deg at most on a line's direction) "
+            f"bows them, which the facility file does not declare: measured with it removed "
+            f"(calibrate it: docs/calibration.md, \"Distortion from a grid\")")
+
+
+def wires_miss_cause(found, limit_px: float) -> str:
+    """Why a view's wires miss their surveyed lines beyond ``limit_px`` rms, given what
+    removing a radial distortion does to them (``found``: a
+    :func:`~cadra.imaging.wires.distortion.radial_from_wires` result, or None)."""
+    if found is None:
+        return "another station's or view's image?"
+    removing = (f"removing a radial distortion k1 = {found.k1:.3g} ({found.max_angle_deg:.2g} "
+                f"deg at most on a line's direction) brings them to {found.rms_after_px:.2g} px")
+    if found.explains(limit_px):
+        return (f"{removing}: an image distortion the facility file does not declare "
+                f"(calibrate it: docs/calibration.md, \"Distortion from a grid\")")
+    if found.rms_after_px < 0.5 * found.rms_before_px:
+        return (f"{removing}, not within {limit_px:g}: an undeclared image distortion with "
+                f"more than a radial term, or another station's or view's image?")
+    return "another station's or view's image?"

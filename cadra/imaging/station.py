@@ -44,7 +44,16 @@ from cadra.body import FinnedBody
 from cadra.conventions import axis_from_inclinations, axis_from_projected_angles
 from cadra.facility.reference import Station
 from cadra.imaging.combine import StationPose, ViewPose, combine_views
-from cadra.imaging.distorted import distortion_pose_sigma, ideal_image
+from cadra.imaging.distorted import (
+    BOW_PASSES,
+    add_bows,
+    bow_warning,
+    declare_bows,
+    distortion_pose_sigma,
+    ideal_image,
+    undeclared_bows,
+    wires_miss_cause,
+)
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 from cadra.imaging.silhouette.template import (
@@ -254,16 +263,16 @@ def _model_box(img: np.ndarray, coarse, margin: int = 12) -> np.ndarray:
 def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
                   coarse=None, final: bool = True, masks: dict | None = None,
                   roll: float = 0.0, restart: bool = False, formation=None,
-                  pose3d=None, ideal=None) -> _Attempt:
+                  pose3d=None) -> _Attempt:
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
     ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
     so template, changed much since ``prev``: its edge profile was fitted to mismatched fins);
     ``formation``: the view's wire formation shared over the shot (None: this image's own);
-    ``pose3d``: a point-source view's expected 3-D pose (:func:`_view_templates`);
-    ``ideal``: a distorted view's ideal image (:func:`ideal_image`), where its wires are
-    fitted (the silhouette is fitted in ``img``, the recorded one)."""
+    ``pose3d``: a point-source view's expected 3-D pose (:func:`_view_templates`). A
+    distorted view's wires and silhouette are both fitted in ``img``, the recorded image,
+    through its distortion."""
     from cadra.imaging.wires.fit import measure_wires
     from cadra.imaging.wires.mask import wire_mask
 
@@ -275,8 +284,8 @@ def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None
             coarse = locate_model(img, template, view.optics())
         if not coarse.ok:
             return _Attempt(None, coarse.reason)
-        wires = measure_wires(img if ideal is None else ideal, view,
-                              exclude=_model_box(img, coarse), formation=formation)
+        wires = measure_wires(img, view, exclude=_model_box(img, coarse), formation=formation,
+                              distortion=view.distortion)
         if not wires.ok:
             return _Attempt(None, wires.reason, wires)
         affine = wires.affine
@@ -361,8 +370,7 @@ def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: flo
             return ViewResult(view.name, name, False, img.reason)
     coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
     att = _measure_view(img, view, body, float(tilt_rad), settings, coarse=coarse, final=True,
-                        roll=float(roll_rad), formation=formation,
-                        ideal=ideal_image(view, img) if view.distortion is not None else None)
+                        roll=float(roll_rad), formation=formation)
     ok = att.fit is not None and att.fit.ok
     return ViewResult(view.name, name, ok, att.reason, att.fit, att.wires, att.affine,
                       float(tilt_rad), att.warnings, time.perf_counter() - t0,
@@ -403,14 +411,14 @@ def view_formation(sources, body_spec):
     profiles, n = [], 0
     for view, src in sources:
         try:
-            img = ideal_image(view, _view_image(view, src,
-                                                f"station {view.station} {view.name} image"))
+            img = _view_image(view, src, f"station {view.station} {view.name} image")
             if not isinstance(img, np.ndarray):
                 continue
             coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
             if not coarse.ok:
                 continue
-            got = wire_profiles(img, view, exclude=_model_box(img, coarse))
+            got = wire_profiles(img, view, exclude=_model_box(img, coarse),
+                                distortion=view.distortion)
         except Exception:  # noqa: BLE001 - that image's station reports it; others serve
             continue
         if len(got) >= 3:
@@ -427,8 +435,14 @@ def view_formation(sources, body_spec):
 
 def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os.PathLike],
                     body_spec: dict, settings: FitSettings | None = None, max_rounds: int = 3,
-                    overlays: bool = True, formations: Mapping | None = None) -> StationResult:
+                    overlays: bool = True, formations: Mapping | None = None,
+                    find_distortion: bool = True) -> StationResult:
     """Measure one station from its images (see the module docstring).
+
+    With ``find_distortion``, a view that declares no distortion but whose wires bow as one
+    radial distortion bows them (:func:`cadra.imaging.distorted.undeclared_bows`) is measured
+    again with that distortion, found from its wires, declared; the station's warnings say so
+    (docs/stage1.md, "An undeclared distortion").
 
     ``station``: the station's geometry (:meth:`cadra.facility.reference.Facility.station`);
     ``images``: view name -> the image, a grey ``uint8``/``uint16`` array (as the renderer
@@ -438,6 +452,25 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
     ``formations``: view name -> the view's wire formation shared over the shot
     (:func:`view_formation`); a view without one fits its image's own.
     """
+    args = (images, body_spec, settings, max_rounds, overlays, formations)
+    result = _measure_once(station, *args)
+    bows, found = undeclared_bows(station, result.views) if find_distortion else {}, {}
+    for _ in range(BOW_PASSES):     # each pass measures the bow that the last one left
+        if not bows:
+            break
+        found = add_bows(found, bows)
+        result = _measure_once(declare_bows(station, found), *args)
+        bows = undeclared_bows(station, result.views)
+    if not found:
+        return result
+    notes = tuple(f"{n}: {bow_warning(b)}" for n, b in found.items())
+    return replace(result, status="failed" if result.status == "failed" else "warning",
+                   warnings=(*notes, *result.warnings))
+
+
+def _measure_once(station: Station, images, body_spec: dict, settings: FitSettings | None,
+                  max_rounds: int, overlays: bool, formations: Mapping | None) -> StationResult:
+    """:func:`measure_station` with the station's views as declared."""
     import time
 
     settings = FitSettings() if settings is None else settings
@@ -462,9 +495,6 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
             results[name] = ViewResult(name, image_names[name], False, img.reason)
             continue
         images[name] = img
-    # a distorted view's wires are fitted in its ideal image (made once)
-    ideals = {n: ideal_image(station.views[n], img) for n, img in images.items()
-              if station.views[n].distortion is not None}
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
     nominal = {n: distorted(v.optics(), v.distortion) for n, v in station.views.items()}
     coarse = {n: locate_model(img, _template(body, n, 0.0, 256), nominal[n])
@@ -507,7 +537,6 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                         img, station.views[name], body, tilts[name], settings, prev,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
                         formation=(formations or {}).get(name), pose3d=pose3d,
-                        ideal=ideals.get(name),
                         restart=prev is not None and abs(_wrap_period(view_roll - prev.roll_rad))
                         > ROLL_RESTART_RAD)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
@@ -566,7 +595,8 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
                                    False)[0] if r.fit is not None and r.fit.ok else None)
             # drawn on a distorted view's ideal image, where its wires, outline and
             # reference point are
-            png = encode_png(view_overlay(ideals.get(name, img), r, tpl, station_id))
+            png = encode_png(view_overlay(ideal_image(station.views[name], img), r, tpl,
+                                          station_id))
             results[name] = ViewResult(**{**r.__dict__, "overlay_png": png})
     ok_views = [n for n in VIEWS if n in results and results[n].ok]
     warnings = tuple(f"{n}: {w}" for n in ok_views for w in results[n].warnings)
@@ -629,21 +659,8 @@ def _views_disagree(pose: StationPose, results: dict, radial=None) -> str:
     for name in VIEWS:
         rms = results[name].wires.affine_rms_px
         if rms > WIRE_RMS_MAX_PX:
-            found = radial(name) if radial is not None else None
-            removing = (None if found is None else
-                        f"removing a radial distortion k1 = {found.k1:.3g} ("
-                        f"{found.max_angle_deg:.2g} deg at most on a line's direction) "
-                        f"brings them to {found.rms_after_px:.2g} px")
-            if found is not None and found.explains(WIRE_RMS_MAX_PX):
-                cause = (f"{removing}: an image distortion the facility file does not "
-                         f"declare (calibrate it: docs/calibration.md, \"Distortion from a "
-                         f"grid\")")
-            elif found is not None and found.rms_after_px < 0.5 * found.rms_before_px:
-                cause = (f"{removing}, not within {WIRE_RMS_MAX_PX:g}: an undeclared image "
-                         f"distortion with more than a radial term, or another station's or "
-                         f"view's image?")
-            else:
-                cause = "another station's or view's image?"
+            cause = wires_miss_cause(radial(name) if radial is not None else None,
+                                     WIRE_RMS_MAX_PX)
             why.append(f"{name} view: its wires miss their surveyed lines by {rms:.3g} px rms "
                        f"(> {WIRE_RMS_MAX_PX:g}): {cause}")
     xc = pose.x_consistency_sigma

@@ -148,7 +148,7 @@ def score_case(case: StationCase, result, sphere: bool) -> dict:
     """Errors and sigmas of one measured case (:func:`measure_station`'s result): per view
     (px, deg) and in 3-D (m, rad); None entries where the station failed."""
     out = {"ok": result.pose is not None and result.status != "failed",
-           "reason": result.reason}
+           "reason": result.reason, "warnings": list(result.warnings)}
     if not out["ok"]:
         return out
     for name in ("top", "side"):

@@ -22,7 +22,8 @@ from scipy.optimize import minimize_scalar
 
 from cadra.optics.distortion import Distortion
 
-__all__ = ["K1_SCAN", "K1_SEARCH", "WireDistortion", "radial_from_wires"]
+__all__ = ["BOW_Z", "K1_SCAN", "K1_SEARCH", "WireBow", "WireDistortion", "radial_from_centres",
+           "radial_from_wires"]
 
 #: the k1 searched (|k1| up to 0.02, 1.2 deg at the corners): the facility file's bound is
 #: 5 % of the radius in displacement
@@ -78,3 +79,114 @@ def radial_from_wires(image: np.ndarray, view, exclude: np.ndarray | None = None
     d = Distortion.for_image(W, H, k1=k1)
     return WireDistortion(k1, float(before), after,
                           math.degrees(d.max_angle_change_rad(W, H)))
+
+
+#: a radial bow of the wires is taken as an undeclared distortion when its ``k1`` is this many
+#: of its sigmas from zero and every wire's own ``k1`` agrees with it (:data:`BOW_AGREE_P`)
+BOW_Z = 6.0
+#: the wires' own ``k1`` agree with their common one unless their scatter about it exceeds
+#: chi2's upper quantile at this probability (a shock or flow line bends one wire alone)
+BOW_AGREE_P = 1e-3
+#: the ``k1`` steps the sum of squares is sampled at (it is a parabola in ``k1`` to far beyond)
+_BOW_STEP = 1e-4
+
+
+@dataclass(frozen=True)
+class WireBow:
+    """The radial distortion ``k1`` (:meth:`Distortion.for_image`: about the image centre,
+    radius the half-diagonal) that straightens a view's wires' centres, with its 1-sigma;
+    the wires' own ``k1`` scatter about it (chi2 over ``n_wires - 1`` degrees of freedom)
+    and the largest line-direction change it makes over the image (deg)."""
+
+    k1: float
+    sigma_k1: float
+    chi2_wires: float
+    n_wires: int
+    max_angle_deg: float
+
+    @property
+    def z(self) -> float:
+        return self.k1 / self.sigma_k1 if self.sigma_k1 > 0 else 0.0
+
+    @property
+    def agrees(self) -> bool:
+        """Do the wires bow as one radial distortion bows them (not one wire alone)?"""
+        from scipy.stats import chi2
+
+        dof = self.n_wires - 1
+        return dof >= 1 and self.chi2_wires <= chi2.ppf(1.0 - BOW_AGREE_P, dof)
+
+    @property
+    def found(self) -> bool:
+        """A distortion the wires show: significant (:data:`BOW_Z`) and shared by them."""
+        return abs(self.z) >= BOW_Z and self.agrees
+
+    def distortion(self, width_px: int, height_px: int) -> Distortion:
+        """The distortion found, with its variance as the covariance of its ``k1``."""
+        cov = np.zeros((4, 4))
+        cov[0, 0] = self.sigma_k1 ** 2
+        return Distortion.for_image(width_px, height_px, k1=self.k1, covariance=cov)
+
+
+def _parabola(f, k0: float, h: float) -> tuple[float, float, float]:
+    """(minimum's ``k1``, half the second derivative, minimum value) of ``f`` from three
+    samples about ``k0``."""
+    fm, f0, fp = f(k0 - h), f(k0), f(k0 + h)
+    a = (fp + fm - 2.0 * f0) / (2.0 * h * h)
+    b = (fp - fm) / (2.0 * h)
+    if not a > 0:
+        return math.nan, a, f0
+    return k0 - b / (2.0 * a), a, f0 - b * b / (4.0 * a)
+
+
+def radial_from_centres(view, wires) -> WireBow | None:
+    """The radial distortion ``k1`` that straightens ``view``'s wires, from their clean
+    centres (:attr:`cadra.imaging.wires.fit.WireFit.clean_px`, the recorded image's pixels):
+    the sum of the centres' squared distances from each wire's own total-least-squares line,
+    after ``k1`` is removed from them, is a parabola in ``k1``; its minimum is the estimate
+    and its curvature with the residuals' scatter the sigma (a linear least squares in
+    ``k1``, the lines' offsets and directions). Each wire alone gives its own ``k1``; their
+    scatter about the common one tells a distortion (every wire bowed as one) from a shock or
+    a flow line along a wire. A wire through the image centre is not bowed by a radial
+    distortion and carries no weight. Milliseconds; None with fewer than two bowed wires."""
+    from cadra.imaging.wires.straightness import tls_line
+
+    W, H = view.width_px, view.height_px
+    pts = [np.asarray(w.clean_px, float) for w in wires.wires
+           if w.found and len(w.clean_px) >= 10]
+    if len(pts) < 2:
+        return None
+
+    def sums(k1: float) -> np.ndarray:
+        d = Distortion.for_image(W, H, k1=k1)
+        return np.array([float(np.sum(tls_line(d.undistort(p))[3] ** 2)) for p in pts])
+
+    cache: dict[float, np.ndarray] = {}
+
+    def each(k1):
+        if k1 not in cache:
+            cache[k1] = sums(k1)
+        return cache[k1]
+
+    # per wire: its parabola about 0 (exact to rounding: the residuals are linear in k1
+    # over these steps), its k1 and sigma (residual scale from its own minimum)
+    ks, ws = [], []
+    for i, p in enumerate(pts):
+        k, a, smin = _parabola(lambda k1, i=i: each(k1)[i], 0.0, _BOW_STEP)
+        dof = len(p) - 3
+        if not (math.isfinite(k) and a > 0 and dof > 0):
+            continue
+        var = (smin / dof) / a
+        if var > 0 and math.isfinite(var):
+            ks.append(k)
+            ws.append(1.0 / var)
+    # a wire too short or too central to be bowed gives a k1 of huge sigma: its weight
+    # is near zero, so it neither helps nor hurts the common estimate
+    if len(ks) < 2:
+        return None
+    ks, ws = np.array(ks), np.array(ws)
+    k1 = float(np.sum(ws * ks) / np.sum(ws))
+    sigma = float(1.0 / math.sqrt(np.sum(ws)))
+    chi2_w = float(np.sum(ws * (ks - k1) ** 2))
+    angle = math.degrees(Distortion.for_image(W, H, k1=k1).max_angle_change_rad(W, H))
+    return WireBow(k1, sigma, chi2_w, len(ks), angle)

@@ -152,6 +152,9 @@ class WireFit:
         The offset's total 1-sigma is ``hypot(sigma_offset_px, sigma_sys_px)``.
     dropped_px : length (px) of the stretches left out because the centres there stray from
         the straight line as a whole (step 5: a shock or flow line along the wire).
+    clean_px : (M, 2) every clean profile centre (u, v), before the line's clipping and the
+        bent stretches' drop: what the bow of an undeclared image distortion is measured
+        from (:func:`cadra.imaging.wires.distortion.radial_from_centres`).
     """
 
     name: str
@@ -170,6 +173,7 @@ class WireFit:
     profile_axis: int = -1
     sigma_sys_px: float = 0.0
     dropped_px: float = 0.0
+    clean_px: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def distance_px(self, uv) -> np.ndarray:
         """Signed perpendicular distance (px) of points ``(N, 2)`` from the fitted line."""
@@ -282,11 +286,28 @@ def _not_found(name: str, why: str, n_rejected: int = 0) -> WireFit:
     return WireFit(name, False, f"wire {name!r} not found: {why}", n_rejected=n_rejected)
 
 
+def _recorded_path(p0: np.ndarray, p1: np.ndarray, ax: int, distortion):
+    """The wire's predicted path in the recorded image: (its ``1 - ax`` coordinate's range,
+    a function of that coordinate giving the ``ax`` one). Straight from ``p0`` to ``p1``, or
+    that line's image through ``distortion`` (curved; sampled every pixel)."""
+    other = 1 - ax
+    d = p1 - p0
+    if distortion is None:
+        return ((min(p0[other], p1[other]), max(p0[other], p1[other])),
+                lambda o: p0[ax] + (o - p0[other]) * (d[ax] / d[other]))
+    curve = distortion.distort(p0 + np.linspace(0.0, 1.0, int(math.hypot(*d)) + 2)[:, None] * d)
+    curve = curve[np.argsort(curve[:, other])]
+    return (curve[0, other], curve[-1, other]), lambda o: np.interp(o, curve[:, other],
+                                                                    curve[:, ax])
+
+
 def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
                  exclude, search_px: float, step_px: float, half_window: int,
-                 collect=None) -> WireFit:
-    """Find one wire near its predicted segment ``seg``; see the module docstring.
-    ``collect``, if given, receives the found wire's clean profiles (:class:`_Profiles`)."""
+                 collect=None, distortion=None) -> WireFit:
+    """Find one wire near its predicted segment ``seg`` (ideal pixels); see the module
+    docstring. ``collect``, if given, receives the found wire's clean profiles
+    (:class:`_Profiles`). ``distortion``: the recorded image's, the profiles taken along the
+    segment's curved image and the centres mapped to ideal pixels before the line fit."""
     H, W = img.shape
     p0, p1 = np.asarray(seg[0], float), np.asarray(seg[1], float)
     d = p1 - p0
@@ -296,12 +317,12 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
     slope = d[ax] / d[other]  # d(ax coordinate) / d(other coordinate) along the wire
     cos_t = abs(d[other]) / math.hypot(*d)
     n_lim = (W, H)
-    lo = max(min(p0[other], p1[other]), 0.0)
-    hi = min(max(p0[other], p1[other]), n_lim[other] - 1.0)
+    (lo, hi), path = _recorded_path(p0, p1, ax, distortion)
+    lo, hi = max(lo, 0.0), min(hi, n_lim[other] - 1.0)
     fixed = np.arange(math.ceil(lo + 2.0), math.floor(hi - 2.0) + 1, step_px).astype(float)
     if len(fixed) < MIN_PROFILES:
         return _not_found(name, f"its predicted path crosses only {hi - lo:.0f} px of the image")
-    pred = p0[ax] + (fixed - p0[other]) * slope
+    pred = path(fixed)
     S = int(round(search_px)) + _DETECT_ARM + 1
     offs = np.arange(-S, S + 1)
     base = np.rint(pred).astype(int)
@@ -382,7 +403,8 @@ def _measure_one(img: np.ndarray, name: str, seg, half_width_px: float, blocked,
                                 f"{max(MIN_PROFILES, math.ceil(MIN_USED_FRACTION * n_cand))}; "
                                 f"no wire-like dark line along {frac:.0%} of its predicted "
                                 f"path)", n_rejected=int(inside.sum()) - n_use)
-    fit, keep = _line_from_centres(name, c, fixed, ax, use, step_px, int(inside.sum()))
+    fit, keep = _line_from_centres(name, c, fixed, ax, use, step_px, int(inside.sum()),
+                                   distortion=distortion)
     if collect is not None and fit.found:
         collect.append(_Profiles(WireProfiles(P[use], widx[use, 0].astype(float), c[use], h,
                                               slope, cos_t), fixed[use], keep[use], ax,
@@ -405,15 +427,19 @@ class _Profiles:
 
 def _line_from_centres(name: str, c: np.ndarray, fixed: np.ndarray, ax: int,
                        use: np.ndarray, step_px: float, n_inside: int,
-                       sys_px: float = BLOCK_SYS_PX):
+                       sys_px: float = BLOCK_SYS_PX, distortion=None):
     """The wire's line from its profile centres ``c`` (profile axis ``ax``; ``use``: the
     clean ones): iterative 3-sigma clipping, the bent stretches left out (step 5; ``sys_px``
-    the bias a stretch of centres may share without being bent). Returns
-    (WireFit, the centres kept)."""
+    the bias a stretch of centres may share without being bent). With the recorded image's
+    ``distortion`` the centres are mapped to ideal pixels first, where the wire is straight.
+    Returns (WireFit, the centres kept)."""
     other = 1 - ax
     pts = np.empty((len(c), 2))
     pts[:, ax] = c
     pts[:, other] = fixed
+    if distortion is not None:
+        ok = np.isfinite(c)
+        pts[ok] = distortion.undistort(pts[ok])
     keep = use.copy()
     for _ in range(8):
         m, t, nrm, _ = tls_line(pts[keep])
@@ -438,7 +464,8 @@ def _line_from_centres(name: str, c: np.ndarray, fixed: np.ndarray, ax: int,
                    direction_px=(float(t[0]), float(t[1])), ends_px=ends,
                    centres_px=pts[keep].copy(), n_used=n_used,
                    n_rejected=n_inside - n_used, rms_px=rms_px,
-                   sigma_offset_px=sigma_off, profile_axis=ax, dropped_px=dropped), keep
+                   sigma_offset_px=sigma_off, profile_axis=ax, dropped_px=dropped,
+                   clean_px=pts[use].copy()), keep
 
 
 # --------------------------------------------------------------------------- affine
@@ -453,9 +480,10 @@ def _gauss_points(f: WireFit) -> np.ndarray:
 
 
 def _centroid_pass(img: np.ndarray, view: View, exclude: np.ndarray | None, search_px: float,
-                   step_px: float, half_window: int, collect: bool):
+                   step_px: float, half_window: int, collect: bool, distortion=None):
     """Steps 1-6 for every wire of ``view``: the centroid lines (``fits``, one per wire) and,
-    if ``collect``, each found wire's clean profiles (wire index -> :class:`_Profiles`)."""
+    if ``collect``, each found wire's clean profiles (wire index -> :class:`_Profiles`);
+    ``distortion`` the recorded image's (:func:`measure_wires`)."""
     segs = view.wire_lines_px()
     mark = view.reference_mark
     mark_r = mark.arm_px + MARK_CLEARANCE_PX
@@ -486,7 +514,8 @@ def _centroid_pass(img: np.ndarray, view: View, exclude: np.ndarray | None, sear
 
         got = [] if collect else None
         fits[i] = _measure_one(img, w.name, seg, 0.5 * view.wire_width_px(w),
-                               blocked, exclude, search_px, step_px, half_window, collect=got)
+                               blocked, exclude, search_px, step_px, half_window, collect=got,
+                               distortion=distortion)
         if got:
             collected[i] = got[0]
     return fits, collected
@@ -513,19 +542,20 @@ def _kept(g: _Profiles) -> WireProfiles:
 
 def wire_profiles(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
                   search_px: float = 30.0, step_px: float = 4.0,
-                  half_window: int = 8) -> list[WireProfiles]:
+                  half_window: int = 8, distortion=None) -> list[WireProfiles]:
     """The clean profiles of each wire of ``view`` found in ``image`` (the centroid lines'
     kept profiles; arguments as :func:`measure_wires`): what the image formation is fitted
     from (:func:`cadra.imaging.wires.formation.fit_formation`, over one image or several)."""
     img, exclude = _checked_image(image, exclude)
-    _, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window, True)
+    _, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window, True,
+                                  distortion)
     return [_kept(g) for g in collected.values()]
 
 
 def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
                   search_px: float = 30.0, step_px: float = 4.0,
                   half_window: int = 8, profile_model: bool = True,
-                  formation: Formation | None = None) -> WireMeasurement:
+                  formation: Formation | None = None, distortion=None) -> WireMeasurement:
     """Find every wire of ``view`` in ``image`` and solve the image->plane affine.
 
     Parameters
@@ -546,6 +576,10 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
         wires' widths with it held, unless its score test rejects it
         (:func:`~cadra.imaging.wires.formation.fit_widths`; the reason says so). None: the
         formation is fitted from this image alone.
+    distortion : the recorded image's :class:`~cadra.optics.distortion.Distortion` (None:
+        none). Each wire's profiles are then taken along its curved image, and their centres
+        mapped to ideal pixels, where the line is fitted: the lines, the affine and every
+        pixel coordinate returned are the ideal image's (docs/stage1.md, "Distorted images").
 
     Returns
     -------
@@ -560,7 +594,7 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
     """
     img, exclude = _checked_image(image, exclude)
     fits, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window,
-                                     profile_model)
+                                     profile_model, distortion)
     if not (profile_model and collected):
         return _solve_affine(view, fits)
     # the formation from the profiles the centroid lines kept (or the view's, held); then
@@ -586,7 +620,7 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
     for k, (i, g) in enumerate(collected.items()):
         c = fit_centres(g.wp, hs[k], formation)
         model[i], _ = _line_from_centres(fits[i].name, c, g.fixed, g.ax, np.isfinite(c),
-                                         step_px, g.n_inside, MODEL_BLOCK_SYS_PX)
+                                         step_px, g.n_inside, MODEL_BLOCK_SYS_PX, distortion)
     sens = {i: formation.sens[k] for k, i in enumerate(collected)}
     centroid = _solve_affine(view, fits)
     t2, n_lines = _disagreement(model, centroid.wires)
