@@ -17,13 +17,17 @@ Sections, all on station 3 of the bundled point-source range ``facilities/brl_sp
 3. **calibration**: the three biased sphere sample shots flown through this range, rendered,
    measured and calibrated: the injected station biases recovered (within 2 sigma, flags),
    as tools/bench_calibration.py --e2e does on the parallel range;
-4. **end to end** (``--e2e-draws``; 0 skips it): the two M-80 sample rounds flown through
+4. **roll** (``--roll-cases``): the Basic Finner at the sample shot's size (7 mm) at random
+   poses and rolls: its roll through the shadows' cones (error rms, sigma over it), with the
+   3-D pose's figures as in 1;
+5. **end to end** (``--e2e-draws``; 0 skips it): the two M-80 sample rounds flown through
    this range, rendered, measured and fitted (6-DOF, both rounds, as tools/validate_m80.py
    does on the parallel range): pulls of the free coefficients, the fraction within
    2 sigma, chi^2/nu against its expected scatter.
 
 Usage: python tools/validate_point_source.py [--cases 100] [--depth-cases 40] [--crb 4]
-[--e2e-draws 8] (about 1.3 s a case, 2 s a bound, 25 s a draw on one core: 15 min in all).
+[--roll-cases 30] [--e2e-draws 8] (about 1.3 s a case, 2 s a bound, 10 s a finned case,
+25 s a draw on one core: 20 min in all).
 The last printed line is a JSON object, recorded in results/validate_point_source.json.
 """
 
@@ -41,6 +45,7 @@ one_thread()
 from cadra.validation.point_source import (  # noqa: E402 (after one_thread)
     BODIES,
     FACILITY,
+    FINNER,
     calibration_e2e,
     e2e_draws,
     run_cases,
@@ -57,6 +62,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=100, help="random cases per body")
     ap.add_argument("--depth-cases", type=int, default=40, help="M-80 cases 50 mm off axis")
     ap.add_argument("--crb", type=int, default=4, help="cases per body given a bound")
+    ap.add_argument("--roll-cases", type=int, default=30, help="finned cases (roll)")
     ap.add_argument("--e2e-draws", type=int, default=8, help="end-to-end draws (0: none)")
     args = ap.parse_args(argv)
     s = run_tool("validate_point_source", ROOT, lambda: run(args), argv=argv,
@@ -77,6 +83,10 @@ def run(args) -> dict:
                                 offsets=DEPTH_OFFSETS_M, n_crb=min(args.crb, 4), parallel=True))
     out["depth"] = round_figures(depth)
     print(f"depth: {json.dumps(out['depth'])}", flush=True)
+    if args.roll_cases > 0:
+        out["roll"] = round_figures(summarize(run_cases(station, FINNER, args.roll_cases,
+                                                        seed=300)))
+        print(f"roll: {json.dumps(out['roll'])}", flush=True)
     out["calibration"] = round_figures(calibration_e2e())
     print(f"calibration: {json.dumps(out['calibration'])}", flush=True)
     if args.e2e_draws > 0:
@@ -101,6 +111,13 @@ def figures(out: dict) -> dict:
            "ps_parallel_error_max_mm": 1e3 * max(d.get("parallel_max_abs_3d", [float("nan")])),
            "ps_parallel_flagged_frac": d.get("parallel_flagged_frac"),
            "ps_failed_cases": sum(b["n"] - b["n_ok"] for b in acc.values()) + d["n"] - d["n_ok"]}
+    if "roll" in out:
+        r = out["roll"]
+        fig.update(ps_roll_cases_ok=r["n_ok"], ps_roll_cases=r["n"],
+                   ps_roll_rms_deg=r.get("roll_rms_deg"),
+                   ps_roll_sigma_ratio=r.get("roll_sigma_ratio"),
+                   ps_roll_3d_sigma_ratio_min=min(r.get("sigma_ratio_3d", [float("nan")])),
+                   ps_roll_3d_sigma_ratio_max=max(r.get("sigma_ratio_3d", [float("nan")])))
     c = out["calibration"]
     fig.update(ps_calibration_within_2sigma_frac=c["injected_within_2sigma_frac"],
                ps_calibration_false_flags=c["false_flags"])

@@ -61,8 +61,8 @@ from cadra.facility.reference import VIEW_AXES
 from cadra.imaging.silhouette.polygon import blurred_polygon, pixel_centres_inside
 
 __all__ = ["HAC_LAG_PX", "PERIOD_RAD", "TRACK_SIGMA_RAD", "RollCandidate", "StationRoll",
-           "ViewRoll", "ViewRollModel", "measure_station_roll", "resolve_roll_track",
-           "view_outline_px"]
+           "ViewRoll", "ViewRollModel", "conical_outline_px", "measure_roll",
+           "measure_station_roll", "resolve_roll_track", "view_outline_px", "wrap_period"]
 
 #: The cruciform's roll period, rad.
 PERIOD_RAD = 0.5 * math.pi
@@ -478,3 +478,51 @@ def resolve_roll_track(times_s, station_rolls, sigma_pred_rad: float = TRACK_SIG
         sig[k] = station_rolls[k].candidates[j].sigma_rad
         chosen[k] = j
     return roll, sig, chosen
+
+
+def wrap_period(x: float) -> float:
+    """``x`` (rad) brought into the cruciform's half period about 0, [-45, 45) deg."""
+    return (x + 0.5 * PERIOD_RAD) % PERIOD_RAD - 0.5 * PERIOD_RAD
+
+
+def conical_outline_px(body, view, projection, pose, tilt_rad: float, pose3d,
+                       roll_rad: float, n_points: int = 1024) -> np.ndarray:
+    """The exact outline (px, (N, 2)) of ``body`` at roll ``roll_rad`` in a point-source
+    ``view`` at stage one's view pose ``pose`` (film-plane ``(a, b, phi)``), the shadow's
+    cone made at the station's 3-D pose ``pose3d`` = (reference point, m; unit axis)
+    (:func:`cadra.imaging.silhouette.template.make_conical_template`, as the silhouette fit's
+    templates are)."""
+    from cadra.imaging.silhouette.template import make_conical_template, outline_px
+
+    r_ref, axis = pose3d
+    tpl = make_conical_template(body, view.optics(), np.asarray(r_ref, dtype=float),
+                                np.asarray(axis, dtype=float), n_points=n_points,
+                                roll_rad=float(roll_rad), tilt_rad=float(tilt_rad))
+    return outline_px(tpl, pose, projection)
+
+
+def measure_roll(body, views, images: dict, fits: dict, tilts: dict, masks: dict, settings,
+                 previous=None, pose3d=None):
+    """The roll of a finned body at one station from both views' fin silhouettes, each view's
+    fitted pose held (:func:`measure_station_roll`): ``views`` the station's views, ``fits``
+    their :class:`cadra.imaging.station.ViewResult`, ``tilts`` the axis' tilt out of each
+    view's plane, ``masks`` the wire masks, ``settings`` the silhouette fit's; ``previous``
+    this station's roll of the last round. A point-source view's outline is its shadow's
+    (:func:`conical_outline_px`, at ``pose3d``), a parallel view's the body's projection
+    (:func:`view_outline_px`)."""
+    import functools
+
+    models = {}
+    for name in ("top", "side"):
+        r = fits[name]
+        f = r.fit
+        profile = f.edge_profile or (f.edge_sigma_px, 0.0, 0.0, 0.0)
+        if views[name].projection == "point_source":
+            outline = functools.partial(conical_outline_px, body, views[name], r.projection,
+                                        f.pose, tilts[name], pose3d)
+        else:
+            outline = functools.partial(view_outline_px, body, r.projection, name, f.pose,
+                                        tilts[name])
+        models[name] = ViewRollModel(images[name], outline, masks.get(name), profile,
+                                     settings.fringe_width_ratio)
+    return measure_station_roll(models, previous=previous)

@@ -54,6 +54,7 @@ from cadra.imaging.distorted import (
     undeclared_bows,
     wires_miss_cause,
 )
+from cadra.imaging.roll import measure_roll, wrap_period
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 from cadra.imaging.silhouette.template import (
@@ -537,7 +538,7 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
                         img, station.views[name], body, tilts[name], settings, prev,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
                         formation=(formations or {}).get(name), pose3d=pose3d,
-                        restart=prev is not None and abs(_wrap_period(view_roll - prev.roll_rad))
+                        restart=prev is not None and abs(wrap_period(view_roll - prev.roll_rad))
                         > ROLL_RESTART_RAD)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                     att = _Attempt(None, f"measurement error ({type(exc).__name__}: {exc})")
@@ -571,8 +572,8 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
         roll_settled = True
         if finned:
             try:
-                station_roll = _station_roll(body, images, fits, tilts, masks, settings,
-                                             station_roll)
+                station_roll = measure_roll(body, station.views, images, fits, tilts, masks,
+                                            settings, station_roll, pose3d)
             except Exception as exc:  # noqa: BLE001 - the pose stands without a roll
                 station_roll = None
                 roll_warning = f"roll not measured ({type(exc).__name__}: {exc})"
@@ -580,7 +581,7 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
                         for n, r in fits.items()}
                 break
             new_roll = station_roll.best.roll_rad
-            roll_settled = abs(_wrap_period(new_roll - roll)) < ROLL_TOL_RAD
+            roll_settled = abs(wrap_period(new_roll - roll)) < ROLL_TOL_RAD
             roll = new_roll
         if (change < 2e-5 and moved_m < CONICAL_POSITION_TOL_M and roll_settled
                 and _round > 0):   # round 0 is a quick pass
@@ -627,17 +628,13 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
 
 
 def point_source_station(station: Station, body) -> bool:
-    """Whether the station's views are point-source ones (then both must be, and the body
-    one of revolution: a finned body's roll is measured through parallel views only)."""
+    """Whether the station's views are point-source ones (then both must be)."""
     kinds = {v.projection for v in station.views.values()}
     if "point_source" not in kinds:
         return False
     if len(kinds) > 1:
         raise ValueError(f"station {station.id}: one point-source and one parallel view; "
                          f"stage one measures a station whose views share their optics")
-    if isinstance(body, FinnedBody):
-        raise ValueError(f"station {station.id}: a finned body's roll is measured through "
-                         f"parallel views only; this station's are point-source")
     return True
 
 
@@ -668,28 +665,3 @@ def _views_disagree(pose: StationPose, results: dict, radial=None) -> str:
         why.append(f"the two views disagree on x by {xc:.3g} sigma (> {X_CONSISTENCY_MAX:g}): "
                    f"swapped, foreign or repeated images?")
     return "; ".join(why)
-
-
-def _wrap_period(x: float) -> float:
-    """``x`` (rad) brought into the cruciform's half period about 0, [-45, 45) deg."""
-    from cadra.imaging.roll import PERIOD_RAD
-
-    return (x + 0.5 * PERIOD_RAD) % PERIOD_RAD - 0.5 * PERIOD_RAD
-
-
-def _station_roll(body, images: dict, fits: dict, tilts: dict, masks: dict,
-                  settings: FitSettings, previous=None):
-    """The roll of a finned body from both views' fin silhouettes, each view's fitted pose
-    held (:mod:`cadra.imaging.roll`); ``previous`` this station's roll of the last round."""
-    from cadra.imaging.roll import ViewRollModel, measure_station_roll, view_outline_px
-
-    models = {}
-    for name in VIEWS:
-        r = fits[name]
-        f = r.fit
-        profile = f.edge_profile or (f.edge_sigma_px, 0.0, 0.0, 0.0)
-        outline = functools.partial(view_outline_px, body, r.projection, name, f.pose,
-                                    tilts[name])
-        models[name] = ViewRollModel(images[name], outline, masks.get(name), profile,
-                                     settings.fringe_width_ratio)
-    return measure_station_roll(models, previous=previous)

@@ -47,6 +47,9 @@ from cadra.validation.stage1_bench import ratio_se
 BODIES = {"sphere": {"kind": "sphere", "d_m": 0.03556},
           "capsule": {"kind": "capsule", "preset": "M2"},
           "bullet": {"kind": "bullet", "preset": "M80"}}
+#: The finned body whose roll is scored: seed 001's Basic Finner at the sample shot's size
+#: (d = 7 mm, 2.1 cm tip to tip; sample_shots/specs/finner_1.toml)
+FINNER = {"kind": "finner", "preset": "basic_finner", "d_cm": 0.7}
 #: The flight velocity of every case, m/s (motion blur over the exposure, the clutter's axis).
 SPEED_M_S = 830.0
 
@@ -61,6 +64,7 @@ class StationCase:
     axis_F: np.ndarray
     images: dict          # view name -> rendered image (uint8)
     truth: dict           # view name -> the scene's truth (view_scene) + scene, config, affine
+    roll_rad: float = math.nan    # the roll about the nose axis (quat_from_axis_roll's)
 
 
 def station_case(station: Station, body_spec: dict, r_ref_F, axis_F, rng: np.random.Generator,
@@ -81,7 +85,7 @@ def station_case(station: Station, body_spec: dict, r_ref_F, axis_F, rng: np.ran
         cfg = config.replace(seed=int(rng.integers(1 << 30)))
         images[name] = render(scene, cfg, rng)
         truth[name] = {**tr, "scene": scene, "config": cfg, "affine": affine}
-    return StationCase(station, dict(body_spec), r, a, images, truth)
+    return StationCase(station, dict(body_spec), r, a, images, truth, float(roll))
 
 
 def random_case(station: Station, body_spec: dict, rng: np.random.Generator, *,
@@ -167,6 +171,11 @@ def score_case(case: StationCase, result, sphere: bool) -> dict:
         theta, psi = truth_inclinations(case)
         out["error_3d"] += [p.theta_rad - theta, p.psi_rad - psi]
         out["sigma_3d"] += [p.sigma_theta_rad, p.sigma_psi_rad]
+    if getattr(result, "roll", None) is not None and math.isfinite(case.roll_rad):
+        # a cruciform's roll is known modulo its 90 deg period
+        best = result.roll.best
+        out["roll_error_deg"] = (math.degrees(best.roll_rad - case.roll_rad) + 45.0) % 90.0 - 45.0
+        out["roll_sigma_deg"] = math.degrees(best.sigma_rad)
     return out
 
 
@@ -270,6 +279,12 @@ def summarize(run: dict) -> dict:
         b3 = _rms([b["bound_3d"] for b in run["bounds"]])
         out.update(view_crb=b_view.tolist(), view_crb_ratio=(rms / b_view).tolist(),
                    crb_3d=b3.tolist(), crb_ratio_3d=(rms3 / b3).tolist())
+    rolls = [(s["roll_error_deg"], s["roll_sigma_deg"]) for s in ok if "roll_error_deg" in s]
+    if rolls:
+        e, sg = np.array(rolls).T
+        out.update(n_roll=len(rolls), roll_rms_deg=float(_rms(e)),
+                   roll_sigma_ratio=float(_rms(sg) / _rms(e)),
+                   roll_pull_rms=float(_rms(e / sg)))
     par = [p for p in run["parallel_errors"] if p is not None]
     if par:
         par = np.array(par)
