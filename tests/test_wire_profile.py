@@ -12,8 +12,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from cadra.imaging.wires.fit import _centroids, measure_wires
+from cadra.imaging.wires.fit import measure_wires
 from cadra.imaging.wires.formation import fit_formation
+from cadra.imaging.wires.line import _centroids
 from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres
 from cadra.synthetic.render import RenderConfig, Scene, render
 from cadra.synthetic.scene import wire_polygon

@@ -141,7 +141,7 @@ def _parabola(f, k0: float, h: float) -> tuple[float, float, float]:
 
 def radial_from_centres(view, wires) -> WireBow | None:
     """The radial distortion ``k1`` that straightens ``view``'s wires, from their clean
-    centres (:attr:`cadra.imaging.wires.fit.WireFit.clean_px`, the recorded image's pixels):
+    centres (:attr:`cadra.imaging.wires.line.WireFit.clean_px`, the ideal image's pixels):
     the sum of the centres' squared distances from each wire's own total-least-squares line,
     after ``k1`` is removed from them, is a parabola in ``k1``; its minimum is the estimate
     and its curvature with the residuals' scatter the sigma (a linear least squares in

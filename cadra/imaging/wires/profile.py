@@ -1,6 +1,6 @@
 """A wire's cross-section modelled as the image forms it: the centres without a phase bias.
 
-A wire's centroid (:func:`cadra.imaging.wires.fit._centroids`) needs no model of the profile, but
+A wire's centroid (:func:`cadra.imaging.wires.line._centroids`) needs no model of the profile, but
 it errs by a periodic function of the wire's sub-pixel phase (up to ~0.007 px for a 2 px wire)
 and its darkness weights carry the noise of every sample in its window. This module fits each
 profile, sampled through pixel centres along an image axis, with a model of how the image was
