@@ -21,6 +21,9 @@ An :class:`Extra` is one scalar unknown shared by the shots it applies to, of on
                 about the range axis)
   angle_theta   ``b`` to theta (psi likewise): an offset  rad        1
                 of the station's angle reference
+  response      ``v g`` to x .. psi: a facility effect    its own    ``g``, given per shot
+                whose response ``g`` at the station was                (``response``)
+                computed from the facility's geometry
   ============  ========================================  =========  =====================
 
   Timing: the attitude's change over ``dt`` (rate x tens of ns, ~1e-6 rad) and the
@@ -46,9 +49,12 @@ from cadra.channels import POSITION
 from cadra.dynamics.layout import N_PHYS, P_CG_OFFSET
 
 MEASURES = ("position_x", "position_y", "position_z", "timing", "scale", "angle_theta",
-            "angle_psi")
+            "angle_psi", "response")
 #: the lateral position channels (y, z) a scale error acts on
 _YZ = np.array([CHANNELS.index("y"), CHANNELS.index("z")])
+#: the channels a response is given in (x, y, z, theta, psi: the roll is left out)
+_RESPONSE = np.array([CHANNELS.index(c) for c in ("x", "y", "z", "theta", "psi")])
+_N_RESPONSE = len(_RESPONSE)
 
 
 def phys_direction(*terms) -> tuple[float, ...]:
@@ -65,7 +71,9 @@ def phys_direction(*terms) -> tuple[float, ...]:
 @dataclass(frozen=True)
 class Extra:
     """One extra unknown (module doc). ``shots``: the shot ids it applies to (None: all);
-    ``held``: kept at ``value``, not fitted."""
+    ``held``: kept at ``value``, not fitted; ``response`` (measure ``"response"``): ``((shot
+    id, (d x, d y, d z, d theta, d psi) per unit value at the station), ...)``, a shot not
+    listed unaffected."""
 
     name: str
     phys_direction: tuple[float, ...] | None = None
@@ -74,6 +82,7 @@ class Extra:
     shots: tuple[str, ...] | None = None
     value: float = 0.0
     held: bool = False
+    response: tuple = ()
 
     def __post_init__(self):
         if (self.phys_direction is None) == (self.station is None):
@@ -87,6 +96,13 @@ class Extra:
             object.__setattr__(self, "phys_direction", d)
         elif self.measure not in MEASURES:
             raise ValueError(f"extra {self.name!r}: measure must be one of {MEASURES}")
+        elif self.measure == "response":
+            resp = tuple((str(sid), tuple(float(v) for v in g)) for sid, g in self.response)
+            if not resp or any(len(g) != _N_RESPONSE or not np.all(np.isfinite(g))
+                               for _, g in resp):
+                raise ValueError(f"extra {self.name!r}: a response needs, per shot, "
+                                 f"{_N_RESPONSE} finite values (x, y, z, theta, psi)")
+            object.__setattr__(self, "response", resp)
         if not np.isfinite(self.value):
             raise ValueError(f"extra {self.name!r}: value must be finite")
         if self.shots is not None:
@@ -132,6 +148,10 @@ def station_columns(extras: Sequence[Extra], shot_id: str, stations: np.ndarray,
             C[rows, CHANNELS.index(e.measure[len("angle_"):]), j] = 1.0
         elif e.measure == "timing":
             C[rows[:, None], POSITION, j] = states[rows, 3:6]
+        elif e.measure == "response":
+            g = dict(e.response).get(shot_id)
+            if g is not None:
+                C[rows[:, None], _RESPONSE, j] = np.asarray(g)
         else:
             C[rows[:, None], _YZ, j] = pred[rows[:, None], _YZ]
     return C

@@ -12,8 +12,9 @@ three kinds:
   C_m within the shot), differentiated by complex step through the same aero-model evaluator;
 - ``measurement``: per-station terms added to what stage one measures (a station's position
   bias in x, y or z -- one candidate per channel, so a one-channel survey error is not charged
-  for three parameters --, its timing bias, its optical scale error), linear in their
-  parameters;
+  for three parameters --, its timing bias, its optical scale error; on point-source stations
+  each view's spark off its surveyed distance, through the response the facility's geometry
+  gives, :mod:`cadra.gap.optics`), linear in their parameters;
 - ``held``: a parameter the model holds (``vary = false``), freed from its held value: a
   held value the data reject is an unmodelled effect too, and the sigmas of the free
   parameters it moves are not valid while it is held (seed 004 holds parameters as everyday
@@ -49,7 +50,8 @@ class Candidate:
 
     ``phys_dirs`` (k, N_PHYS) for a dynamics effect; ``terms`` {coefficient: expression} in the
     new parameters ``params`` for an aero effect; ``station``/``measure`` ("position_x",
-    "position_y", "position_z", "timing", "scale") for a measurement effect; for a held
+    "position_y", "position_z", "timing", "scale", or "response" with its ``response`` per
+    shot, :class:`cadra.fitting.extras.Extra`) for a measurement effect; for a held
     parameter, ``params`` is its name. ``scope``: a dynamics effect's parameters per shot
     ("shot") or one set for every shot of the fit ("set").
     """
@@ -63,6 +65,7 @@ class Candidate:
     station: int | None = None
     measure: str = ""
     scope: str = "shot"
+    response: tuple = ()
 
     @property
     def n_params(self) -> int:
@@ -180,7 +183,10 @@ def aero_candidates(model: AeroModel, mach_nominal: float) -> list[Candidate]:
     return out
 
 
-def measurement_candidates(stations) -> list[Candidate]:
+def measurement_candidates(stations, sparks: dict | None = None) -> list[Candidate]:
+    """The per-station measurement candidates; ``sparks``: ``(station, view)`` -> the
+    response of each shot's measurement there to that view's spark distance
+    (:func:`cadra.gap.optics.spark_responses`), one candidate each."""
     out = []
     for st in stations:
         st = int(st)
@@ -194,6 +200,14 @@ def measurement_candidates(stations) -> list[Candidate]:
         out.append(Candidate(f"station {st} optical scale", "measurement",
                              (f"st{st}_scale",), "the station's image scale is off",
                              station=st, measure="scale"))
+    for (st, view), resp in sorted((sparks or {}).items()):
+        if int(st) in {int(s) for s in stations}:
+            out.append(Candidate(f"station {st} {view} spark distance", "measurement",
+                                 (f"st{st}_{view}_spark_m",),
+                                 f"the {view} view's spark is off its surveyed distance from "
+                                 f"the film (m, + farther): a scale error growing with the "
+                                 f"model's offset", station=int(st), measure="response",
+                                 response=resp))
     return out
 
 
@@ -236,8 +250,9 @@ def same_term(model: AeroModel, held: Candidate, aero: Candidate, mach_nominal: 
 
 
 def library(model: AeroModel, stations, mach_nominal: float,
-            n_shots: int = 1) -> list[Candidate]:
-    """Every candidate for a fit of ``n_shots`` shots with ``model`` over ``stations``. A held
+            n_shots: int = 1, sparks: dict | None = None) -> list[Candidate]:
+    """Every candidate for a fit of ``n_shots`` shots with ``model`` over ``stations``
+    (``sparks``: the spark candidates' responses, :func:`measurement_candidates`). A held
     parameter that is the same term as an aero candidate is offered once, as that candidate
     (its description names the held parameter)."""
     aero = aero_candidates(model, mach_nominal)
@@ -251,4 +266,5 @@ def library(model: AeroModel, stations, mach_nominal: float,
             i = aero.index(twin)
             aero[i] = replace(twin, description=twin.description
                               + f" (the model holds this term: {h.params[0]})")
-    return dynamics_candidates(n_shots) + aero + held + measurement_candidates(stations)
+    return (dynamics_candidates(n_shots) + aero + held
+            + measurement_candidates(stations, sparks))

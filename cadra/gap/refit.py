@@ -86,7 +86,7 @@ def candidate_extras(c: Candidate, shot_ids: Sequence[str]) -> list[Extra]:
                                  phys_direction=tuple(d), shots=(sid,)))
         return out
     if c.kind == "measurement":
-        return [Extra(c.params[0], station=c.station, measure=c.measure)]
+        return [Extra(c.params[0], station=c.station, measure=c.measure, response=c.response)]
     return []
 
 

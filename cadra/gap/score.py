@@ -41,6 +41,7 @@ from cadra.fitting.solver import FitOptions
 from cadra.flight.data import ShotData
 from cadra.gap import verdict as vd
 from cadra.gap.candidates import Candidate, augmented_model, form_counterpart, library
+from cadra.gap.optics import spark_responses
 from cadra.gap.refit import (
     PROFILE_MAX_PARAMS,
     candidate_extras,
@@ -513,7 +514,8 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                                     / np.diff(s.t_s)) / s.rigid.speed_of_sound_m_s
                           for s in shots]))
     cands = (list(candidates) if candidates is not None
-             else library(model, stations, mach, n_shots=len(ids)))
+             else library(model, stations, mach, n_shots=len(ids),
+                          sparks=spark_responses(shots)))
     # weighted Bonferroni (family-wise error alpha): half of alpha for the physics
     # candidates (dynamics, aero, held: few), half for the per-station measurement ones
     # (many), so the many station candidates do not dilute the test of the few physical ones

@@ -1,0 +1,74 @@
+"""A point-source view's spark off its surveyed distance, as the gap library models it
+(cadra.gap.optics): the response of a station's measured pose, against the closed form of a
+central projection whose film map is re-solved from the wires; and the extra unknown that
+carries it into a fit (cadra.fitting.extras, measure "response")."""
+
+import numpy as np
+import pytest
+
+from cadra.fitting.extras import Extra, station_columns
+from cadra.gap.optics import _moved, _view_pose, spark_response
+from cadra.io.facility_file import load_facility
+
+STATION = load_facility("brl_spark").stations[2]
+
+
+def _closed_form(view, q, depth, wire_names):
+    """d(lateral) / d(delta) of a point at lateral coordinate ``q`` (from the spark's foot)
+    and ``depth`` along the sight axis (toward the spark +), when the film map is set by
+    wires at their mean depth ``d_w``: the magnification (H - d_f) / (H - d) changes with the
+    spark's distance H, and the map re-solved from the wires takes out its change at d_w:
+    q (d_w - d) / ((H - d_w)(H - d))."""
+    k = view.sight_axis
+    H = abs(view.source_position_m[k])
+    sign = np.sign(view.source_position_m[k])
+    d_w = np.mean([sign * w.p0_m[k] for w in view.wires if w.name in wire_names]
+                  + [sign * w.p1_m[k] for w in view.wires if w.name in wire_names])
+    d = sign * depth
+    return q * (d_w - d) / ((H - d_w) * (H - d))
+
+
+@pytest.mark.parametrize("pose", [(0.004, 0.02, -0.015, 0.01, -0.02),
+                                  (-0.006, -0.03, 0.03, 0.0, 0.0),
+                                  (0.0, 0.012, 0.025, -0.02, 0.01)])
+def test_a_sparks_distance_scales_the_lateral_position_about_its_foot(pose):
+    """The top view's spark farther by delta moves the measured y as the closed form says
+    (the y wires, 200 mm below the line of flight, set the film's y scale), the side view's
+    the measured z; both to 1 % (the surveyed wires are not quite level). At the spark's
+    foot nothing moves (to 1 %), and the response is small in the channel the other view
+    measures."""
+    p = (STATION.x_m + pose[0], *pose[1:])
+    top = spark_response(STATION, "top", p)
+    side = spark_response(STATION, "side", p)
+    assert top[1] == pytest.approx(_closed_form(STATION.views["top"], p[1], p[2],
+                                                ("y-", "y+")), rel=0.01)
+    assert side[2] == pytest.approx(_closed_form(STATION.views["side"], p[2], p[1],
+                                                 ("z-", "z+")), rel=0.01)
+    assert abs(top[2]) < 0.05 * abs(top[1]) and abs(side[1]) < 0.05 * abs(side[2])
+    foot = spark_response(STATION, "top", (STATION.x_m, 0.0, p[2], 0.0, 0.0))
+    assert np.all(np.abs(foot[:3]) < 0.01 * abs(top[1]))     # the wires are not quite level
+
+
+def test_with_the_spark_where_the_file_says_the_pose_comes_back_exactly():
+    from cadra.conventions import axis_from_inclinations
+    from cadra.imaging.combine import combine_views
+
+    r, a = np.array([STATION.x_m + 0.003, 0.02, -0.01]), axis_from_inclinations(0.02, -0.01)
+    views = STATION.views
+    p = combine_views(*(_view_pose(views[n], views[n], r, a) for n in ("top", "side")))
+    assert np.allclose([p.x_m, p.y_m, p.z_m], r, atol=1e-12)
+    moved = combine_views(_view_pose(views["top"], _moved(views["top"], 1e-3), r, a),
+                          _view_pose(views["side"], views["side"], r, a))
+    assert abs(moved.y_m - r[1]) > 1e-6          # a millimetre moves y by micrometres
+
+
+def test_a_response_extra_adds_its_response_at_its_station_for_its_shots():
+    g = (1e-3, -2e-3, 3e-4, 1e-5, -2e-5)
+    e = Extra("st3_top_spark_m", station=3, measure="response", response=(("A", g),))
+    stations = np.array([2, 3, 4])
+    C = station_columns([e], "A", stations, np.zeros((3, 6)), np.zeros((3, 13)))
+    assert np.allclose(C[1, :5, 0], g) and np.all(C[[0, 2], :, 0] == 0) and C[1, 5, 0] == 0
+    assert np.all(station_columns([e], "B", stations, np.zeros((3, 6)),
+                                  np.zeros((3, 13))) == 0)
+    with pytest.raises(ValueError, match="response"):
+        Extra("bad", station=3, measure="response", response=(("A", (1.0, 2.0)),))
