@@ -555,8 +555,12 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
             break
         moved_m = 0.0
         if conical:     # the shadow templates follow the pose the views now give
-            new3d = _station_pose3d({n: _view_pose(fits[n].fit, fits[n].wires)
-                                     for n in VIEWS}, sphere)
+            try:
+                new3d = _station_pose3d({n: _view_pose(fits[n].fit, fits[n].wires)
+                                         for n in VIEWS}, sphere)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                return StationResult(station_id, "failed", "the two views' rays from their "
+                                     f"sparks do not meet ({exc})", None, fits)
             moved_m = float(np.linalg.norm(np.subtract(new3d[0], pose3d[0])))
             pose3d = new3d
             new = _tilts_of(station, pose3d[1])

@@ -66,7 +66,10 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "gap_scoring": ("The size of an added effect of several parameters, scored as a vector",
                     "gap.md"),
     "validate_distortion": ("Distorted records: a seed-002-size distortion calibrated from "
-                            "a grid, removed by stage one, or undeclared", "stage1.md"),
+                            "a grid, removed by stage one, or undeclared; a small undeclared "
+                            "one found from the wires' bow", "stage1.md"),
+    "validate_spark_gap": ("A point-source spark off its surveyed place, named by the gap "
+                           "diagnosis", "gap.md"),
     "bench_starts": ("Starting values: epicyclic arms against damped sines", "fitting.md"),
     "bench_motion": ("Classic motion methods: speed and accuracy", "motion.md"),
     "bench_simulator": ("The 6-DOF simulator's speed", "dynamics.md"),
