@@ -106,10 +106,7 @@ def add_bows(found: dict, bows: dict) -> dict:
 
     out = dict(found)
     for name, bow in bows.items():
-        if name in out:
-            k1 = out[name].k1 + bow.k1
-            bow = replace(bow, k1=k1, max_angle_deg=bow.max_angle_deg * abs(k1 / bow.k1))
-        out[name] = bow
+        out[name] = replace(bow, k1=out[name].k1 + bow.k1) if name in out else bow
     return out
 
 

@@ -87,22 +87,27 @@ BOW_Z = 6.0
 #: the wires' own ``k1`` agree with their common one unless their scatter about it exceeds
 #: chi2's upper quantile at this probability (a shock or flow line bends one wire alone)
 BOW_AGREE_P = 1e-3
-#: the ``k1`` steps the sum of squares is sampled at (it is a parabola in ``k1`` to far beyond)
-_BOW_STEP = 1e-4
 
 
 @dataclass(frozen=True)
 class WireBow:
-    """The radial distortion ``k1`` (:meth:`Distortion.for_image`: about the image centre,
-    radius the half-diagonal) that straightens a view's wires' centres, with its 1-sigma;
-    the wires' own ``k1`` scatter about it (chi2 over ``n_wires - 1`` degrees of freedom)
-    and the largest line-direction change it makes over the image (deg)."""
+    """The radial distortion ``k1`` (:meth:`Distortion.for_image`: about the centre of the
+    ``width_px`` x ``height_px`` image, radius the half-diagonal) that straightens a view's
+    wires' centres, with its 1-sigma; the wires' own ``k1`` scatter about it (chi2 over
+    ``n_wires - 1`` degrees of freedom)."""
 
     k1: float
     sigma_k1: float
     chi2_wires: float
     n_wires: int
-    max_angle_deg: float
+    width_px: int
+    height_px: int
+
+    @property
+    def max_angle_deg(self) -> float:
+        """The largest line-direction change the distortion makes over the image (deg)."""
+        W, H = self.width_px, self.height_px
+        return math.degrees(Distortion.for_image(W, H, k1=self.k1).max_angle_change_rad(W, H))
 
     @property
     def z(self) -> float:
@@ -128,65 +133,44 @@ class WireBow:
         return Distortion.for_image(width_px, height_px, k1=self.k1, covariance=cov)
 
 
-def _parabola(f, k0: float, h: float) -> tuple[float, float, float]:
-    """(minimum's ``k1``, half the second derivative, minimum value) of ``f`` from three
-    samples about ``k0``."""
-    fm, f0, fp = f(k0 - h), f(k0), f(k0 + h)
-    a = (fp + fm - 2.0 * f0) / (2.0 * h * h)
-    b = (fp - fm) / (2.0 * h)
-    if not a > 0:
-        return math.nan, a, f0
-    return k0 - b / (2.0 * a), a, f0 - b * b / (4.0 * a)
-
-
 def radial_from_centres(view, wires) -> WireBow | None:
     """The radial distortion ``k1`` that straightens ``view``'s wires, from their clean
-    centres (:attr:`cadra.imaging.wires.line.WireFit.clean_px`, the ideal image's pixels):
-    the sum of the centres' squared distances from each wire's own total-least-squares line,
-    after ``k1`` is removed from them, is a parabola in ``k1``; its minimum is the estimate
-    and its curvature with the residuals' scatter the sigma (a linear least squares in
-    ``k1``, the lines' offsets and directions). Each wire alone gives its own ``k1``; their
-    scatter about the common one tells a distortion (every wire bowed as one) from a shock or
-    a flow line along a wire. A wire through the image centre is not bowed by a radial
-    distortion and carries no weight. Milliseconds; None with fewer than two bowed wires."""
+    centres (:attr:`cadra.imaging.wires.line.WireFit.clean_px`, the ideal image's pixels).
+    Removing ``k1`` moves a recorded centre ``q`` to ``q - k1 b(q)`` to first order (``b``
+    the displacement per unit ``k1``, :meth:`Distortion.basis`), so each centre's distance
+    from its wire's line changes by ``-k1 n.b``: each wire's ``k1`` is the least-squares
+    coefficient of ``n.b`` in its centres' distances from their total-least-squares line,
+    with the line's offset and turn (a constant and a slope along it) fitted beside it, and
+    its sigma from the residuals' scatter. Their scatter about the weighted common ``k1``
+    tells a distortion (every wire bowed as one) from a shock or a flow line along a wire. A
+    wire through the image centre is not bowed and carries no weight. First order in
+    ``k1``: a bow of pixels is measured again after it is removed (stage one's passes,
+    :data:`cadra.imaging.distorted.BOW_PASSES`). A fraction of a millisecond a wire; None
+    with fewer than two bowed wires."""
     from cadra.imaging.wires.straightness import tls_line
 
     W, H = view.width_px, view.height_px
-    pts = [np.asarray(w.clean_px, float) for w in wires.wires
-           if w.found and len(w.clean_px) >= 10]
-    if len(pts) < 2:
-        return None
-
-    def sums(k1: float) -> np.ndarray:
-        d = Distortion.for_image(W, H, k1=k1)
-        return np.array([float(np.sum(tls_line(d.undistort(p))[3] ** 2)) for p in pts])
-
-    cache: dict[float, np.ndarray] = {}
-
-    def each(k1):
-        if k1 not in cache:
-            cache[k1] = sums(k1)
-        return cache[k1]
-
-    # per wire: its parabola about 0 (exact to rounding: the residuals are linear in k1
-    # over these steps), its k1 and sigma (residual scale from its own minimum)
+    unit = Distortion.for_image(W, H)
     ks, ws = [], []
-    for i, p in enumerate(pts):
-        k, a, smin = _parabola(lambda k1, i=i: each(k1)[i], 0.0, _BOW_STEP)
-        dof = len(p) - 3
-        if not (math.isfinite(k) and a > 0 and dof > 0):
+    for w in wires.wires:
+        p = np.asarray(w.clean_px, float) if w.found else np.zeros((0, 2))
+        if len(p) < 10:
             continue
-        var = (smin / dof) / a
+        m, t, n, r = tls_line(p)
+        g = unit.basis(p)[:, :, 0] @ n                 # n . b: the bow per unit k1
+        A = np.column_stack([np.ones(len(p)), (p - m) @ t, g])
+        coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+        dof = len(p) - 3
+        s2 = float(np.sum((r - A @ coef) ** 2)) / dof
+        cov = np.linalg.pinv(A.T @ A)
+        var = s2 * cov[2, 2]
         if var > 0 and math.isfinite(var):
-            ks.append(k)
+            ks.append(float(coef[2]))
             ws.append(1.0 / var)
-    # a wire too short or too central to be bowed gives a k1 of huge sigma: its weight
-    # is near zero, so it neither helps nor hurts the common estimate
     if len(ks) < 2:
         return None
     ks, ws = np.array(ks), np.array(ws)
     k1 = float(np.sum(ws * ks) / np.sum(ws))
     sigma = float(1.0 / math.sqrt(np.sum(ws)))
     chi2_w = float(np.sum(ws * (ks - k1) ** 2))
-    angle = math.degrees(Distortion.for_image(W, H, k1=k1).max_angle_change_rad(W, H))
-    return WireBow(k1, sigma, chi2_w, len(ks), angle)
+    return WireBow(k1, sigma, chi2_w, len(ks), W, H)
