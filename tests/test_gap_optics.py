@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cadra.fitting.extras import Extra, station_columns
-from cadra.gap.optics import _moved, _view_pose, spark_response
+from cadra.gap.optics import film_view_pose, spark_moved, spark_response
 from cadra.io.facility_file import load_facility
 
 STATION = load_facility("brl_spark").stations[2]
@@ -55,10 +55,10 @@ def test_with_the_spark_where_the_file_says_the_pose_comes_back_exactly():
 
     r, a = np.array([STATION.x_m + 0.003, 0.02, -0.01]), axis_from_inclinations(0.02, -0.01)
     views = STATION.views
-    p = combine_views(*(_view_pose(views[n], views[n], r, a) for n in ("top", "side")))
+    p = combine_views(*(film_view_pose(views[n], views[n], r, a) for n in ("top", "side")))
     assert np.allclose([p.x_m, p.y_m, p.z_m], r, atol=1e-12)
-    moved = combine_views(_view_pose(views["top"], _moved(views["top"], 1e-3), r, a),
-                          _view_pose(views["side"], views["side"], r, a))
+    moved = combine_views(film_view_pose(views["top"], spark_moved(views["top"], 1e-3), r, a),
+                          film_view_pose(views["side"], views["side"], r, a))
     assert abs(moved.y_m - r[1]) > 1e-6          # a millimetre moves y by micrometres
 
 

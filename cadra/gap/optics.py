@@ -30,7 +30,8 @@ import numpy as np
 
 from cadra.conventions import axis_from_inclinations
 
-__all__ = ["SPARK_STEP_M", "point_source_facility", "spark_response", "spark_responses"]
+__all__ = ["SPARK_STEP_M", "film_view_pose", "point_source_facility", "spark_moved",
+           "spark_response", "spark_responses"]
 
 #: the spark displacement the response is differenced over, m
 SPARK_STEP_M = 1e-4
@@ -56,7 +57,7 @@ def point_source_facility(name: str):
     return fac
 
 
-def _moved(view, delta_m: float):
+def spark_moved(view, delta_m: float):
     """``view`` with its spark ``delta_m`` farther from its film (the film where it was)."""
     k = view.sight_axis
     S = np.array(view.source_position_m, dtype=float)
@@ -64,7 +65,7 @@ def _moved(view, delta_m: float):
     return replace(view, source_position_m=S, film_distance_m=view.film_distance_m + delta_m)
 
 
-def _view_pose(declared, true, r, axis):
+def film_view_pose(declared, true, r, axis):
     """The view pose stage one measures from an image cast by ``true`` (its spark), its film
     placement solved from the wires' shadows with ``declared``'s geometry."""
     from cadra.facility.reference import fit_affine_to_wires
@@ -91,8 +92,8 @@ def spark_response(station, view_name: str, pose) -> np.ndarray:
     axis = axis_from_inclinations(*angles)
 
     def measured(delta):
-        poses = {n: _view_pose(v, _moved(v, delta) if n == view_name else v, r, axis)
-                 for n, v in station.views.items()}
+        poses = {n: film_view_pose(v, spark_moved(v, delta) if n == view_name else v, r,
+                                   axis) for n, v in station.views.items()}
         p = combine_views(poses["top"], poses["side"])
         return np.array([p.x_m, p.y_m, p.z_m, p.theta_rad, p.psi_rad])
 

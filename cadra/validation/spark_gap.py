@@ -46,10 +46,10 @@ def _rounds(k: int):
 
 def _with_spark(facility, station_id: int, view: str, delta_m: float):
     """``facility`` with ``station_id``'s ``view`` spark ``delta_m`` farther from its film."""
-    from cadra.gap.optics import _moved
+    from cadra.gap.optics import spark_moved
 
-    stations = tuple(dataclasses.replace(s, views={**s.views, view: _moved(s.views[view],
-                                                                          delta_m)})
+    stations = tuple(dataclasses.replace(s, views={**s.views,
+                                                   view: spark_moved(s.views[view], delta_m)})
                      if s.id == station_id else s for s in facility.stations)
     return dataclasses.replace(facility, stations=stations)
 
