@@ -318,7 +318,7 @@ def test_an_undeclared_small_distortion_is_found_from_the_bow_and_removed(distor
                                for n, v in st.views.items()})
     rec = station_case(small, body, np.array(case.r_ref_F), case.axis_F,
                        np.random.default_rng(5), roll_rad=0.4)
-    res = measure_station(st, rec.images, body, overlays=False)
+    res = measure_station(st, rec.images, body, overlays=False, max_rounds=2)
     assert res.status == "warning"
     named = [w for w in res.warnings if "does not declare" in w]
     assert {w.split(":")[0] for w in named} == {"top", "side"}

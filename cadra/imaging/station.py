@@ -454,14 +454,18 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
     (:func:`view_formation`); a view without one fits its image's own.
     """
     args = (images, body_spec, settings, max_rounds, overlays, formations)
-    result = _measure_once(station, *args)
+    # a station failed by its wires is explained (a radial search, seconds a view) only once
+    # the bow's passes are done, and only if it still fails
+    result = _measure_once(station, *args, explain=not find_distortion)
     bows, found = undeclared_bows(station, result.views) if find_distortion else {}, {}
     for _ in range(BOW_PASSES):     # each pass measures the bow that the last one left
         if not bows:
             break
         found = add_bows(found, bows)
-        result = _measure_once(declare_bows(station, found), *args)
+        result = _measure_once(declare_bows(station, found), *args, explain=False)
         bows = undeclared_bows(station, result.views)
+    if find_distortion and result.status == "failed":    # as declared, and why it fails
+        result = _measure_once(station, *args, explain=True)
     if not found:
         return result
     notes = tuple(f"{n}: {bow_warning(b)}" for n, b in found.items())
@@ -470,8 +474,10 @@ def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os
 
 
 def _measure_once(station: Station, images, body_spec: dict, settings: FitSettings | None,
-                  max_rounds: int, overlays: bool, formations: Mapping | None) -> StationResult:
-    """:func:`measure_station` with the station's views as declared."""
+                  max_rounds: int, overlays: bool, formations: Mapping | None,
+                  explain: bool = True) -> StationResult:
+    """:func:`measure_station` with the station's views as declared; ``explain``: a view
+    whose wires miss their survey is searched for a radial distortion that explains it."""
     import time
 
     settings = FitSettings() if settings is None else settings
@@ -623,7 +629,7 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
             return None
         return radial_from_wires(images[name], view, _model_box(images[name], coarse[name]))
 
-    wrong = _views_disagree(pose, results, radial)
+    wrong = _views_disagree(pose, results, radial if explain else None)
     if wrong:
         return StationResult(station_id, "failed", wrong, pose, results, warnings,
                              roll=station_roll)
