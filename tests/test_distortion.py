@@ -304,9 +304,9 @@ def test_the_wires_bow_gives_an_undeclared_k1_within_its_sigma():
 
 def test_an_undeclared_small_distortion_is_found_from_the_bow_and_removed(distorted_case):
     """The fixture's pose recorded through a small radial distortion none declares (k1 1e-3
-    in both views, 0.06 deg), which left alone fails the station (its bowed wires miss
-    their survey): stage one names it in the station's warnings with a k1 within 3 sigmas
-    of the truth's, and measures the pose within 3 of its sigmas."""
+    in both views, 0.06 deg), whose bowed wires miss their survey: stage one names it in the
+    station's warnings with a k1 within 3 sigmas of the truth's, and measures the pose
+    within 3 of its sigmas."""
     from dataclasses import replace
 
     from cadra.imaging.station import measure_station
