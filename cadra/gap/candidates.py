@@ -200,8 +200,9 @@ def measurement_candidates(stations, sparks: dict | None = None) -> list[Candida
         out.append(Candidate(f"station {st} optical scale", "measurement",
                              (f"st{st}_scale",), "the station's image scale is off",
                              station=st, measure="scale"))
+    fitted = {int(s) for s in stations}
     for (st, view), resp in sorted((sparks or {}).items()):
-        if int(st) in {int(s) for s in stations}:
+        if int(st) in fitted:
             out.append(Candidate(f"station {st} {view} spark distance", "measurement",
                                  (f"st{st}_{view}_spark_m",),
                                  f"the {view} view's spark is off its surveyed distance from "

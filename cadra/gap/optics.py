@@ -28,6 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from cadra.channels import NAMES as CHANNELS
 from cadra.conventions import axis_from_inclinations
 
 __all__ = ["SPARK_STEP_M", "film_view_pose", "point_source_facility", "spark_moved",
@@ -91,9 +92,12 @@ def spark_response(station, view_name: str, pose) -> np.ndarray:
     angles = [0.0 if not math.isfinite(a) else float(a) for a in pose[3:5]]
     axis = axis_from_inclinations(*angles)
 
+    fixed = {n: film_view_pose(v, v, r, axis) for n, v in station.views.items()
+             if n != view_name}           # the other view: its spark where the file says
+
     def measured(delta):
-        poses = {n: film_view_pose(v, spark_moved(v, delta) if n == view_name else v, r,
-                                   axis) for n, v in station.views.items()}
+        v = station.views[view_name]
+        poses = {**fixed, view_name: film_view_pose(v, spark_moved(v, delta), r, axis)}
         p = combine_views(poses["top"], poses["side"])
         return np.array([p.x_m, p.y_m, p.z_m, p.theta_rad, p.psi_rad])
 
@@ -104,6 +108,7 @@ def spark_responses(shots) -> dict:
     """For every point-source station and view of the shots' facilities: ``(station id, view
     name)`` -> ``((shot id, the 5 values of :func:`spark_response` at the shot's measured
     pose there), ...)``. Empty without a point-source facility."""
+    pose_columns = [CHANNELS.index(c) for c in ("x", "y", "z", "theta", "psi")]
     out: dict = {}
     for sd in shots:
         fac = point_source_facility(sd.facility)
@@ -112,11 +117,12 @@ def spark_responses(shots) -> dict:
         by_id = {s.id: s for s in fac.stations}
         for i, st in enumerate(np.asarray(sd.stations, dtype=int)):
             station = by_id.get(int(st))
-            if station is None or not np.all(np.isfinite(sd.meas[i, :3])):
+            pose = sd.meas[i, pose_columns]
+            if station is None or not np.all(np.isfinite(pose[:3])):
                 continue
             if any(v.projection != "point_source" for v in station.views.values()):
                 continue
             for name in station.views:
-                resp = spark_response(station, name, sd.meas[i, :5])
+                resp = spark_response(station, name, pose)
                 out.setdefault((int(st), name), []).append((sd.shot_id, tuple(map(float, resp))))
     return {k: tuple(v) for k, v in out.items()}

@@ -29,12 +29,9 @@ def ideal_image(view, img):
 
 def _line_points(wire) -> np.ndarray:
     """A found wire's points on its fitted line where its centres were used (the centres
-    projected onto the line; 33 points between its ends if it carries none)."""
+    projected onto the line)."""
     c = np.asarray(wire.centres_px, float)
     p, t = np.asarray(wire.point_px, float), np.asarray(wire.direction_px, float)
-    if len(c) < 2:
-        e = np.asarray(wire.ends_px, float)
-        return e[0] + np.linspace(0.0, 1.0, 33)[:, None] * (e[1] - e[0])
     return p + ((c - p) @ t)[:, None] * t
 
 

@@ -49,6 +49,7 @@ Everything is a pure function of arrays and frozen dataclasses.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -510,8 +511,6 @@ def measure_roll(body, views, images: dict, fits: dict, tilts: dict, masks: dict
     this station's roll of the last round. A point-source view's outline is its shadow's
     (:func:`conical_outline_px`, at ``pose3d``), a parallel view's the body's projection
     (:func:`view_outline_px`)."""
-    import functools
-
     models = {}
     for name in ("top", "side"):
         r = fits[name]

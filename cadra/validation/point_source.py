@@ -38,6 +38,7 @@ from cadra.conventions import (
 )
 from cadra.facility.reference import Station
 from cadra.imaging.combine import ViewPose, combine_views
+from cadra.imaging.roll import wrap_period
 from cadra.imaging.station import measure_station
 from cadra.synthetic.render import RenderConfig, render
 from cadra.synthetic.simulate import FilmPlacement, film_affine, view_scene
@@ -174,7 +175,7 @@ def score_case(case: StationCase, result, sphere: bool) -> dict:
     if getattr(result, "roll", None) is not None and math.isfinite(case.roll_rad):
         # a cruciform's roll is known modulo its 90 deg period
         best = result.roll.best
-        out["roll_error_deg"] = (math.degrees(best.roll_rad - case.roll_rad) + 45.0) % 90.0 - 45.0
+        out["roll_error_deg"] = math.degrees(wrap_period(best.roll_rad - case.roll_rad))
         out["roll_sigma_deg"] = math.degrees(best.sigma_rad)
     return out
 

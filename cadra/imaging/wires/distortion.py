@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from cadra.imaging.wires.straightness import tls_line
 from cadra.optics.distortion import Distortion
 
 __all__ = ["BOW_Z", "K1_SCAN", "K1_SEARCH", "WireBow", "WireDistortion", "radial_from_centres",
@@ -147,8 +148,6 @@ def radial_from_centres(view, wires) -> WireBow | None:
     ``k1``: a bow of pixels is measured again after it is removed (stage one's passes,
     :data:`cadra.imaging.distorted.BOW_PASSES`). A fraction of a millisecond a wire; None
     with fewer than two bowed wires."""
-    from cadra.imaging.wires.straightness import tls_line
-
     W, H = view.width_px, view.height_px
     unit = Distortion.for_image(W, H)
     ks, ws = [], []
