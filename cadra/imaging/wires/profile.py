@@ -143,20 +143,39 @@ class _Rows:
                      np.repeat(np.arange(len(wires)), n))
 
 
+#: Beyond this many sigmas from an edge the blurred edge is a step to rounding (the normal
+#: tail there is < 1e-23): a pixel wholly beyond it is exactly in (1) or out (0) of the
+#: half-line, and no ``erfc`` is evaluated for it.
+_U_SAT = 10.0
+
+
 @numba.njit(cache=True)
 def _pixel_profile(x0, ne, h, s, cov, dcov, F, N):
     """``cov[j]``: the band ``|y| < h`` blurred by N(0, s^2) and integrated over the pixel
     ``[x0 + j - 1/2, x0 + j + 1/2]``, ``dcov[j]`` its derivative in ``x0``, j < ne (added to
     the arrays). Each edge's antiderivative is evaluated once per pixel boundary (``F``,
-    ``N`` scratch of ne + 1)."""
+    ``N`` scratch of ne + 1), and only within :data:`_U_SAT` sigmas of the edge: a pixel
+    wholly beyond adds exactly 1 (past the edge) or 0 (before it)."""
     for sg, e in ((1.0, h), (-1.0, -h)):
         for j in range(ne + 1):
             u = (x0 + j - 0.5 + e) / s
-            N[j] = 0.5 * math.erfc(-u * _INV_SQRT2)
-            F[j] = u * N[j] + math.exp(-0.5 * u * u) * _INV_SQRT2PI
+            if u > _U_SAT:
+                N[j] = 1.0
+                F[j] = u
+            elif u < -_U_SAT:
+                N[j] = 0.0
+                F[j] = 0.0
+            else:
+                N[j] = 0.5 * math.erfc(-u * _INV_SQRT2)
+                F[j] = u * N[j] + math.exp(-0.5 * u * u) * _INV_SQRT2PI
         for j in range(ne):
-            cov[j] += sg * s * (F[j + 1] - F[j])
-            dcov[j] += sg * (N[j + 1] - N[j])
+            if N[j] == 1.0 and N[j + 1] == 1.0 and (x0 + j - 0.5 + e) > _U_SAT * s:
+                cov[j] += sg        # s (u_{j+1} - u_j) = 1, without its rounding
+            elif N[j + 1] == 0.0 and F[j + 1] == 0.0:
+                pass                # before the edge: adds nothing
+            else:
+                cov[j] += sg * s * (F[j + 1] - F[j])
+                dcov[j] += sg * (N[j + 1] - N[j])
 
 
 @numba.njit(cache=True)
@@ -184,10 +203,17 @@ def _row_basis(s0i, c, h, sc, at, mrow, kd, kw, A, O, dO, G, dG, cov, dcov, F, N
                 dcov[j] += wg * dcov_g[j]
     else:
         _pixel_profile(x0, ne, h, sc, cov, dcov, F, Nb)
-    for j in range(hd, ne - hd):  # discrete blur after the pixel
+    # the band's pixels: cov and dcov are exactly 0 outside [lo, hi] (see _pixel_profile)
+    lo = 0
+    while lo < ne and cov[lo] == 0.0 and dcov[lo] == 0.0:
+        lo += 1
+    hi = ne - 1
+    while hi > lo and cov[hi] == 0.0 and dcov[hi] == 0.0:
+        hi -= 1
+    for j in range(hd, ne - hd):  # discrete blur after the pixel (zero terms skipped)
         o = 0.0
         do = 0.0
-        for q in range(-hd, hd + 1):
+        for q in range(max(-hd, lo - j), min(hd, hi - j) + 1):
             o += kd[q + hd] * cov[j + q]
             do -= kd[q + hd] * dcov[j + q]
         O[j] = o
