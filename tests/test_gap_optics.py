@@ -72,3 +72,90 @@ def test_a_response_extra_adds_its_response_at_its_station_for_its_shots():
                                   np.zeros((3, 13))) == 0)
     with pytest.raises(ValueError, match="response"):
         Extra("bad", station=3, measure="response", response=(("A", (1.0, 2.0)),))
+
+
+# --- point-source images under a facility file that declares parallel optics ------------
+
+def _level(station, depth_m=-0.12):
+    """``station`` with each view's wires moved to one depth, ``depth_m`` along its sight axis
+    (the surveyed ones differ by up to a millimetre, which makes the closed form below
+    approximate: a depth difference between the wires fixing one scale shifts the map)."""
+    from dataclasses import replace
+
+    views = {}
+    for n, v in station.views.items():
+        k = v.sight_axis
+        wires = []
+        for w in v.wires:
+            p0, p1 = np.array(w.p0_m), np.array(w.p1_m)
+            p0[k] = p1[k] = depth_m
+            wires.append(replace(w, p0_m=p0, p1_m=p1))
+        views[n] = replace(v, wires=tuple(wires))
+    return replace(station, views=views)
+
+
+PARALLEL = _level(load_facility("hffaf").stations[3])
+
+
+@pytest.mark.parametrize("pose", [(0.003, 0.006, -0.004, 0.02, -0.01),
+                                  (-0.005, -0.02, 0.015, 0.0, 0.0),
+                                  (0.0, 0.01, 0.03, -0.03, 0.02)])
+def test_point_source_optics_scale_a_parallel_view_about_the_sparks_foot_with_depth(pose):
+    """A parallel view whose images are cast by a spark 1/kappa away: to first order each
+    point it measures moves by kappa (d - d_w)(q - q_s), d the point's depth toward the
+    spark, d_w the wires' (the film map re-solved from them takes out the scale at their
+    depth), q - q_s its lateral distance from the spark's foot (the image centre). The top
+    view moves y and half of x (x is the mean of the two views'), not z; to 1e-4 (the
+    wires at one depth: the map's change is then a scale about the foot). The second column,
+    a scale error of the view about the foot, moves them by q - q_s alone."""
+    from cadra.gap.optics import perspective_response
+
+    p = (PARALLEL.x_m + pose[0], *pose[1:])
+    for name, lat, depth in (("top", 1, 2), ("side", 2, 1)):
+        v = PARALLEL.views[name]
+        M = np.asarray(v.image_to_plane)
+        foot = M[:, :2] @ v.image_centre_px + M[:, 2]
+        d_w = -0.12
+        g, g_scale, g_x = perspective_response(PARALLEL, name, p)
+        assert g_scale[lat] == pytest.approx(p[lat] - foot[1], rel=1e-6)
+        assert g[lat] == pytest.approx((p[depth] - d_w) * (p[lat] - foot[1]), rel=1e-4)
+        assert abs(g[depth]) < 1e-9 and g[0] == g_scale[0] == 0.0
+        assert g_x[0] == pytest.approx(p[depth] * (p[0] - foot[0]), rel=1e-12, abs=1e-15)
+        assert np.all(g_x[1:] == 0.0)
+
+
+def test_a_facility_wide_response_acts_at_each_listed_station_of_its_shots():
+    g3, g4 = (1e-3, -2e-3, 3e-4, 1e-5, -2e-5), (2e-3, 1e-3, 0.0, 0.0, 4e-5)
+    e = Extra("top_inv_spark_distance_per_m", measure="response",
+              response=(("A", 3, g3), ("A", 4, g4), ("B", 2, g3)))
+    stations = np.array([2, 3, 4])
+    C = station_columns([e], "A", stations, np.zeros((3, 6)), np.zeros((3, 13)))
+    assert np.allclose(C[1, :5, 0], g3) and np.allclose(C[2, :5, 0], g4)
+    assert np.all(C[0, :, 0] == 0) and np.all(C[:, 5, 0] == 0)
+    with pytest.raises(ValueError, match="per shot and station"):
+        Extra("bad", measure="response", response=(("A", g3),))
+    with pytest.raises(ValueError, match="phys direction or a station"):
+        Extra("bad", measure="scale")
+
+
+def test_the_library_offers_point_source_optics_only_for_a_parallel_facility():
+    """One candidate per view, over the fitted stations only, for shots measured in a
+    parallel facility; none for a point-source one (its sparks have their own candidates)."""
+    from types import SimpleNamespace
+
+    from cadra.gap.candidates import measurement_candidates
+    from cadra.gap.optics import perspective_responses
+
+    meas = np.array([[PARALLEL.x_m, 0.01, -0.005, 0.01, 0.0, 0.0]])
+    shot = SimpleNamespace(shot_id="A", facility="hffaf", stations=np.array([PARALLEL.id]),
+                           meas=meas)
+    resp = perspective_responses([shot])
+    assert sorted(resp) == ["side", "top"] and resp["top"][0][0][:2] == ("A", PARALLEL.id)
+    cands = [c for c in measurement_candidates([PARALLEL.id], None, resp)
+             if c.measure == "response"]
+    assert [c.name for c in cands] == ["side view point-source optics",
+                                       "top view point-source optics"]
+    assert [len(c.responses) for c in cands] == [3, 3] and cands[0].n_params == 3
+    assert measurement_candidates([PARALLEL.id + 1], None, resp)[-1].measure != "response"
+    assert perspective_responses([SimpleNamespace(**{**vars(shot), "facility": "brl_spark"})]
+                                 ) == {}

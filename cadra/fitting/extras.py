@@ -26,6 +26,9 @@ An :class:`Extra` is one scalar unknown shared by the shots it applies to, of on
                 computed from the facility's geometry
   ============  ========================================  =========  =====================
 
+  A response may also act at every station (``station`` None): its ``g`` is then given per
+  shot and station (a facility's optics misdeclared for all its stations).
+
   Timing: the attitude's change over ``dt`` (rate x tens of ns, ~1e-6 rad) and the
   velocity's dependence on the other unknowns (``dt`` times it) are left out; both are far
   below stage one's precision. Scale: the x part (about the station's optical centre, where
@@ -72,8 +75,9 @@ def phys_direction(*terms) -> tuple[float, ...]:
 class Extra:
     """One extra unknown (module doc). ``shots``: the shot ids it applies to (None: all);
     ``held``: kept at ``value``, not fitted; ``response`` (measure ``"response"``): ``((shot
-    id, (d x, d y, d z, d theta, d psi) per unit value at the station), ...)``, a shot not
-    listed unaffected."""
+    id, (d x, d y, d z, d theta, d psi) per unit value at the station), ...)``, or with
+    ``station`` None ``((shot id, station id, (d x, ..., d psi)), ...)``; a shot (or station)
+    not listed unaffected."""
 
     name: str
     phys_direction: tuple[float, ...] | None = None
@@ -85,7 +89,8 @@ class Extra:
     response: tuple = ()
 
     def __post_init__(self):
-        if (self.phys_direction is None) == (self.station is None):
+        if (self.phys_direction is None) == (self.station is None) and not (
+                self.phys_direction is None and self.measure == "response"):
             raise ValueError(f"extra {self.name!r}: give a phys direction or a station, "
                              "not both or neither")
         if self.phys_direction is not None:
@@ -97,10 +102,19 @@ class Extra:
         elif self.measure not in MEASURES:
             raise ValueError(f"extra {self.name!r}: measure must be one of {MEASURES}")
         elif self.measure == "response":
-            resp = tuple((str(sid), tuple(float(v) for v in g)) for sid, g in self.response)
-            if not resp or any(len(g) != _N_RESPONSE or not np.all(np.isfinite(g))
-                               for _, g in resp):
-                raise ValueError(f"extra {self.name!r}: a response needs, per shot, "
+            # at one station: (shot, g) entries; at every station (station None): (shot,
+            # station, g)
+            try:
+                resp = tuple((str(e[0]), *(() if self.station is not None else (int(e[1]),)),
+                              tuple(float(v) for v in e[-1])) for e in self.response)
+                ok = all(len(e) == (2 if self.station is not None else 3) for e in
+                         self.response)
+            except (TypeError, ValueError, IndexError):
+                resp, ok = (), False
+            if not ok or not resp or any(len(e[-1]) != _N_RESPONSE
+                                         or not np.all(np.isfinite(e[-1])) for e in resp):
+                where = "shot" if self.station is not None else "shot and station"
+                raise ValueError(f"extra {self.name!r}: a response needs, per {where}, "
                                  f"{_N_RESPONSE} finite values (x, y, z, theta, psi)")
             object.__setattr__(self, "response", resp)
         if not np.isfinite(self.value):
@@ -149,9 +163,12 @@ def station_columns(extras: Sequence[Extra], shot_id: str, stations: np.ndarray,
         elif e.measure == "timing":
             C[rows[:, None], POSITION, j] = states[rows, 3:6]
         elif e.measure == "response":
-            g = dict(e.response).get(shot_id)
-            if g is not None:
-                C[rows[:, None], _RESPONSE, j] = np.asarray(g)
+            for entry in e.response:
+                if entry[0] != shot_id:
+                    continue
+                at = rows if e.station is not None else np.flatnonzero(
+                    np.asarray(stations) == entry[1])
+                C[at[:, None], _RESPONSE, j] = np.asarray(entry[-1])
         else:
             C[rows[:, None], _YZ, j] = pred[rows[:, None], _YZ]
     return C

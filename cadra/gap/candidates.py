@@ -51,7 +51,8 @@ class Candidate:
     ``phys_dirs`` (k, N_PHYS) for a dynamics effect; ``terms`` {coefficient: expression} in the
     new parameters ``params`` for an aero effect; ``station``/``measure`` ("position_x",
     "position_y", "position_z", "timing", "scale", or "response" with its ``response`` per
-    shot, :class:`cadra.fitting.extras.Extra`) for a measurement effect; for a held
+    shot, :class:`cadra.fitting.extras.Extra`, or ``responses``, one a parameter) for a
+    measurement effect; for a held
     parameter, ``params`` is its name. ``scope``: a dynamics effect's parameters per shot
     ("shot") or one set for every shot of the fit ("set").
     """
@@ -66,6 +67,9 @@ class Candidate:
     measure: str = ""
     scope: str = "shot"
     response: tuple = ()
+    #: a measurement effect of several parameters: one response per parameter (``response``
+    #: is then empty)
+    responses: tuple = ()
 
     @property
     def n_params(self) -> int:
@@ -183,10 +187,14 @@ def aero_candidates(model: AeroModel, mach_nominal: float) -> list[Candidate]:
     return out
 
 
-def measurement_candidates(stations, sparks: dict | None = None) -> list[Candidate]:
+def measurement_candidates(stations, sparks: dict | None = None,
+                           perspective: dict | None = None) -> list[Candidate]:
     """The per-station measurement candidates; ``sparks``: ``(station, view)`` -> the
     response of each shot's measurement there to that view's spark distance
-    (:func:`cadra.gap.optics.spark_responses`), one candidate each."""
+    (:func:`cadra.gap.optics.spark_responses`), one candidate each; ``perspective``: view
+    name -> the response of each shot's measurements at every station to point-source optics
+    where the facility declares parallel ones (:func:`cadra.gap.optics.perspective_responses`),
+    one candidate each."""
     out = []
     for st in stations:
         st = int(st)
@@ -209,6 +217,20 @@ def measurement_candidates(stations, sparks: dict | None = None) -> list[Candida
                                  f"the film (m, + farther): a scale error growing with the "
                                  f"model's offset", station=int(st), measure="response",
                                  response=resp))
+    for view, columns in sorted((perspective or {}).items()):
+        columns = tuple(tuple(e for e in col if int(e[1]) in fitted) for col in columns)
+        if all(columns):
+            out.append(Candidate(f"{view} view point-source optics", "measurement",
+                                 (f"{view}_inv_spark_distance_per_m", f"{view}_scale_at_foot",
+                                  f"{view}_x_depth_per_m"),
+                                 f"the {view} view's images are shadows cast by a spark "
+                                 f"(1/value m from the line of flight), not parallel light "
+                                 f"as the facility file declares: an error growing with the "
+                                 f"model's offset times its depth, at every station (with "
+                                 f"the view's scale about the spark's foot, as the file's "
+                                 f"map may be right at another depth than its wires', and "
+                                 f"the view's share of x)",
+                                 measure="response", responses=columns))
     return out
 
 
@@ -251,9 +273,11 @@ def same_term(model: AeroModel, held: Candidate, aero: Candidate, mach_nominal: 
 
 
 def library(model: AeroModel, stations, mach_nominal: float,
-            n_shots: int = 1, sparks: dict | None = None) -> list[Candidate]:
+            n_shots: int = 1, sparks: dict | None = None,
+            perspective: dict | None = None) -> list[Candidate]:
     """Every candidate for a fit of ``n_shots`` shots with ``model`` over ``stations``
-    (``sparks``: the spark candidates' responses, :func:`measurement_candidates`). A held
+    (``sparks``, ``perspective``: the facility's optics candidates' responses,
+    :func:`measurement_candidates`). A held
     parameter that is the same term as an aero candidate is offered once, as that candidate
     (its description names the held parameter)."""
     aero = aero_candidates(model, mach_nominal)
@@ -268,4 +292,4 @@ def library(model: AeroModel, stations, mach_nominal: float,
             aero[i] = replace(twin, description=twin.description
                               + f" (the model holds this term: {h.params[0]})")
     return (dynamics_candidates(n_shots) + aero + held
-            + measurement_candidates(stations, sparks))
+            + measurement_candidates(stations, sparks, perspective))

@@ -1,5 +1,6 @@
 """Station effects of a facility's optics for the gap library (docs/gap.md): a point-source
-view's spark off its surveyed distance from the film.
+view's spark off its surveyed distance from the film, and a facility that declares parallel
+optics for images cast by point sources.
 
 A spark surveyed ``delta`` too close to (or far from) the film changes the shadow's
 magnification, so the lateral coordinates a view measures come out scaled about the spark's
@@ -18,6 +19,21 @@ is linear in ``delta`` over any plausible survey error; central differences of
 The geometry is the shot's facility (``ShotData.facility``, a bundled name or a file),
 loaded once per name; a shot whose facility cannot be loaded, or has no point-source
 stations, gets no spark candidates.
+
+A facility file that declares a view parallel when its images are shadows cast by a spark
+(a direct shadowgraph) makes each point's magnification depend on its depth: what the view
+measures is scaled about the spark's foot by ``(H - d_w) / (H - d)`` (``H`` the spark's
+distance from the line of flight, ``d`` the point's depth and ``d_w`` the wires'), an error
+that grows with the product of the model's offset and its depth. Its response
+(:func:`perspective_response`) is that of ``kappa = 1 / H``: the view's images cast from a
+spark on its sight axis through the image centre, the film placement solved from the wires
+as the parallel file has them (:func:`film_view_pose`), first order in ``kappa`` (central
+differences of :data:`PERSPECTIVE_STEP_PER_M`). Where the film lies does not enter at first
+order: its part is an affine map of the view plane, which the wires' affine takes up. Two
+more parameters per view complete it: a scale of the view about the spark's foot (a file
+whose map is right at another depth than its wires', e.g. calibrated at the line of flight)
+and the station's x, moved by the depth times the distance from the foot along x in the
+share stage one gave that view's x (its weighting of the two views is not known here).
 """
 
 from __future__ import annotations
@@ -31,8 +47,9 @@ import numpy as np
 from cadra.channels import NAMES as CHANNELS
 from cadra.conventions import axis_from_inclinations
 
-__all__ = ["SPARK_STEP_M", "film_view_pose", "point_source_facility", "spark_moved",
-           "spark_response", "spark_responses"]
+__all__ = ["PERSPECTIVE_STEP_PER_M", "SPARK_STEP_M", "film_view_pose", "parallel_facility",
+           "perspective_response", "perspective_responses", "perspective_view",
+           "point_source_facility", "spark_moved", "spark_response", "spark_responses"]
 
 #: the spark displacement the response is differenced over, m
 SPARK_STEP_M = 1e-4
@@ -41,19 +58,48 @@ SPARK_STEP_M = 1e-4
 _WEIGHTS = (3e-7, 3e-7, 3e-5)
 
 
+#: the steps of 1 / (spark distance) the perspective response is differenced over, 1/m
+PERSPECTIVE_STEP_PER_M = 1e-3
+#: how far beyond the line of flight a hypothetical spark's film lies, m (it does not enter
+#: the response at first order: module doc)
+_FILM_BEYOND_M = 0.5
+
+
 @functools.lru_cache(maxsize=8)
-def point_source_facility(name: str):
-    """The facility named ``name`` (bundled or a file), or None when it cannot be loaded or
-    has no point-source station."""
+def _facility(name: str):
     from cadra.io.facility_file import load_facility
 
     if not name:
         return None
     try:
-        fac = load_facility(name)
+        return load_facility(name)
     except Exception:  # noqa: BLE001 - an unknown facility simply gets no candidates
         return None
-    if not any(v.projection == "point_source" for s in fac.stations for v in s.views.values()):
+
+
+def _loaded(name_or_facility):
+    """A facility given as itself, or by name or file (None when it cannot be loaded)."""
+    if name_or_facility is None or isinstance(name_or_facility, str):
+        return _facility(name_or_facility or "")
+    return name_or_facility
+
+
+def point_source_facility(name):
+    """The facility ``name`` (bundled or a file, or a facility itself), or None when it
+    cannot be loaded or has no point-source station."""
+    fac = _loaded(name)
+    if fac is None or not any(v.projection == "point_source" for s in fac.stations
+                              for v in s.views.values()):
+        return None
+    return fac
+
+
+def parallel_facility(name):
+    """The facility ``name`` (as :func:`point_source_facility` takes it), or None when it
+    cannot be loaded or any of its views is not parallel."""
+    fac = _loaded(name)
+    if fac is None or not fac.stations or any(
+            v.projection != "parallel" for s in fac.stations for v in s.views.values()):
         return None
     return fac
 
@@ -66,13 +112,13 @@ def spark_moved(view, delta_m: float):
     return replace(view, source_position_m=S, film_distance_m=view.film_distance_m + delta_m)
 
 
-def film_view_pose(declared, true, r, axis):
+def film_view_pose(declared, true, r, axis, affine=None):
     """The view pose stage one measures from an image cast by ``true`` (its spark), its film
-    placement solved from the wires' shadows with ``declared``'s geometry."""
-    from cadra.facility.reference import fit_affine_to_wires
+    placement solved from the wires' shadows with ``declared``'s geometry (or ``affine``, that
+    solution made once)."""
     from cadra.imaging.combine import ViewPose
 
-    M = fit_affine_to_wires(declared, true.wire_lines_px()).affine
+    M = _wire_affine(declared, true) if affine is None else affine
     to_px = true.plane_to_image
     ends = true.optics().plane_point(np.array([r, r + 1e-3 * np.asarray(axis)]))
     px = ends @ to_px[:, :2].T + to_px[:, 2]
@@ -80,6 +126,14 @@ def film_view_pose(declared, true, r, axis):
     d = film[1] - film[0]
     return ViewPose(float(film[0, 0]), float(film[0, 1]), math.atan2(d[1], d[0]),
                     *_WEIGHTS, projection=declared.optics(M))
+
+
+def _wire_affine(declared, true):
+    """The image -> plane affine solved from the wires' images cast by ``true``, with
+    ``declared``'s geometry."""
+    from cadra.facility.reference import fit_affine_to_wires
+
+    return fit_affine_to_wires(declared, true.wire_lines_px()).affine
 
 
 def spark_response(station, view_name: str, pose) -> np.ndarray:
@@ -104,14 +158,15 @@ def spark_response(station, view_name: str, pose) -> np.ndarray:
     return (measured(SPARK_STEP_M) - measured(-SPARK_STEP_M)) / (2 * SPARK_STEP_M)
 
 
-def spark_responses(shots) -> dict:
-    """For every point-source station and view of the shots' facilities: ``(station id, view
-    name)`` -> ``((shot id, the 5 values of :func:`spark_response` at the shot's measured
-    pose there), ...)``. Empty without a point-source facility."""
+def spark_responses(shots, facility=None) -> dict:
+    """For every point-source station and view of the shots' facilities (``facility``, a
+    facility or its name or file, for every shot: default each shot's own): ``(station id,
+    view name)`` -> ``((shot id, the 5 values of :func:`spark_response` at the shot's
+    measured pose there), ...)``. Empty without a point-source facility."""
     pose_columns = [CHANNELS.index(c) for c in ("x", "y", "z", "theta", "psi")]
     out: dict = {}
     for sd in shots:
-        fac = point_source_facility(sd.facility)
+        fac = point_source_facility(sd.facility if facility is None else facility)
         if fac is None:
             continue
         by_id = {s.id: s for s in fac.stations}
@@ -126,3 +181,99 @@ def spark_responses(shots) -> dict:
                 resp = spark_response(station, name, pose)
                 out.setdefault((int(st), name), []).append((sd.shot_id, tuple(map(float, resp))))
     return {k: tuple(v) for k, v in out.items()}
+
+
+def perspective_view(view, kappa_per_m: float):
+    """A parallel ``view`` as a direct shadowgraph: the same image map and wires, its images
+    cast from a spark on its sight axis through the image centre, ``1 / kappa_per_m`` from the
+    line of flight (on the axis' negative side for a negative ``kappa_per_m``), the film
+    :data:`_FILM_BEYOND_M` beyond the line of flight."""
+    k = view.sight_axis
+    M = np.asarray(view.image_to_plane, dtype=float)
+    S = np.zeros(3)
+    S[list(view.axes)] = M[:, :2] @ view.image_centre_px + M[:, 2]
+    S[k] = 1.0 / kappa_per_m
+    return replace(view, projection="point_source", source_position_m=S,
+                   film_distance_m=abs(S[k]) + _FILM_BEYOND_M)
+
+
+@functools.lru_cache(maxsize=4096)
+def _perspective_affines(station, view_name: str):
+    """``station``'s views as film poses see them, for the two columns of
+    :func:`perspective_response`: per column, per view, the view cast (``view_name`` from
+    sparks at +-:data:`PERSPECTIVE_STEP_PER_M`, the others parallel) and its wire affine
+    (``view_name``'s scaled by +-:data:`PERSPECTIVE_STEP_PER_M` about its foot)."""
+    out = []
+    for s in (1.0, -1.0):
+        kappa, scale = {}, {}
+        for n, v in station.views.items():
+            flat = _wire_affine(v, v)
+            if n == view_name:
+                c = perspective_view(v, s * PERSPECTIVE_STEP_PER_M)
+                kappa[n] = (c, _wire_affine(v, c))
+                M = np.asarray(flat, dtype=float)
+                foot = M[:, :2] @ v.image_centre_px + M[:, 2]
+                e = s * PERSPECTIVE_STEP_PER_M
+                scale[n] = (v, np.column_stack([(1 + e) * M[:, :2], (1 + e) * M[:, 2]
+                                                - e * foot]))
+            else:
+                kappa[n] = scale[n] = (v, flat)
+        out.append((kappa, scale))
+    return out
+
+
+def perspective_response(station, view_name: str, pose) -> np.ndarray:
+    """(3, 5): d(x, y, z, theta, psi) of a parallel ``station``'s measured pose at the 3-D
+    ``pose`` (as :func:`spark_response`'s) per unit of each of three parameters of
+    ``view_name`` (module doc): ``kappa`` (1/m) when its images are cast by a spark
+    ``1 / kappa`` from the line of flight (row 0), a scale error of the view about the
+    spark's foot (row 1: the file's map may be right at another depth than its wires'), both
+    without x; and x moved by the point's depth times its distance from the foot along x
+    (row 2, per m: how much of it reaches the station's x is ``kappa`` times the view's share
+    in stage one's weighting of the two views' x, which the diagnosis does not know)."""
+    from cadra.imaging.combine import combine_views
+
+    r = np.asarray(pose[:3], dtype=float)
+    angles = [0.0 if not math.isfinite(a) else float(a) for a in pose[3:5]]
+    axis = axis_from_inclinations(*angles)
+    rows = np.empty((2, 2, 5))
+    for i, columns in enumerate(_perspective_affines(station, view_name)):
+        for j, cast in enumerate(columns):
+            poses = {n: film_view_pose(station.views[n], c, r, axis, affine=M)
+                     for n, (c, M) in cast.items()}
+            p = combine_views(poses["top"], poses["side"])
+            rows[i, j] = (p.x_m, p.y_m, p.z_m, p.theta_rad, p.psi_rad)
+    out = np.zeros((3, 5))
+    out[:2] = (rows[0] - rows[1]) / (2 * PERSPECTIVE_STEP_PER_M)
+    out[:2, 0] = 0.0
+    v = station.views[view_name]
+    M = np.asarray(v.image_to_plane, dtype=float)
+    foot_x = (M[:, :2] @ v.image_centre_px + M[:, 2])[list(v.axes).index(0)]
+    out[2, 0] = r[v.sight_axis] * (r[0] - foot_x)
+    return out
+
+
+def perspective_responses(shots, facility=None) -> dict:
+    """For each view name of the shots' parallel facilities (``facility`` as
+    :func:`spark_responses` takes it): ``view name`` -> the three columns of
+    :func:`perspective_response`, each ``((shot id, station id, its 5 values at the shot's
+    measured pose there), ...)``. Empty when no shot's facility is parallel (or can be
+    loaded)."""
+    pose_columns = [CHANNELS.index(c) for c in ("x", "y", "z", "theta", "psi")]
+    out: dict = {}
+    for sd in shots:
+        fac = parallel_facility(sd.facility if facility is None else facility)
+        if fac is None:
+            continue
+        by_id = {s.id: s for s in fac.stations}
+        for i, st in enumerate(np.asarray(sd.stations, dtype=int)):
+            station = by_id.get(int(st))
+            pose = sd.meas[i, pose_columns]
+            if station is None or not np.all(np.isfinite(pose[:3])):
+                continue
+            for name in station.views:
+                g = perspective_response(station, name, pose)
+                cols = out.setdefault(name, ([], [], []))
+                for c, col in enumerate(cols):
+                    col.append((sd.shot_id, int(st), tuple(map(float, g[c]))))
+    return {k: tuple(tuple(c) for c in v) for k, v in out.items()}

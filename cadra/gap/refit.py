@@ -85,6 +85,9 @@ def candidate_extras(c: Candidate, shot_ids: Sequence[str]) -> list[Extra]:
                 out.append(Extra(p if len(shot_ids) == 1 else f"{p}@{sid}",
                                  phys_direction=tuple(d), shots=(sid,)))
         return out
+    if c.kind == "measurement" and c.responses:
+        return [Extra(p, station=c.station, measure=c.measure, response=g)
+                for p, g in zip(c.params, c.responses, strict=True)]
     if c.kind == "measurement":
         return [Extra(c.params[0], station=c.station, measure=c.measure, response=c.response)]
     return []

@@ -41,7 +41,7 @@ from cadra.fitting.solver import FitOptions
 from cadra.flight.data import ShotData
 from cadra.gap import verdict as vd
 from cadra.gap.candidates import Candidate, augmented_model, form_counterpart, library
-from cadra.gap.optics import spark_responses
+from cadra.gap.optics import perspective_responses, spark_responses
 from cadra.gap.refit import (
     PROFILE_MAX_PARAMS,
     candidate_extras,
@@ -463,7 +463,8 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                  *, candidates: Sequence[Candidate] | None = None, alpha: float = 0.01,
                  max_effects: int = 3, integ: Integration | None = None,
                  refit_physics: int = 3, refit_measurement: int = 3,
-                 profile: bool = True, progress: bool = False) -> GapDiagnosis:
+                 profile: bool = True, progress: bool = False,
+                 facility=None) -> GapDiagnosis:
     """Rank the candidate effects for a fit, add the significant ones greedily, and give one
     verdict from every test.
 
@@ -486,7 +487,9 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
     unexplained offset there and the ranking is redone with it: an effect that left it
     standing and is not found again is not the explanation (``dropped``).
     ``model``: the model as given to the fit (default ``result.model``): the library is built
-    for it, and fits from scratch start from its values (:func:`fresh_fit`).
+    for it, and fits from scratch start from its values (:func:`fresh_fit`). ``facility``:
+    the facility (or its name or file) whose optics the optics candidates are computed from
+    (:mod:`cadra.gap.optics`; default each shot's own, ``ShotData.facility``).
 
     Raises ``ValueError`` for a fit with no degrees of freedom or no finite chi^2 (an
     underdetermined fit has no gap to diagnose: every test would be on nothing)."""
@@ -515,7 +518,8 @@ def diagnose_gap(result: FitResult, shots: Sequence[ShotData], model: AeroModel 
                           for s in shots]))
     cands = (list(candidates) if candidates is not None
              else library(model, stations, mach, n_shots=len(ids),
-                          sparks=spark_responses(shots)))
+                          sparks=spark_responses(shots, facility),
+                          perspective=perspective_responses(shots, facility)))
     # weighted Bonferroni (family-wise error alpha): half of alpha for the physics
     # candidates (dynamics, aero, held: few), half for the per-station measurement ones
     # (many), so the many station candidates do not dilute the test of the few physical ones
