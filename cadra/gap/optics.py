@@ -222,6 +222,33 @@ def _perspective_affines(station, view_name: str):
     return out
 
 
+_POSE_FIELDS = ("a_m", "b_m", "angle_rad")
+
+
+@functools.lru_cache(maxsize=4096)
+def _combine_jacobian(station):
+    """d(x, y, z, theta, psi) / d(a, b, angle) of each view of a parallel ``station``, by
+    stage one's :func:`cadra.imaging.combine.combine_views` at the station's point of the
+    line of flight (central differences; for parallel views the map is linear in the
+    positions and near linear in the angles at the small angles of a range)."""
+    from cadra.imaging.combine import combine_views
+
+    r, axis = np.array([station.x_m, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])
+    base = {n: film_view_pose(v, v, r, axis) for n, v in station.views.items()}
+    out = {}
+    for n in station.views:
+        cols = []
+        for f, h in zip(_POSE_FIELDS, (1e-6, 1e-6, 1e-6), strict=True):
+            vals = []
+            for sgn in (1.0, -1.0):
+                moved = replace(base[n], **{f: getattr(base[n], f) + sgn * h})
+                p = combine_views(*(moved if m == n else base[m] for m in ("top", "side")))
+                vals.append(np.array([p.x_m, p.y_m, p.z_m, p.theta_rad, p.psi_rad]))
+            cols.append((vals[0] - vals[1]) / (2 * h))
+        out[n] = np.column_stack(cols)
+    return out
+
+
 def perspective_response(station, view_name: str, pose) -> np.ndarray:
     """(3, 5): d(x, y, z, theta, psi) of a parallel ``station``'s measured pose at the 3-D
     ``pose`` (as :func:`spark_response`'s) per unit of each of three parameters of
@@ -230,23 +257,22 @@ def perspective_response(station, view_name: str, pose) -> np.ndarray:
     spark's foot (row 1: the file's map may be right at another depth than its wires'), both
     without x; and x moved by the point's depth times its distance from the foot along x
     (row 2, per m: how much of it reaches the station's x is ``kappa`` times the view's share
-    in stage one's weighting of the two views' x, which the diagnosis does not know)."""
-    from cadra.imaging.combine import combine_views
-
+    in stage one's weighting of the two views' x, which the diagnosis does not know). The
+    view's own pose is differenced; the two views' combination is stage one's, linearized at
+    the station (:func:`_combine_jacobian`)."""
     r = np.asarray(pose[:3], dtype=float)
     angles = [0.0 if not math.isfinite(a) else float(a) for a in pose[3:5]]
     axis = axis_from_inclinations(*angles)
-    rows = np.empty((2, 2, 5))
-    for i, columns in enumerate(_perspective_affines(station, view_name)):
-        for j, cast in enumerate(columns):
-            poses = {n: film_view_pose(station.views[n], c, r, axis, affine=M)
-                     for n, (c, M) in cast.items()}
-            p = combine_views(poses["top"], poses["side"])
-            rows[i, j] = (p.x_m, p.y_m, p.z_m, p.theta_rad, p.psi_rad)
-    out = np.zeros((3, 5))
-    out[:2] = (rows[0] - rows[1]) / (2 * PERSPECTIVE_STEP_PER_M)
-    out[:2, 0] = 0.0
     v = station.views[view_name]
+    d_view = np.empty((2, 3))
+    for i, columns in enumerate(zip(*_perspective_affines(station, view_name), strict=True)):
+        plus, minus = (film_view_pose(v, col[view_name][0], r, axis, affine=col[view_name][1])
+                       for col in columns)
+        d_view[i] = [(getattr(plus, f) - getattr(minus, f)) / (2 * PERSPECTIVE_STEP_PER_M)
+                     for f in _POSE_FIELDS]
+    out = np.zeros((3, 5))
+    out[:2] = d_view @ _combine_jacobian(station)[view_name].T
+    out[:2, 0] = 0.0
     M = np.asarray(v.image_to_plane, dtype=float)
     foot_x = (M[:, :2] @ v.image_centre_px + M[:, 2])[list(v.axes).index(0)]
     out[2, 0] = r[v.sight_axis] * (r[0] - foot_x)
