@@ -70,6 +70,8 @@ SECTIONS: dict[str, tuple[str, str]] = {
                             "one found from the wires' bow", "stage1.md"),
     "validate_spark_gap": ("A point-source spark off its surveyed place, named by the gap "
                            "diagnosis", "gap.md"),
+    "validate_perspective_gap": ("Point-source records under a file that declares parallel "
+                                 "optics, named by the gap diagnosis", "gap.md"),
     "bench_starts": ("Starting values: epicyclic arms against damped sines", "fitting.md"),
     "bench_motion": ("Classic motion methods: speed and accuracy", "motion.md"),
     "bench_simulator": ("The 6-DOF simulator's speed", "dynamics.md"),
