@@ -158,28 +158,35 @@ def spark_response(station, view_name: str, pose) -> np.ndarray:
     return (measured(SPARK_STEP_M) - measured(-SPARK_STEP_M)) / (2 * SPARK_STEP_M)
 
 
-def spark_responses(shots, facility=None) -> dict:
-    """For every point-source station and view of the shots' facilities (``facility``, a
-    facility or its name or file, for every shot: default each shot's own): ``(station id,
-    view name)`` -> ``((shot id, the 5 values of :func:`spark_response` at the shot's
-    measured pose there), ...)``. Empty without a point-source facility."""
+def _measured_stations(shots, facility, loader):
+    """``(shot id, station, its measured pose (x, y, z, theta, psi))`` of every station of
+    the shots measured where their facility (``facility`` for all, default each shot's own,
+    loaded by ``loader``: None skips the shot) has it."""
     pose_columns = [CHANNELS.index(c) for c in ("x", "y", "z", "theta", "psi")]
-    out: dict = {}
     for sd in shots:
-        fac = point_source_facility(sd.facility if facility is None else facility)
+        fac = loader(sd.facility if facility is None else facility)
         if fac is None:
             continue
         by_id = {s.id: s for s in fac.stations}
         for i, st in enumerate(np.asarray(sd.stations, dtype=int)):
             station = by_id.get(int(st))
             pose = sd.meas[i, pose_columns]
-            if station is None or not np.all(np.isfinite(pose[:3])):
-                continue
-            if any(v.projection != "point_source" for v in station.views.values()):
-                continue
-            for name in station.views:
-                resp = spark_response(station, name, pose)
-                out.setdefault((int(st), name), []).append((sd.shot_id, tuple(map(float, resp))))
+            if station is not None and np.all(np.isfinite(pose[:3])):
+                yield sd.shot_id, station, pose
+
+
+def spark_responses(shots, facility=None) -> dict:
+    """For every point-source station and view of the shots' facilities (``facility``, a
+    facility or its name or file, for every shot: default each shot's own): ``(station id,
+    view name)`` -> ``((shot id, the 5 values of :func:`spark_response` at the shot's
+    measured pose there), ...)``. Empty without a point-source facility."""
+    out: dict = {}
+    for sid, station, pose in _measured_stations(shots, facility, point_source_facility):
+        if any(v.projection != "point_source" for v in station.views.values()):
+            continue
+        for name in station.views:
+            resp = spark_response(station, name, pose)
+            out.setdefault((station.id, name), []).append((sid, tuple(map(float, resp))))
     return {k: tuple(v) for k, v in out.items()}
 
 
@@ -285,21 +292,11 @@ def perspective_responses(shots, facility=None) -> dict:
     :func:`perspective_response`, each ``((shot id, station id, its 5 values at the shot's
     measured pose there), ...)``. Empty when no shot's facility is parallel (or can be
     loaded)."""
-    pose_columns = [CHANNELS.index(c) for c in ("x", "y", "z", "theta", "psi")]
     out: dict = {}
-    for sd in shots:
-        fac = parallel_facility(sd.facility if facility is None else facility)
-        if fac is None:
-            continue
-        by_id = {s.id: s for s in fac.stations}
-        for i, st in enumerate(np.asarray(sd.stations, dtype=int)):
-            station = by_id.get(int(st))
-            pose = sd.meas[i, pose_columns]
-            if station is None or not np.all(np.isfinite(pose[:3])):
-                continue
-            for name in station.views:
-                g = perspective_response(station, name, pose)
-                cols = out.setdefault(name, ([], [], []))
-                for c, col in enumerate(cols):
-                    col.append((sd.shot_id, int(st), tuple(map(float, g[c]))))
+    for sid, station, pose in _measured_stations(shots, facility, parallel_facility):
+        for name in station.views:
+            g = perspective_response(station, name, pose)
+            cols = out.setdefault(name, ([], [], []))
+            for c, col in enumerate(cols):
+                col.append((sid, int(station.id), tuple(map(float, g[c]))))
     return {k: tuple(tuple(c) for c in v) for k, v in out.items()}
