@@ -206,26 +206,20 @@ def perspective_view(view, kappa_per_m: float):
 
 @functools.lru_cache(maxsize=4096)
 def _perspective_affines(station, view_name: str):
-    """``station``'s views as film poses see them, for the two columns of
-    :func:`perspective_response`: per column, per view, the view cast (``view_name`` from
-    sparks at +-:data:`PERSPECTIVE_STEP_PER_M`, the others parallel) and its wire affine
-    (``view_name``'s scaled by +-:data:`PERSPECTIVE_STEP_PER_M` about its foot)."""
+    """``view_name`` of ``station`` as the two columns of :func:`perspective_response` see
+    it, at +- and -:data:`PERSPECTIVE_STEP_PER_M`: ``(kappa, scale)``, each the view its
+    images are cast by and the wire affine they are mapped with (cast from a spark 1/step
+    away, the affine re-solved from its wires; the view as it is, its affine scaled about the
+    spark's foot)."""
+    v = station.views[view_name]
+    M = np.asarray(_wire_affine(v, v), dtype=float)
+    foot = M[:, :2] @ v.image_centre_px + M[:, 2]
     out = []
     for s in (1.0, -1.0):
-        kappa, scale = {}, {}
-        for n, v in station.views.items():
-            flat = _wire_affine(v, v)
-            if n == view_name:
-                c = perspective_view(v, s * PERSPECTIVE_STEP_PER_M)
-                kappa[n] = (c, _wire_affine(v, c))
-                M = np.asarray(flat, dtype=float)
-                foot = M[:, :2] @ v.image_centre_px + M[:, 2]
-                e = s * PERSPECTIVE_STEP_PER_M
-                scale[n] = (v, np.column_stack([(1 + e) * M[:, :2], (1 + e) * M[:, 2]
-                                                - e * foot]))
-            else:
-                kappa[n] = scale[n] = (v, flat)
-        out.append((kappa, scale))
+        e = s * PERSPECTIVE_STEP_PER_M
+        c = perspective_view(v, e)
+        out.append(((c, _wire_affine(v, c)),
+                    (v, np.column_stack([(1 + e) * M[:, :2], (1 + e) * M[:, 2] - e * foot]))))
     return out
 
 
@@ -245,8 +239,8 @@ def _combine_jacobian(station):
     out = {}
     for n in station.views:
         cols = []
-        for f, h in zip(_POSE_FIELDS, (1e-6, 1e-6, 1e-6), strict=True):
-            vals = []
+        for f in _POSE_FIELDS:
+            h, vals = 1e-6, []
             for sgn in (1.0, -1.0):
                 moved = replace(base[n], **{f: getattr(base[n], f) + sgn * h})
                 p = combine_views(*(moved if m == n else base[m] for m in ("top", "side")))
@@ -273,8 +267,7 @@ def perspective_response(station, view_name: str, pose) -> np.ndarray:
     v = station.views[view_name]
     d_view = np.empty((2, 3))
     for i, columns in enumerate(zip(*_perspective_affines(station, view_name), strict=True)):
-        plus, minus = (film_view_pose(v, col[view_name][0], r, axis, affine=col[view_name][1])
-                       for col in columns)
+        plus, minus = (film_view_pose(v, cast, r, axis, affine=M) for cast, M in columns)
         d_view[i] = [(getattr(plus, f) - getattr(minus, f)) / (2 * PERSPECTIVE_STEP_PER_M)
                      for f in _POSE_FIELDS]
     out = np.zeros((3, 5))
