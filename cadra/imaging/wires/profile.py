@@ -157,25 +157,26 @@ def _pixel_profile(x0, ne, h, s, cov, dcov, F, N):
     ``N`` scratch of ne + 1), and only within :data:`_U_SAT` sigmas of the edge: a pixel
     wholly beyond adds exactly 1 (past the edge) or 0 (before it)."""
     for sg, e in ((1.0, h), (-1.0, -h)):
+        past = ne + 1   # the first boundary beyond the edge's tail (u grows with j)
+        before = -1     # the last boundary short of it
         for j in range(ne + 1):
             u = (x0 + j - 0.5 + e) / s
             if u > _U_SAT:
-                N[j] = 1.0
-                F[j] = u
+                past = min(past, j)
             elif u < -_U_SAT:
-                N[j] = 0.0
-                F[j] = 0.0
+                before = j
             else:
                 N[j] = 0.5 * math.erfc(-u * _INV_SQRT2)
                 F[j] = u * N[j] + math.exp(-0.5 * u * u) * _INV_SQRT2PI
-        for j in range(ne):
-            if N[j] == 1.0 and N[j + 1] == 1.0 and (x0 + j - 0.5 + e) > _U_SAT * s:
-                cov[j] += sg        # s (u_{j+1} - u_j) = 1, without its rounding
-            elif N[j + 1] == 0.0 and F[j + 1] == 0.0:
-                pass                # before the edge: adds nothing
-            else:
-                cov[j] += sg * s * (F[j + 1] - F[j])
-                dcov[j] += sg * (N[j + 1] - N[j])
+        for j in range(max(before, 0), min(past, ne)):
+            # a pixel with a boundary in the tails: that boundary's N and F exactly
+            n0, f0 = (0.0, 0.0) if j <= before else (N[j], F[j])
+            n1, f1 = ((1.0, (x0 + j + 0.5 + e) / s) if j + 1 >= past
+                      else (N[j + 1], F[j + 1]))
+            cov[j] += sg * s * (f1 - f0)
+            dcov[j] += sg * (n1 - n0)
+        for j in range(past, ne):
+            cov[j] += sg        # s (u_{j+1} - u_j) = 1, without its rounding
 
 
 @numba.njit(cache=True)
