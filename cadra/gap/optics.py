@@ -46,6 +46,7 @@ import numpy as np
 
 from cadra.channels import NAMES as CHANNELS
 from cadra.conventions import axis_from_inclinations
+from cadra.geometry import apply_affine
 
 __all__ = ["PERSPECTIVE_STEP_PER_M", "SPARK_STEP_M", "film_view_pose", "parallel_facility",
            "perspective_response", "perspective_responses", "perspective_view",
@@ -121,8 +122,7 @@ def film_view_pose(declared, true, r, axis, affine=None):
     M = _wire_affine(declared, true) if affine is None else affine
     to_px = true.plane_to_image
     ends = true.optics().plane_point(np.array([r, r + 1e-3 * np.asarray(axis)]))
-    px = ends @ to_px[:, :2].T + to_px[:, 2]
-    film = px @ M[:, :2].T + M[:, 2]
+    film = apply_affine(M, apply_affine(to_px, ends))
     d = film[1] - film[0]
     return ViewPose(float(film[0, 0]), float(film[0, 1]), math.atan2(d[1], d[0]),
                     *_WEIGHTS, projection=declared.optics(M))
@@ -190,15 +190,20 @@ def spark_responses(shots, facility=None) -> dict:
     return {k: tuple(v) for k, v in out.items()}
 
 
+def _foot(view) -> np.ndarray:
+    """A view's image centre in its view plane (m): where a direct shadowgraph's spark
+    stands opposite its film."""
+    return apply_affine(view.image_to_plane, view.image_centre_px)
+
+
 def perspective_view(view, kappa_per_m: float):
     """A parallel ``view`` as a direct shadowgraph: the same image map and wires, its images
     cast from a spark on its sight axis through the image centre, ``1 / kappa_per_m`` from the
     line of flight (on the axis' negative side for a negative ``kappa_per_m``), the film
     :data:`_FILM_BEYOND_M` beyond the line of flight."""
     k = view.sight_axis
-    M = np.asarray(view.image_to_plane, dtype=float)
     S = np.zeros(3)
-    S[list(view.axes)] = M[:, :2] @ view.image_centre_px + M[:, 2]
+    S[list(view.axes)] = _foot(view)
     S[k] = 1.0 / kappa_per_m
     return replace(view, projection="point_source", source_position_m=S,
                    film_distance_m=abs(S[k]) + _FILM_BEYOND_M)
@@ -207,13 +212,12 @@ def perspective_view(view, kappa_per_m: float):
 @functools.lru_cache(maxsize=4096)
 def _perspective_affines(station, view_name: str):
     """``view_name`` of ``station`` as the two columns of :func:`perspective_response` see
-    it, at +- and -:data:`PERSPECTIVE_STEP_PER_M`: ``(kappa, scale)``, each the view its
+    it, at + and -:data:`PERSPECTIVE_STEP_PER_M`: ``(kappa, scale)``, each the view its
     images are cast by and the wire affine they are mapped with (cast from a spark 1/step
     away, the affine re-solved from its wires; the view as it is, its affine scaled about the
     spark's foot)."""
     v = station.views[view_name]
-    M = np.asarray(_wire_affine(v, v), dtype=float)
-    foot = M[:, :2] @ v.image_centre_px + M[:, 2]
+    M, foot = np.asarray(_wire_affine(v, v), dtype=float), _foot(v)
     out = []
     for s in (1.0, -1.0):
         e = s * PERSPECTIVE_STEP_PER_M
@@ -273,8 +277,7 @@ def perspective_response(station, view_name: str, pose) -> np.ndarray:
     out = np.zeros((3, 5))
     out[:2] = d_view @ _combine_jacobian(station)[view_name].T
     out[:2, 0] = 0.0
-    M = np.asarray(v.image_to_plane, dtype=float)
-    foot_x = (M[:, :2] @ v.image_centre_px + M[:, 2])[list(v.axes).index(0)]
+    foot_x = _foot(v)[list(v.axes).index(0)]
     out[2, 0] = r[v.sight_axis] * (r[0] - foot_x)
     return out
 
