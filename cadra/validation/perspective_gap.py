@@ -45,24 +45,13 @@ def run_trial(k: int, point_source: bool) -> dict:
     parallel facility. Returns what was added, the optics candidates' fitted values and
     sigmas, and the seconds taken."""
     from cadra.gap.score import diagnose_gap
-    from cadra.imaging.shot import measure_shot
     from cadra.io.facility_file import load_facility
-    from cadra.synthetic.simulate import render_images, simulate_shot
-    from cadra.validation.m80 import linear_theory, six_dof, start_from_linear, truth_model
-    from cadra.validation.spark_gap import _rounds
+    from cadra.validation.spark_gap import fly_and_fit
 
     t0 = time.perf_counter()
     cast = load_facility("brl_spark")
     declared = declared_parallel(cast)
-    true = cast if point_source else declared
-    shots, failed = [], 0
-    for spec in _rounds(k):
-        flown = render_images(simulate_shot(spec, true), progress=False)
-        stage1 = measure_shot(flown.shot_file(), images=flown.images, facility=declared,
-                              workers=1, progress=False, overlays=False)
-        failed += int(stage1.trajectory["status"].eq("failed").sum())
-        shots.append(stage1.shot_data())
-    res = six_dof(shots, start_from_linear([linear_theory(s) for s in shots]), truth_model())
+    shots, failed, res = fly_and_fit(k, cast if point_source else declared, declared)
     out = {"trial": k, "point_source": point_source, "stations_failed": failed,
            "fit_status": res.status, "chi2_nu": float(res.reduced_chi2)}
     dg = diagnose_gap(res, shots, facility=declared)

@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-__all__ = ["SPARK_ERROR_M", "run_trial", "summarize"]
+__all__ = ["SPARK_ERROR_M", "fly_and_fit", "run_trial", "summarize"]
 
 #: the spark survey error of a spark trial, m (a spark's position is surveyed to millimetres;
 #: on the rounds' offsets this moves the station's lateral position by several of stage
@@ -54,15 +54,30 @@ def _with_spark(facility, station_id: int, view: str, delta_m: float):
     return dataclasses.replace(facility, stations=stations)
 
 
+def fly_and_fit(k: int, true, declared):
+    """Trial ``k``'s two rounds rendered through facility ``true``, measured by stage one
+    under ``declared`` and fitted together: ``(shots, stations failed, the fit)``."""
+    from cadra.imaging.shot import measure_shot
+    from cadra.synthetic.simulate import render_images, simulate_shot
+    from cadra.validation.m80 import linear_theory, six_dof, start_from_linear, truth_model
+
+    shots, failed = [], 0
+    for spec in _rounds(k):
+        flown = render_images(simulate_shot(spec, true), progress=False)
+        stage1 = measure_shot(flown.shot_file(), images=flown.images, facility=declared,
+                              workers=1, progress=False, overlays=False)
+        failed += int(stage1.trajectory["status"].eq("failed").sum())
+        shots.append(stage1.shot_data())
+    res = six_dof(shots, start_from_linear([linear_theory(s) for s in shots]), truth_model())
+    return shots, failed, res
+
+
 def run_trial(k: int, spark: bool) -> dict:
     """One trial (module doc): the rounds rendered (through a moved spark if ``spark``),
     measured, fitted and diagnosed. Returns what was injected, what was added first, its
     fitted value and sigma, and the seconds taken."""
     from cadra.gap.score import diagnose_gap
-    from cadra.imaging.shot import measure_shot
     from cadra.io.facility_file import load_facility
-    from cadra.synthetic.simulate import render_images, simulate_shot
-    from cadra.validation.m80 import linear_theory, six_dof, start_from_linear, truth_model
 
     t0 = time.perf_counter()
     rng = np.random.default_rng([k, 4242])
@@ -70,13 +85,7 @@ def run_trial(k: int, spark: bool) -> dict:
     station = int(rng.choice(STATIONS))
     view = str(rng.choice(["top", "side"]))
     true = _with_spark(declared, station, view, SPARK_ERROR_M) if spark else declared
-    shots = []
-    for spec in _rounds(k):
-        flown = render_images(simulate_shot(spec, true), progress=False)
-        stage1 = measure_shot(flown.shot_file(), images=flown.images, facility=declared,
-                              workers=1, progress=False, overlays=False)
-        shots.append(stage1.shot_data())
-    res = six_dof(shots, start_from_linear([linear_theory(s) for s in shots]), truth_model())
+    shots, _, res = fly_and_fit(k, true, declared)
     out = {"trial": k, "spark": spark, "station": station, "view": view,
            "expected": f"station {station} {view} spark distance" if spark else "",
            "fit_status": res.status, "chi2_nu": float(res.reduced_chi2)}
