@@ -52,6 +52,7 @@ from cadra.fitting.sensitivity import (
     Integration,
     apply_local,
     observables,
+    over_shots,
     predict_states,
     predict_with_jacobian,
 )
@@ -376,7 +377,7 @@ class FitProblem:
         held_values = [e.value for e in held]
         xv = np.asarray(extra_values, dtype=float)
         na, ne = aero_idx.size, len(free)
-        preds, jacs, sts = [], [], []
+        preds, jacs, sts, runs = [], [], [], []
         for k, sd in enumerate(self.shots):
             sid = sd.shot_id
             phys, ref = self.physics(k, xv)
@@ -390,10 +391,13 @@ class FitProblem:
                 if phys[P_FRAME] != FRAME_BODY and non_rolling_obstacle(phys, program, more):
                     phys = phys.copy()
                     phys[P_FRAME] = FRAME_BODY     # e.g. a gap candidate's lateral cg offset
-            pred, jac, y = predict_with_jacobian(
+            runs.append((k, sd, lf, on, n_more, (
                 initial_states[k], self.epochs[k], sd.t_s, phys, program, params, ref, lf,
-                aero_idx, self.integration, phys_dirs=np.array(dirs) if dirs else None,
-                with_states=True)
+                aero_idx, self.integration, np.array(dirs) if dirs else None, True)))
+        outs = over_shots(lambda a: predict_with_jacobian(*a), [r[-1] for r in runs],
+                          self.integration)
+        for (_, sd, lf, on, n_more, _args), (pred, jac, y) in zip(runs, outs, strict=True):
+            sid = sd.shot_id
             base = lf.size + na
             if ne or n_more:
                 full = np.zeros(jac.shape[:2] + (base + ne + n_more,))

@@ -1,14 +1,19 @@
-"""Predicted measurements and their exact sensitivities (complex step) for stage two.
+"""Predicted measurements and their exact sensitivities (forward mode) for stage two.
 
 The fitter predicts what stage one measured with the simulator's own code: the 6-DOF
 equations and aero-model evaluator (:mod:`cadra.dynamics`, :mod:`cadra.aero`) integrated by
 :func:`cadra.dynamics.integrate.propagate_adaptive`, and the observation model
 :func:`cadra.dynamics.observe.observe` (reference point seen from the cg, axis inclinations).
 
-Sensitivities are complex-step derivatives: each free unknown gets one complex propagation
-with ``i * EPS`` added to it; ``Im(prediction) / EPS`` is its Jacobian column, exact to
-rounding (no step-size trade-off), and the real part of any run is the prediction itself.
-The runs are shared out over threads (the compiled integrator releases the GIL).
+Sensitivities are forward-mode derivatives (``method="forward"``, the default): one run of the
+integrator's tangent version (:mod:`cadra.dynamics.tangent`, generated from the integrator's
+own source) carries a derivative lane per free unknown, sharing the float run's values, so a
+Jacobian costs a few trajectories instead of one per unknown. ``method="complex"`` is the
+independent check the tests hold it to: each free unknown gets one complex propagation with
+``i * EPS`` added to it, and ``Im(prediction) / EPS`` is its Jacobian column. Both are exact
+derivatives of the same discrete scheme (same steps, no step-size trade-off); they agree to
+rounding (docs/fitting.md, "Sensitivities"). Runs are shared out over threads (the compiled
+integrators release the GIL).
 
 Per-shot unknowns (the *local* parameters, :data:`LOCAL_NAMES`) are corrections to a nominal
 state at the shot's epoch: cg position and velocity (facility frame F), a small rotation of the
@@ -19,7 +24,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,6 +35,7 @@ from cadra.dynamics.integrate import propagate_batch
 from cadra.dynamics.layout import N_STATE, P_CG_OFFSET
 from cadra.dynamics.observe import observe
 from cadra.dynamics.setup import plane_code
+from cadra.dynamics.tangent import propagate_tangent
 
 #: the 12 per-shot unknowns, in order
 LOCAL_NAMES = ("x_cg_m", "y_cg_m", "z_cg_m", "vx_m_s", "vy_m_s", "vz_m_s",
@@ -37,6 +43,8 @@ LOCAL_NAMES = ("x_cg_m", "y_cg_m", "z_cg_m", "vx_m_s", "vy_m_s", "vz_m_s",
 N_LOCAL = len(LOCAL_NAMES)
 #: complex-step size (any tiny value gives the same derivative to rounding)
 EPS = 1e-20
+#: how a Jacobian is computed: forward-mode lanes, or complex step (the check)
+METHODS = ("forward", "complex")
 
 _POOL: ThreadPoolExecutor | None = None
 
@@ -137,12 +145,87 @@ def predict(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray, prog
                        ref_from_cg_body_m)
 
 
+def _seeds(y0, n_params, local_free, aero_free, phys_dirs):
+    """The lanes' seeds: d(y0), d(params), d(phys) per unknown, (13, m), (n_params, m),
+    (N_PHYS, m), in the column order of :func:`predict_with_jacobian`."""
+    m = local_free.size + aero_free.size + phys_dirs.shape[0]
+    Y = np.zeros((N_STATE, m))
+    P = np.zeros((n_params, m))
+    H = np.zeros((phys_dirs.shape[1], m))
+    q = np.asarray(y0[6:10], dtype=float)
+    for row, k in enumerate(local_free):
+        if k < 6:
+            Y[k, row] = 1.0
+        elif k < 9:
+            e = np.zeros(4)
+            e[1 + k - 6] = 0.5                     # d/du of q (x) (1, u/2): q (x) (0, e/2)
+            Y[6:10, row] = quat_mul(q, e)
+        else:
+            Y[10 + k - 9, row] = 1.0
+    for row, j in enumerate(aero_free, start=local_free.size):
+        P[j, row] = 1.0
+    H[:, local_free.size + aero_free.size:] = phys_dirs.T
+    return Y, P, H
+
+
+def _run_tangent(y0, t0, times, phys, program, params, seeds, integ: Integration):
+    """States (n, 13) and their derivatives (n, 13, m) along the seeded lanes, the lanes
+    shared out over threads when there are enough of them to pay for a second float run."""
+    Y, P, H = seeds
+    m = Y.shape[1]
+    n = len(times)
+    states = np.empty((n, N_STATE))
+    d_states = np.empty((n, N_STATE, m))
+    plane = plane_code(program.angle_plane)
+    workers = min(integ.threads or cores.available(), max(1, m // _LANES_PER_THREAD))
+    chunks = [c for c in np.array_split(np.arange(m), workers) if c.size]
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    phys = np.ascontiguousarray(phys, dtype=float)
+    params = np.ascontiguousarray(params, dtype=float)
+
+    def job(k, idx):
+        sl = slice(int(idx[0]), int(idx[-1]) + 1)
+        out = states if k == 0 else np.empty_like(states)
+        out_t = np.empty((n, N_STATE, idx.size))
+        propagate_tangent(y0, np.ascontiguousarray(Y[:, sl]), float(t0), times, integ.h_max_s,
+                          integ.tol_position_m, integ.tol_angle_rad, phys,
+                          np.ascontiguousarray(H[:, sl]), program.ops, program.args,
+                          program.starts, params, np.ascontiguousarray(P[:, sl]), plane,
+                          int(program.stack_size), out, out_t)
+        d_states[:, :, sl] = out_t
+
+    if len(chunks) == 1:
+        job(0, chunks[0])
+    else:
+        for f in [_pool().submit(job, k, c) for k, c in enumerate(chunks)]:
+            f.result()
+    return states, d_states
+
+
+#: the fewest lanes a thread of :func:`_run_tangent` takes (each thread repeats the float
+#: run and the tangent code's fixed cost, so a shot's usual 20-30 lanes stay on one thread;
+#: several shots run in parallel instead, :func:`over_shots`)
+_LANES_PER_THREAD = 24
+
+
+def over_shots(fn, args: list, integ: Integration) -> list:
+    """``[fn(a) for a in args]``, where each ``a`` ends with a shot's :class:`Integration`
+    (the 10th of :func:`predict_with_jacobian`'s arguments): several shots run in parallel
+    over the thread pool, each on one thread; one shot keeps ``integ``'s threads."""
+    workers = integ.threads or cores.available()
+    if len(args) < 2 or workers < 2:
+        return [fn(a) for a in args]
+    one = replace(integ, threads=1)
+    jobs = [_pool().submit(fn, (*a[:9], one, *a[10:])) for a in args]
+    return [j.result() for j in jobs]
+
+
 def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,
                           program, params: np.ndarray, ref_from_cg_body_m: np.ndarray,
                           local_free: np.ndarray, aero_free: np.ndarray,
                           integ: Integration = Integration(), phys_dirs=None,
-                          with_states: bool = False):
-    """Prediction (n, 5) and Jacobian (n, 5, n_local + n_aero + n_phys) by complex step.
+                          with_states: bool = False, method: str = "forward"):
+    """Prediction (n, 5) and Jacobian (n, 5, n_local + n_aero + n_phys).
 
     ``local_free`` are indices into :data:`LOCAL_NAMES` (corrections at ``y0``),
     ``aero_free`` indices into ``params``, ``phys_dirs`` (k, N_PHYS) directions in the
@@ -150,9 +233,12 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     gradient, inertia; a product of inertia is a direction with two entries). Columns in
     that order. A direction that moves the cg offset also moves the observed reference point
     (``ref_from_cg -= offset``, per run: :func:`cadra.fitting.extras.shot_ref`).
-    ``with_states``: also return the (n, 13) states (the real part of any run: no extra
-    integration).
+    ``with_states``: also return the (n, 13) states (the float run's: no extra
+    integration). ``method``: ``"forward"`` (tangent lanes) or ``"complex"`` (complex step,
+    the independent check; module doc).
     """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     local_free = np.asarray(local_free, dtype=int)
     aero_free = np.asarray(aero_free, dtype=int)
     phys_dirs = (np.zeros((0, len(phys))) if phys_dirs is None
@@ -163,6 +249,35 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
         out = (observables(states, ref_from_cg_body_m), np.zeros((len(times), N_CHANNELS, 0)))
         return (*out, states) if with_states else out
     times = np.ascontiguousarray(times, dtype=float)
+    cg = slice(P_CG_OFFSET, P_CG_OFFSET + 3)
+    if method == "forward":
+        seeds = _seeds(y0, len(params), local_free, aero_free, phys_dirs)
+        states, d_states = _run_tangent(y0, t0, times, phys, program, params, seeds, integ)
+        # the observation model is cheap numpy: its directional derivatives along the lanes
+        # by complex step (Im f(x + i eps dx) / eps = f'(x) dx, exact)
+        lanes = states[None] + 1j * EPS * np.moveaxis(d_states, -1, 0)     # (m, n, 13)
+        ref_dirs = -phys_dirs[:, cg]
+    else:
+        lanes = _complex_runs(y0, t0, times, phys, program, params, local_free, aero_free,
+                              phys_dirs, integ)
+        states = lanes[0].real.copy()
+        ref_dirs = -phys_dirs[:, cg]
+    if np.any(ref_dirs):
+        refs = np.asarray(ref_from_cg_body_m)[None, :] + 1j * EPS * np.vstack(
+            [np.zeros((m - len(ref_dirs), 3)), ref_dirs])
+        obs = np.stack([observables(lanes[i], refs[i]) for i in range(m)])
+    else:
+        obs = observables(lanes, ref_from_cg_body_m)      # (m, n, 5) complex
+    pred = obs[0].real.copy() if method == "complex" else observables(states,
+                                                                     ref_from_cg_body_m)
+    jac = np.ascontiguousarray(np.moveaxis(obs.imag / EPS, 0, -1))   # (n, 5, m)
+    return (pred, jac, states) if with_states else (pred, jac)
+
+
+def _complex_runs(y0, t0, times, phys, program, params, local_free, aero_free, phys_dirs,
+                  integ):
+    """(m, n, 13) complex states, one complex-step run per unknown (the check)."""
+    m = local_free.size + aero_free.size + phys_dirs.shape[0]
     Y0 = np.tile(np.asarray(y0, dtype=np.complex128), (m, 1))
     PARAMS = np.tile(np.asarray(params, dtype=np.complex128), (m, 1))
     PHYS = np.tile(np.asarray(phys, dtype=np.complex128), (m, 1))
@@ -181,13 +296,4 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
         PARAMS[row, j] += 1j * EPS
     for row, direction in enumerate(phys_dirs, start=local_free.size + aero_free.size):
         PHYS[row] += 1j * EPS * direction
-    states = _run(Y0, t0, times, PHYS, program, PARAMS, integ)
-    cg = slice(P_CG_OFFSET, P_CG_OFFSET + 3)
-    if np.any(phys_dirs[:, cg]):
-        refs = np.asarray(ref_from_cg_body_m)[None, :] - (PHYS[:, cg] - np.asarray(phys)[cg])
-        obs = np.stack([observables(states[i], refs[i]) for i in range(m)])
-    else:
-        obs = observables(states, ref_from_cg_body_m)      # (m, n, 5) complex
-    pred = obs[0].real.copy()
-    jac = np.ascontiguousarray(np.moveaxis(obs.imag / EPS, 0, -1))   # (n, 5, m)
-    return (pred, jac, states[0].real.copy()) if with_states else (pred, jac)
+    return _run(Y0, t0, times, PHYS, program, PARAMS, integ)
