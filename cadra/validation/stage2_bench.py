@@ -134,6 +134,31 @@ def truth_errors(names, values, sigmas, model):
 
 # --- 1-2: speed and baseline ------------------------------------------------------------
 
+def jacobian_cost(sds, model, starts) -> dict:
+    """The first shot's Jacobian at the start, on one thread: forward mode's and complex
+    step's cost in float trajectories' time (best of 5 each), the lanes (unknowns), and the
+    worst column difference between the two over the column's largest entry."""
+    from cadra.fitting.problem import FitProblem
+    from cadra.fitting.sensitivity import Integration, predict_states, predict_with_jacobian
+
+    prob = FitProblem(tuple(sds), model, tuple(starts))
+    one = Integration(threads=1)
+    phys, ref = prob.physics(0, np.zeros(0))
+    y0, t0, t = prob.epoch_states[0], prob.epochs[0], sds[0].t_s
+    program, params = model.compile(), model.values()
+    args = (y0, t0, t, phys, program, params, ref, prob.local_free[0], prob.aero_indices, one)
+    jf = predict_with_jacobian(*args, method="forward")[1]
+    jc = predict_with_jacobian(*args, method="complex")[1]
+    float_s = _best_of(lambda: predict_states(y0, t0, t, phys, program, params, one), 5)[0]
+    fwd_s = _best_of(lambda: predict_with_jacobian(*args, method="forward"), 5)[0]
+    cpx_s = _best_of(lambda: predict_with_jacobian(*args, method="complex"), 5)[0]
+    scale = np.abs(jc).max(axis=(0, 1))
+    worst = np.abs(jf - jc).max(axis=(0, 1)) / np.where(scale > 0, scale, 1.0)
+    return {"jac_lanes": int(jf.shape[-1]), "jac_forward_equiv": fwd_s / float_s,
+            "jac_complex_equiv": cpx_s / float_s, "jac_float_ms": 1e3 * float_s,
+            "jac_vs_complex_max_rel": float(worst.max())}
+
+
 def _best_of(fn, n):
     times, out = [], None
     for _ in range(n):
@@ -165,11 +190,16 @@ def speed_and_baseline(seed, skip_baseline, quick):
         r = {"best_s": best, "median_s": med, "status": res.status, "one_thread_s": best1,
              "iterations": res.iterations, "chi2": res.chi2, "n_free": res.n_free,
              "n_obs": res.n_observations, "max_abs_pull": float(np.max(np.abs(pulls)))}
+        r.update(jacobian_cost(sds, start_model, starts))
         print(f"\n== {label} fit ({len(names)} shot(s), {res.n_free} unknowns, "
               f"{res.n_observations} measurements), perturbed start: best of 3 {best:.3f} s "
               f"(median {med:.3f}; one thread {best1:.3f} s), {res.status} in "
               f"{res.iterations} iterations, chi2 "
               f"{res.chi2:.2f}, max |fit-truth|/sigma {r['max_abs_pull']:.2f}")
+        print(f"   Jacobian of one shot ({r['jac_lanes']} unknowns, one thread): forward mode "
+              f"{r['jac_forward_equiv']:.1f} trajectories' time, complex step "
+              f"{r['jac_complex_equiv']:.1f}; worst column difference "
+              f"{r['jac_vs_complex_max_rel']:.1e} of its size")
         if _has_auto_start():
             t0 = time.perf_counter()
             auto_model, auto_states = auto_start(sds, start_model)
@@ -444,6 +474,12 @@ def figures(sp: dict, cold: dict | None, nf: dict | None, pl: dict | None,
         "multifit_one_thread_s": round(m["one_thread_s"], 4),
         "multifit_median_s": round(m["median_s"], 4),
         "multifit_status": m["status"], "multifit_iterations": m["iterations"],
+        "jacobian_unknowns": s["jac_lanes"],
+        "jacobian_trajectory_equivalents": round(s["jac_forward_equiv"], 2),
+        "jacobian_complex_trajectory_equivalents": round(s["jac_complex_equiv"], 2),
+        "jacobian_vs_complex_max_rel": float(f"{s['jac_vs_complex_max_rel']:.2e}"),
+        "multifit_jacobian_vs_complex_max_rel": float(f"{m['jac_vs_complex_max_rel']:.2e}"),
+        "float_trajectory_ms": round(s["jac_float_ms"], 3),
     }
     for key, r in (("single", s), ("multifit", m)):
         if "auto_best_s" in r:
