@@ -61,7 +61,8 @@ def _close(J, fd, tol):
     return np.abs(J - fd).max() <= tol * np.abs(fd).max()
 
 
-def test_complex_step_jacobian_matches_finite_differences(m2_2429):
+@pytest.mark.parametrize("method", ["forward", "complex"])
+def test_jacobian_matches_finite_differences(m2_2429, method):
     """Every state column and four aero columns against central differences, forward mode and
     complex step alike, on Table 4 M2
     M0.70 made smooth (C_mq_A2 low enough that max(...) never switches). Across the kink the
