@@ -9,6 +9,8 @@ complex step's real part takes its own path now and then, and the test says by h
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from numba import njit
@@ -168,3 +170,24 @@ def test_transform_refuses_what_it_cannot_differentiate():
         tangent_module([Spec(_bad, {"x": "a", "out": "a"})])
     with pytest.raises(TransformError, match="no parameter"):
         tangent_module([Spec(_bad, {"y": "a"})])
+
+
+def test_the_first_compile_runs_once_in_the_background(tmp_path, monkeypatch):
+    """Until the tangent code is compiled on the machine, "auto" asks for one background
+    compile: one process however many ask, another after a dead one's flag goes stale, none
+    once the code is ready."""
+    from cadra.dynamics import tangent
+
+    started = []
+    monkeypatch.setattr(tangent, "_MODULE", None)
+    monkeypatch.setattr(tangent, "_PATH", tmp_path / "cadra_tangent_0.py")
+    monkeypatch.setattr(tangent.subprocess, "Popen", lambda *a, **k: started.append(a))
+    assert not tangent.ready()
+    assert tangent.compile_in_background() and len(started) == 1
+    assert not tangent.compile_in_background() and len(started) == 1     # one at work
+    flag = tmp_path / "cadra_tangent_0.compiling"
+    old = flag.stat().st_mtime - 2 * tangent._COMPILE_STALE_S
+    os.utime(flag, (old, old))                                            # it died
+    assert tangent.compile_in_background() and len(started) == 2
+    (tmp_path / "cadra_tangent_0.ready").touch()
+    assert tangent.ready() and not tangent.compile_in_background() and len(started) == 2

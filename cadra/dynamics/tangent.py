@@ -20,8 +20,10 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import os
+import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +83,7 @@ SPECS = (
 PASSIVE = ("_doubling_error", "adaptive_budget")
 
 _MODULE = None
+_PATH: Path | None = None
 
 
 def source() -> str:
@@ -96,30 +99,77 @@ def _folder() -> Path:
     return folder
 
 
-def module():
-    """The generated module (written, imported and compiled on first use).
-
-    The first compile takes minutes of one core (the tangent code is several times the
-    float code); it is done under a file lock, so parallel processes (test workers, a
-    campaign's workers) wait for one compile and load its cached result."""
-    global _MODULE
-    if _MODULE is None:
+def _path() -> Path:
+    """Where the generated module lives (written on first call in a process)."""
+    global _PATH
+    if _PATH is None:
         text = source()
         key = hashlib.sha256(text.encode()).hexdigest()[:16]
-        name = f"cadra_tangent_{key}"
-        path = _folder() / f"{name}.py"
+        path = _folder() / f"cadra_tangent_{key}.py"
         if not path.exists() or path.read_text() != text:
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_text(text)
             os.replace(tmp, path)
-        spec = importlib.util.spec_from_file_location(name, path)
+        _PATH = path
+    return _PATH
+
+
+def module():
+    """The generated module (imported, and compiled or loaded from numba's cache, on first
+    use in a process).
+
+    The first compile on a machine (per build of the sources) takes one to two minutes of
+    one core: the tangent code is several times the float code. It runs under a file lock,
+    so parallel processes (test workers, a campaign's workers) compile once and load the
+    cached result; a marker then says the compiled code is there (:func:`ready`)."""
+    global _MODULE
+    if _MODULE is None:
+        path = _path()
+        spec = importlib.util.spec_from_file_location(path.stem, path)
         mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
+        sys.modules[path.stem] = mod
         spec.loader.exec_module(mod)
         with FileLock(str(path.with_suffix(".lock"))):
             _warm(mod)
+            path.with_suffix(".ready").touch()
+            path.with_suffix(".compiling").unlink(missing_ok=True)
         _MODULE = mod
     return _MODULE
+
+
+def ready() -> bool:
+    """Whether the compiled tangent code can be had without compiling it: loaded in this
+    process, or compiled on this machine for these sources (numba's cache holds it)."""
+    return _MODULE is not None or _path().with_suffix(".ready").exists()
+
+
+#: a background compile whose flag is older than this is taken for dead
+_COMPILE_STALE_S = 1800.0
+
+
+def compile_in_background() -> bool:
+    """Start one process that compiles the tangent code into numba's cache, unless it is
+    ready or another process is already at it (a flag file next to the module). Returns
+    whether one was started. Until it is done, callers that cannot wait use complex step
+    (:func:`cadra.fitting.sensitivity.predict_with_jacobian`, ``method="auto"``)."""
+    if ready():
+        return False
+    flag = _path().with_suffix(".compiling")
+    try:
+        if time.time() - flag.stat().st_mtime < _COMPILE_STALE_S:
+            return False
+        flag.unlink(missing_ok=True)                   # a dead compile's flag
+    except FileNotFoundError:
+        pass
+    try:
+        os.close(os.open(flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return False                                    # another process got there first
+    subprocess.Popen([sys.executable, "-c",
+                      "from cadra.dynamics.tangent import module; module()"],
+                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                     stderr=subprocess.DEVNULL, start_new_session=True)
+    return True
 
 
 def _warm(mod) -> None:

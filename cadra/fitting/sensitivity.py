@@ -5,7 +5,8 @@ equations and aero-model evaluator (:mod:`cadra.dynamics`, :mod:`cadra.aero`) in
 :func:`cadra.dynamics.integrate.propagate_adaptive`, and the observation model
 :func:`cadra.dynamics.observe.observe` (reference point seen from the cg, axis inclinations).
 
-Sensitivities are forward-mode derivatives (``method="forward"``, the default): one run of the
+Sensitivities are forward-mode derivatives (``method="forward"``; the default ``"auto"`` uses
+them once their compiled code is on the machine, :data:`METHODS`): one run of the
 integrator's tangent version (:mod:`cadra.dynamics.tangent`, generated from the integrator's
 own source) carries a derivative lane per free unknown, sharing the float run's values, so a
 Jacobian costs a few trajectories instead of one per unknown. ``method="complex"`` is the
@@ -31,6 +32,7 @@ import numpy as np
 from cadra import cores
 from cadra.channels import N_CHANNELS, OBSERVED
 from cadra.conventions import quat_mul, rotvec_quat
+from cadra.dynamics import tangent
 from cadra.dynamics.integrate import propagate_batch
 from cadra.dynamics.layout import N_STATE, P_CG_OFFSET
 from cadra.dynamics.observe import observe
@@ -43,8 +45,10 @@ LOCAL_NAMES = ("x_cg_m", "y_cg_m", "z_cg_m", "vx_m_s", "vy_m_s", "vz_m_s",
 N_LOCAL = len(LOCAL_NAMES)
 #: complex-step size (any tiny value gives the same derivative to rounding)
 EPS = 1e-20
-#: how a Jacobian is computed: forward-mode lanes, or complex step (the check)
-METHODS = ("forward", "complex")
+#: how a Jacobian is computed: forward-mode lanes, complex step (the check), or "auto":
+#: forward mode once its compiled code is on this machine, complex step until then (the
+#: first compile, one to two minutes, then runs in a background process)
+METHODS = ("auto", "forward", "complex")
 
 _POOL: ThreadPoolExecutor | None = None
 
@@ -224,7 +228,7 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
                           program, params: np.ndarray, ref_from_cg_body_m: np.ndarray,
                           local_free: np.ndarray, aero_free: np.ndarray,
                           integ: Integration = Integration(), phys_dirs=None,
-                          with_states: bool = False, method: str = "forward"):
+                          with_states: bool = False, method: str = "auto"):
     """Prediction (n, 5) and Jacobian (n, 5, n_local + n_aero + n_phys).
 
     ``local_free`` are indices into :data:`LOCAL_NAMES` (corrections at ``y0``),
@@ -234,11 +238,15 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     that order. A direction that moves the cg offset also moves the observed reference point
     (``ref_from_cg -= offset``, per run: :func:`cadra.fitting.extras.shot_ref`).
     ``with_states``: also return the (n, 13) states (the float run's: no extra
-    integration). ``method``: ``"forward"`` (tangent lanes) or ``"complex"`` (complex step,
-    the independent check; module doc).
+    integration). ``method``: ``"forward"`` (tangent lanes), ``"complex"`` (complex step,
+    the independent check; module doc) or ``"auto"`` (:data:`METHODS`).
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if method == "auto":
+        method = "forward" if tangent.ready() else "complex"
+        if method == "complex":
+            tangent.compile_in_background()
     local_free = np.asarray(local_free, dtype=int)
     aero_free = np.asarray(aero_free, dtype=int)
     phys_dirs = (np.zeros((0, len(phys))) if phys_dirs is None

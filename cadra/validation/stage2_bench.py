@@ -173,10 +173,12 @@ PYTHON_MULTIFIT_LIMIT_S = 600.0
 
 
 def speed_and_baseline(seed, skip_baseline, quick):
+    from cadra.dynamics import tangent
     from cadra.fitting.sensitivity import Integration
     from cadra.fitting.solver import FitOptions, fit
     from cadra.flight.data import FILM_SIGMAS
 
+    tangent.module()          # the forward-mode code compiled (or loaded) before any timing
     out = {}
     python_ms = None                        # plain-Python baseline ms per trajectory (single)
     for label, names in (("single", SINGLE), ("multi", M2_SET)):
