@@ -145,6 +145,8 @@ def ready() -> bool:
 
 #: a background compile whose flag is older than this is taken for dead
 _COMPILE_STALE_S = 1800.0
+#: the background compiles this process started
+_BACKGROUND: list = []
 
 
 def compile_in_background() -> bool:
@@ -165,10 +167,11 @@ def compile_in_background() -> bool:
         os.close(os.open(flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except FileExistsError:
         return False                                    # another process got there first
-    subprocess.Popen([sys.executable, "-c",
-                      "from cadra.dynamics.tangent import module; module()"],
-                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                     stderr=subprocess.DEVNULL, start_new_session=True)
+    # kept for the process's life: a dropped Popen of a running child warns when collected
+    _BACKGROUND.append(subprocess.Popen(
+        [sys.executable, "-c", "from cadra.dynamics.tangent import module; module()"],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        start_new_session=True))
     return True
 
 
