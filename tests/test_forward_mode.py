@@ -181,8 +181,7 @@ def test_the_first_compile_runs_once_in_the_background(tmp_path, monkeypatch):
     started = []
     monkeypatch.setattr(tangent, "_MODULE", None)
     monkeypatch.setattr(tangent, "_PATH", tmp_path / "cadra_tangent_0.py")
-    monkeypatch.setattr(tangent.subprocess, "Popen", lambda *a, **k: started.append(a))
-    monkeypatch.setattr(tangent, "_BACKGROUND", [])
+    monkeypatch.setattr(tangent.subprocess, "run", lambda *a, **k: started.append(a))
     assert not tangent.ready()
     assert tangent.compile_in_background() and len(started) == 1
     assert not tangent.compile_in_background() and len(started) == 1     # one at work

@@ -145,8 +145,11 @@ def ready() -> bool:
 
 #: a background compile whose flag is older than this is taken for dead
 _COMPILE_STALE_S = 1800.0
-#: the background compiles this process started
-_BACKGROUND: list = []
+#: the intermediate's program: start the compiler in a session of its own, and leave
+_LAUNCH = ("import subprocess, sys; subprocess.Popen([sys.executable, '-c', "
+           "'from cadra.dynamics.tangent import module; module()'], "
+           "stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, "
+           "start_new_session=True)")
 
 
 def compile_in_background() -> bool:
@@ -167,11 +170,10 @@ def compile_in_background() -> bool:
         os.close(os.open(flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except FileExistsError:
         return False                                    # another process got there first
-    # kept for the process's life: a dropped Popen of a running child warns when collected
-    _BACKGROUND.append(subprocess.Popen(
-        [sys.executable, "-c", "from cadra.dynamics.tangent import module; module()"],
-        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        start_new_session=True))
+    # launched through a short-lived intermediate that is waited for: the compiler is then
+    # nobody's child here (no zombie, no Popen of a running child to warn when collected)
+    subprocess.run([sys.executable, "-c", _LAUNCH], stdin=subprocess.DEVNULL,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
     return True
 
 
