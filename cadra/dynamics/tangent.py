@@ -51,8 +51,9 @@ _A, _S, _T = "a", "s", "t"
 _STATE_SCRATCH = {"R": _A, "v_b": _A, "variables": _A, "F_b": _A, "M_b": _A, "coef": _A,
                   "stack": _A}
 
-#: njit options of the generated functions (the run releases the GIL). Numba-level inlining
-#: of the helpers was tried: it made the cold compile 1.5x longer for ~15 % less run time
+#: njit options of the generated functions (the run releases the GIL). Inlining the helpers
+#: at numba's level was measured (M2 shot, 28 lanes): a Jacobian in about half the time, but
+#: a cold compile 2.5x as long; this is the short compile (docs/fitting.md, "Sensitivities")
 _JIT = {"cache": True, "error_model": "numpy"}
 _TOP = {"cache": True, "error_model": "numpy", "nogil": True}
 
