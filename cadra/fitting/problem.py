@@ -391,12 +391,16 @@ class FitProblem:
                 if phys[P_FRAME] != FRAME_BODY and non_rolling_obstacle(phys, program, more):
                     phys = phys.copy()
                     phys[P_FRAME] = FRAME_BODY     # e.g. a gap candidate's lateral cg offset
-            runs.append((k, sd, lf, on, n_more, (
+            runs.append((sd, lf, on, n_more, (
                 initial_states[k], self.epochs[k], sd.t_s, phys, program, params, ref, lf,
-                aero_idx, self.integration, np.array(dirs) if dirs else None, True)))
-        outs = over_shots(lambda a: predict_with_jacobian(*a), [r[-1] for r in runs],
-                          self.integration)
-        for (_, sd, lf, on, n_more, _args), (pred, jac, y) in zip(runs, outs, strict=True):
+                aero_idx), np.array(dirs) if dirs else None))
+
+        def shot(run, integ):
+            *_, args, dirs = run
+            return predict_with_jacobian(*args, integ, phys_dirs=dirs, with_states=True)
+
+        outs = over_shots(shot, runs, self.integration)
+        for (sd, lf, on, n_more, _, _), (pred, jac, y) in zip(runs, outs, strict=True):
             sid = sd.shot_id
             base = lf.size + na
             if ne or n_more:

@@ -212,15 +212,15 @@ def _run_tangent(y0, t0, times, phys, program, params, seeds, integ: Integration
 _LANES_PER_THREAD = 24
 
 
-def over_shots(fn, args: list, integ: Integration) -> list:
-    """``[fn(a) for a in args]``, where each ``a`` ends with a shot's :class:`Integration`
-    (the 10th of :func:`predict_with_jacobian`'s arguments): several shots run in parallel
-    over the thread pool, each on one thread; one shot keeps ``integ``'s threads."""
+def over_shots(fn, items: list, integ: Integration) -> list:
+    """``[fn(item, integ) for item in items]`` for the shots of a problem: several shots run
+    in parallel over the thread pool, each on one thread (``fn`` gets ``integ`` with
+    ``threads=1``); a single shot keeps ``integ``'s threads."""
     workers = integ.threads or cores.available()
-    if len(args) < 2 or workers < 2:
-        return [fn(a) for a in args]
+    if len(items) < 2 or workers < 2:
+        return [fn(item, integ) for item in items]
     one = replace(integ, threads=1)
-    jobs = [_pool().submit(fn, (*a[:9], one, *a[10:])) for a in args]
+    jobs = [_pool().submit(fn, item, one) for item in items]
     return [j.result() for j in jobs]
 
 
@@ -257,22 +257,19 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
         out = (observables(states, ref_from_cg_body_m), np.zeros((len(times), N_CHANNELS, 0)))
         return (*out, states) if with_states else out
     times = np.ascontiguousarray(times, dtype=float)
-    cg = slice(P_CG_OFFSET, P_CG_OFFSET + 3)
+    seeds = _seeds(y0, len(params), local_free, aero_free, phys_dirs)
     if method == "forward":
-        seeds = _seeds(y0, len(params), local_free, aero_free, phys_dirs)
         states, d_states = _run_tangent(y0, t0, times, phys, program, params, seeds, integ)
         # the observation model is cheap numpy: its directional derivatives along the lanes
         # by complex step (Im f(x + i eps dx) / eps = f'(x) dx, exact)
         lanes = states[None] + 1j * EPS * np.moveaxis(d_states, -1, 0)     # (m, n, 13)
-        ref_dirs = -phys_dirs[:, cg]
     else:
-        lanes = _complex_runs(y0, t0, times, phys, program, params, local_free, aero_free,
-                              phys_dirs, integ)
+        lanes = _complex_runs(y0, t0, times, phys, program, params, seeds, integ)
         states = lanes[0].real.copy()
-        ref_dirs = -phys_dirs[:, cg]
+    # a lane that moves the cg offset moves the observed reference point against it
+    ref_dirs = -seeds[2][P_CG_OFFSET:P_CG_OFFSET + 3].T                      # (m, 3)
     if np.any(ref_dirs):
-        refs = np.asarray(ref_from_cg_body_m)[None, :] + 1j * EPS * np.vstack(
-            [np.zeros((m - len(ref_dirs), 3)), ref_dirs])
+        refs = np.asarray(ref_from_cg_body_m)[None, :] + 1j * EPS * ref_dirs
         obs = np.stack([observables(lanes[i], refs[i]) for i in range(m)])
     else:
         obs = observables(lanes, ref_from_cg_body_m)      # (m, n, 5) complex
@@ -282,26 +279,11 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     return (pred, jac, states) if with_states else (pred, jac)
 
 
-def _complex_runs(y0, t0, times, phys, program, params, local_free, aero_free, phys_dirs,
-                  integ):
-    """(m, n, 13) complex states, one complex-step run per unknown (the check)."""
-    m = local_free.size + aero_free.size + phys_dirs.shape[0]
-    Y0 = np.tile(np.asarray(y0, dtype=np.complex128), (m, 1))
-    PARAMS = np.tile(np.asarray(params, dtype=np.complex128), (m, 1))
-    PHYS = np.tile(np.asarray(phys, dtype=np.complex128), (m, 1))
-    q = np.asarray(y0[6:10], dtype=float)
-    for row, k in enumerate(local_free):
-        if k < 6:
-            Y0[row, k] += 1j * EPS
-        elif k < 9:
-            e = np.zeros(4, dtype=np.complex128)
-            e[0] = 1.0
-            e[1 + k - 6] = 0.5j * EPS
-            Y0[row, 6:10] = quat_mul(q, e)
-        else:
-            Y0[row, 10 + k - 9] += 1j * EPS
-    for row, j in enumerate(aero_free, start=local_free.size):
-        PARAMS[row, j] += 1j * EPS
-    for row, direction in enumerate(phys_dirs, start=local_free.size + aero_free.size):
-        PHYS[row] += 1j * EPS * direction
+def _complex_runs(y0, t0, times, phys, program, params, seeds, integ):
+    """(m, n, 13) complex states, one complex-step run per seeded lane (the check): each
+    run's inputs are the float ones plus ``i * EPS`` times its lane's seed."""
+    Y, P, H = seeds
+    Y0 = np.asarray(y0, dtype=float)[None, :] + 1j * EPS * Y.T
+    PARAMS = np.asarray(params, dtype=float)[None, :] + 1j * EPS * P.T
+    PHYS = np.asarray(phys, dtype=float)[None, :] + 1j * EPS * H.T
     return _run(Y0, t0, times, PHYS, program, PARAMS, integ)
