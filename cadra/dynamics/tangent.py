@@ -51,10 +51,14 @@ _A, _S, _T = "a", "s", "t"
 _STATE_SCRATCH = {"R": _A, "v_b": _A, "variables": _A, "F_b": _A, "M_b": _A, "coef": _A,
                   "stack": _A}
 
-#: njit options of the generated functions (the run releases the GIL). Inlining the helpers
-#: at numba's level was measured (M2 shot, 28 lanes): a Jacobian in about half the time, but
-#: a cold compile 2.5x as long; this is the short compile (docs/fitting.md, "Sensitivities")
-_JIT = {"cache": True, "error_model": "numpy"}
+#: njit options of the generated functions (the run releases the GIL). The helpers of the
+#: equations of motion are inlined at numba's level into the derivative (not the derivative
+#: into the RK4 span, which calls it four times: four copies of the aero interpreter's
+#: tangent): a Jacobian in about half the time of calls (M2 shot, 28 lanes: 12.9 against
+#: 24.5 ms), for a first compile about 2.5x as long, which runs in the background
+#: (docs/fitting.md, "Sensitivities")
+_JIT = {"cache": True, "error_model": "numpy", "inline": "always"}
+_SPAN = {"cache": True, "error_model": "numpy"}
 _TOP = {"cache": True, "error_model": "numpy", "nogil": True}
 
 #: the functions transformed, with the parameters that carry derivatives
@@ -70,11 +74,11 @@ SPECS = (
     Spec(constrain, {"y": _A, "phys": _A, "R": _A, "F_b": _A, "M_b": _A, "dy": _A},
          jit=_JIT),
     Spec(derivative, {"y": _A, "phys": _A, "I": _A, "Iinv": _A, "params": _A,
-                      **_STATE_SCRATCH, "dy": _A}, jit=_TOP),
+                      **_STATE_SCRATCH, "dy": _A}, jit=_SPAN),
     Spec(inverse3, {"A": _A, "out": _A}, jit=_JIT),
     Spec(_rk4_span, {"y": _A, "phys": _A, "I": _A, "Iinv": _A, "params": _A,
                      "scratch": _T, "coef": _A, "stack": _A, "k1": _A, "k2": _A, "k3": _A,
-                     "k4": _A, "tmp": _A}, jit=_JIT),
+                     "k4": _A, "tmp": _A}, jit=_SPAN),
     Spec(_start, {"y0": _A, "phys": _A, "R": _A, "y": _A}, jit=_JIT),
     Spec(_workspace, {"y0": _A, "phys": _A},
          returns=(_A, _A, _T, _A, _A, _A, _A, _A, _A, _A), jit=_JIT),

@@ -49,6 +49,10 @@ EPS = 1e-20
 #: forward mode once its compiled code is on this machine, complex step until then (the
 #: first compile, one to two minutes, then runs in a background process)
 METHODS = ("auto", "forward", "complex")
+#: environment variable that chooses what ``method="auto"`` means, for every fit of a process
+#: and its workers: ``forward`` (wait for the compile if needed) or ``complex``; unset or
+#: ``auto``: as above (docs/fitting.md, "Sensitivities")
+METHOD_ENV = "CADRA_SENSITIVITIES"
 
 _POOL: ThreadPoolExecutor | None = None
 
@@ -224,6 +228,21 @@ def over_shots(fn, items: list, integ: Integration) -> list:
     return [j.result() for j in jobs]
 
 
+def _auto_method() -> str:
+    """What ``method="auto"`` is now: :data:`METHOD_ENV` if set, else forward mode if its
+    compiled code is ready (complex step until then, with the compile started in the
+    background)."""
+    chosen = os.environ.get(METHOD_ENV, "auto").strip().lower() or "auto"
+    if chosen not in METHODS:
+        raise ValueError(f"{METHOD_ENV} must be one of {METHODS}, got {chosen!r}")
+    if chosen != "auto":
+        return chosen
+    if tangent.ready():
+        return "forward"
+    tangent.compile_in_background()
+    return "complex"
+
+
 def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,
                           program, params: np.ndarray, ref_from_cg_body_m: np.ndarray,
                           local_free: np.ndarray, aero_free: np.ndarray,
@@ -244,9 +263,7 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if method == "auto":
-        method = "forward" if tangent.ready() else "complex"
-        if method == "complex":
-            tangent.compile_in_background()
+        method = _auto_method()
     local_free = np.asarray(local_free, dtype=int)
     aero_free = np.asarray(aero_free, dtype=int)
     phys_dirs = (np.zeros((0, len(phys))) if phys_dirs is None
