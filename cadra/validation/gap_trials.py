@@ -20,6 +20,7 @@ effect. The summaries of the rows are :mod:`cadra.validation.gap_summary`.
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import replace
 
@@ -52,7 +53,8 @@ from cadra.validation.gap_scoring import (
 )
 
 __all__ = ["CASES", "CASE_OF_EFFECT", "EXTENDED_CASES", "STRONG_RCHI2", "STRONG_REDRAWS",
-           "WHERE_ONLY_LAMBDA", "multifit_timing", "run_case", "run_trial", "score_extended"]
+           "WHERE_ONLY_LAMBDA", "diagnose_with", "multifit_timing", "run_case", "run_trial",
+           "score_extended"]
 
 #: the noncentrality b^2 sum(1 - leverage) of a where-only trial's one-station bias
 WHERE_ONLY_LAMBDA = (36.0, 44.0)
@@ -74,14 +76,40 @@ CASES = ["cg", "inertia_asym", "products", "density", "crossflow", "cm3", "cmq2"
          "station_bias", "timing", "scale", "null", "out_of_library", *EXTENDED_CASES]
 
 
-def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0):
+def diagnose_with(method: str, res, shots, model):
+    """:func:`cadra.gap.score.diagnose_gap` with every Jacobian by ``method`` ("forward" or
+    "complex", through :data:`cadra.fitting.sensitivity.METHOD_ENV`): (diagnosis, seconds)."""
+    from cadra.fitting.sensitivity import METHOD_ENV
+    from cadra.gap.score import diagnose_gap
+
+    before = os.environ.get(METHOD_ENV)
+    os.environ[METHOD_ENV] = method
+    try:
+        t0 = time.perf_counter()
+        dg = diagnose_gap(res, shots, model)
+        return dg, time.perf_counter() - t0
+    finally:
+        if before is None:
+            os.environ.pop(METHOD_ENV, None)
+        else:
+            os.environ[METHOD_ENV] = before
+
+
+def _first_named(dg):
+    return dg.added[0]["effect"] if dg.added else None
+
+
+def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0, ab=None):
     """One trial of ``case`` (its shots simulated with the effect, measured, fitted without it
     and diagnosed blind, the diagnosis scored against the truth): a dict row. ``tmpdir``: where
     an aero case writes its model file. A draw whose effect does not matter returns early (no
     diagnosis) unless ``force``. A strong-effect trial draws one of STRONG_SUBCASES at k times
     its usual size (k log-uniform in 0.01-1 on the M1 sets); when the fit without it lands
     outside STRONG_RCHI2 the same trial (shots, direction, noise) is redone with k rescaled
-    towards chi^2/dof ~ 60 (``strong_k``; at most three times)."""
+    towards chi^2/dof ~ 60 (``strong_k``; at most three times). ``ab``: the two
+    sensitivity methods in the order to run them (e.g. ("complex", "forward")): the fit is
+    diagnosed with each, timed, and scored on the forward-mode diagnosis (the row's
+    ``ab_seconds`` and ``ab_first`` by method, and ``ab_verdicts``)."""
     saved = rng.bit_generator.state
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
@@ -190,14 +218,22 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0):
         if not out["matters"] and _depth < 3 and not force:
             rng.bit_generator.state = saved
             factor = math.sqrt(61.0 / max(res.reduced_chi2 - 1.0, 1e-2))
-            return run_trial(case, rng, tmpdir, force, k * min(factor, 30.0), _depth + 1)
+            return run_trial(case, rng, tmpdir, force, k * min(factor, 30.0), _depth + 1, ab)
     if (expected is not None and case not in ("where_only", "shared_density")
             and not out["matters"]
             and not force):
         return out             # not a trial of this case: the caller draws another
-    t0 = time.perf_counter()
-    dg = diagnose_gap(res, shots, model)
-    out.update({"seconds": t_fit + time.perf_counter() - t0, "verdict": dg.verdict,
+    if ab:
+        runs = {m: diagnose_with(m, res, shots, model) for m in ab}
+        dg, t_diag = runs["forward"]
+        out.update({"ab_seconds": {m: r[1] for m, r in runs.items()},
+                    "ab_first": {m: _first_named(r[0]) for m, r in runs.items()},
+                    "ab_verdicts": {m: r[0].verdict for m, r in runs.items()}})
+    else:
+        t0 = time.perf_counter()
+        dg = diagnose_gap(res, shots, model)
+        t_diag = time.perf_counter() - t0
+    out.update({"seconds": t_fit + t_diag, "verdict": dg.verdict,
                 "after_status": dg.fit_after.status if dg.fit_after is not None else "-"})
     first = dg.added[0] if dg.added else None
     # a freed hold the verdict does not blame (a misfit stands beside it) names nothing
@@ -304,22 +340,26 @@ def score_extended(case, out, dg, res, expected, truth, where, named, groups, su
     return out
 
 
-def run_case(case, rng, tmpdir, trials: int, progress: bool = False):
+def run_case(case, rng, tmpdir, trials: int, progress: bool = False, ab: bool = False):
     """``trials`` trials of ``case`` from the generator ``rng``: ([row, ...], the number of
     draws drawn again). A draw whose effect does not matter (rms up 20 %, or a coefficient
     moved by more than its sigma) is not a trial of the case: it is drawn again, at most
     MAX_REDRAWS times (STRONG_REDRAWS for a strong effect), and counted; the last is kept
-    whatever it gives. ``progress``: a progress bar (tqdm)."""
+    whatever it gives. ``progress``: a progress bar (tqdm). ``ab``: each trial diagnosed
+    with both sensitivity methods, complex step first in even trials and forward mode first
+    in odd ones (:func:`run_trial`)."""
     steps = range(trials)
     if progress:
         from tqdm import tqdm
 
         steps = tqdm(steps, desc=case, unit="shot", leave=False)
     rows, n_redrawn = [], 0
-    for _ in steps:
+    for i in steps:
         n_max = STRONG_REDRAWS if case == "strong" else MAX_REDRAWS
+        order = (None if not ab else ("complex", "forward") if i % 2 == 0
+                 else ("forward", "complex"))
         for attempt in range(n_max + 1):
-            row = run_trial(case, rng, tmpdir, force=attempt == n_max)
+            row = run_trial(case, rng, tmpdir, force=attempt == n_max, ab=order)
             if "verdict" in row:
                 break
             n_redrawn += 1
@@ -327,9 +367,11 @@ def run_case(case, rng, tmpdir, trials: int, progress: bool = False):
     return rows, n_redrawn
 
 
-def multifit_timing(seed: int = 0) -> dict:
+def multifit_timing(seed: int = 0, methods=None) -> dict:
     """Diagnosis time of one seven-shot M2 multi-fit (every M2 sample shot, stage-one noise, a
-    2 um z bias at station 9 in every shot: a facility effect), and what it found."""
+    2 um z bias at station 9 in every shot: a facility effect), and what it found.
+    ``methods``: also the diagnosis with each of these sensitivity methods, timed
+    (``multifit_ab_seconds``, ``multifit_ab_first``)."""
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
     from cadra.gap.score import diagnose_gap
@@ -352,6 +394,11 @@ def multifit_timing(seed: int = 0) -> dict:
     dg = diagnose_gap(res, shots, model)
     tables = where_analysis(res, shots, res.residuals)
     t2 = time.perf_counter()
-    return {"seconds_multifit_fit": t1 - t0, "seconds_multifit_diagnosis": t2 - t1,
-            "multifit_verdict": dg.verdict, "multifit_where": tables["findings"][:3]}
+    out = {"seconds_multifit_fit": t1 - t0, "seconds_multifit_diagnosis": t2 - t1,
+           "multifit_verdict": dg.verdict, "multifit_where": tables["findings"][:3]}
+    if methods:
+        runs = {m: diagnose_with(m, res, shots, model) for m in methods}
+        out["multifit_ab_seconds"] = {m: r[1] for m, r in runs.items()}
+        out["multifit_ab_first"] = {m: _first_named(r[0]) for m, r in runs.items()}
+    return out
 

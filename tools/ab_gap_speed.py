@@ -1,0 +1,95 @@
+"""The gap diagnosis's time with forward-mode sensitivities against complex step, in one run.
+
+Each trial is made as ``tools/validate_gap.py`` makes it (its cases, shots, noise and fit),
+then the same fit is diagnosed twice: with every Jacobian by complex step (the method the
+diagnosis used before forward mode) and by forward mode, in alternating order (complex step
+first in even trials), so both see the same machine and the same load. Printed: each
+method's median diagnosis time, the median of the paired ratios (forward / complex) with its
+range, how often the two diagnoses named the same effect first and gave the same verdict, and
+the seven-shot multi-fit diagnosis both ways. The rows are scored on the forward-mode
+diagnosis, as the validation scores them (top-1 rate per case).
+
+Usage: python tools/ab_gap_speed.py [--trials 3] [--seed 6] [--cases cg,density,...]
+(about 1-2 min a trial on one core). The last printed line is a JSON object, recorded in
+results/ab_gap_speed.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+from cadra.validation.tool import one_thread, run_tool
+
+one_thread()
+
+import numpy as np  # noqa: E402 (after one_thread)
+
+from cadra.validation.gap_trials import multifit_timing, run_case  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+#: a case of each kind the library covers: body, aero, air, station effects, a null and an
+#: effect outside the library, on single shots and a three-shot set
+CASES = "cg,inertia_asym,density,crossflow,cm3,cmq2,station_bias,timing,null,out_of_library"
+METHODS = ("complex", "forward")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--trials", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=6)
+    ap.add_argument("--cases", default=CASES)
+    ap.add_argument("--no-multifit", action="store_true",
+                    help="skip the seven-shot multi-fit diagnosis")
+    args = ap.parse_args(argv)
+    run_tool("ab_gap_speed", ROOT, lambda: run(args), argv=argv)
+    return 0
+
+
+def run(args) -> dict:
+    from cadra.dynamics import tangent
+
+    tangent.module()              # forward mode's code compiled (or loaded) before any timing
+    rng = np.random.default_rng(args.seed)
+    rows, by_case = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in [c for c in args.cases.split(",") if c]:
+            got, _ = run_case(case, rng, tmp, args.trials, progress=True, ab=True)
+            rows += got
+            sec = {m: [r["ab_seconds"][m] for r in got] for m in METHODS}
+            by_case[case] = {
+                "trials": len(got),
+                "median_s": {m: float(np.median(sec[m])) for m in METHODS},
+                "same_first": sum(r["ab_first"]["complex"] == r["ab_first"]["forward"]
+                                  for r in got),
+                "top1_forward": sum(bool(r.get("top1")) for r in got)
+                if any("top1" in r for r in got) else None}
+            print(f"{case}: {by_case[case]}", flush=True)
+    ratio = np.array([r["ab_seconds"]["forward"] / r["ab_seconds"]["complex"] for r in rows])
+    out = {
+        "trials": len(rows),
+        "diagnosis_median_s_complex": float(np.median([r["ab_seconds"]["complex"]
+                                                       for r in rows])),
+        "diagnosis_median_s_forward": float(np.median([r["ab_seconds"]["forward"]
+                                                       for r in rows])),
+        "diagnosis_time_ratio_median": float(np.median(ratio)),
+        "diagnosis_time_ratio_range": [float(ratio.min()), float(ratio.max())],
+        "same_first_rate": float(np.mean([r["ab_first"]["complex"] == r["ab_first"]["forward"]
+                                          for r in rows])),
+        "same_verdict_rate": float(np.mean([r["ab_verdicts"]["complex"]
+                                            == r["ab_verdicts"]["forward"] for r in rows])),
+        "by_case": by_case}
+    if not args.no_multifit:
+        mf = multifit_timing(methods=METHODS)
+        out["multifit_diagnosis_s"] = mf["multifit_ab_seconds"]
+        out["multifit_time_ratio"] = (mf["multifit_ab_seconds"]["forward"]
+                                      / mf["multifit_ab_seconds"]["complex"])
+        out["multifit_same_first"] = (mf["multifit_ab_first"]["complex"]
+                                      == mf["multifit_ab_first"]["forward"])
+    return out
+
+
+if __name__ == "__main__":
+    sys.exit(main())
