@@ -51,12 +51,12 @@ _A, _S, _T = "a", "s", "t"
 _STATE_SCRATCH = {"R": _A, "v_b": _A, "variables": _A, "F_b": _A, "M_b": _A, "coef": _A,
                   "stack": _A}
 
-#: njit options of the generated functions (the run releases the GIL). The helpers of the
-#: equations of motion are inlined at numba's level into the derivative (not the derivative
-#: into the RK4 span, which calls it four times: four copies of the aero interpreter's
-#: tangent): a Jacobian in about half the time of calls (M2 shot, 28 lanes: 12.9 against
-#: 24.5 ms), for a first compile about 2.5x as long, which runs in the background
-#: (docs/fitting.md, "Sensitivities")
+#: njit options of the generated functions (the run releases the GIL). The small helpers of
+#: the equations of motion are inlined at numba's level into the derivative; the aero
+#: interpreter's tangent is not (nor the derivative into the RK4 span, which calls it four
+#: times). Measured on the M2 shot, 28 lanes, one thread: a Jacobian about half the time of
+#: calls alone, 10-15 % slower than with the interpreter inlined too, for a first compile of
+#: 100 s against 184 s (calls alone: 97 s); docs/fitting.md, "Sensitivities"
 _JIT = {"cache": True, "error_model": "numpy", "inline": "always"}
 _SPAN = {"cache": True, "error_model": "numpy"}
 _TOP = {"cache": True, "error_model": "numpy", "nogil": True}
@@ -67,7 +67,7 @@ SPECS = (
     Spec(air_data, {"y": _A, "phys": _A, "R": _A, "v_b": _A, "variables": _A},
          returns=(_S, _S), jit=_JIT),
     Spec(eval_coefficients, {"variables": _A, "params": _A, "out": _A, "stack": _A},
-         jit=_JIT),
+         jit=_SPAN),
     Spec(aero_force_moment, {"v_b": _A, "V": _S, "rho": _S, "phys": _A, "coef": _A,
                              "F_b": _A, "M_b": _A}, returns=(_S, _S, _S), jit=_JIT),
     Spec(mount, {"y": _A, "phys": _A, "R": _A}, jit=_JIT),

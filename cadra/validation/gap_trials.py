@@ -53,8 +53,8 @@ from cadra.validation.gap_scoring import (
 )
 
 __all__ = ["CASES", "CASE_OF_EFFECT", "EXTENDED_CASES", "STRONG_RCHI2", "STRONG_REDRAWS",
-           "WHERE_ONLY_LAMBDA", "diagnose_with", "multifit_timing", "run_case", "run_trial",
-           "score_extended"]
+           "WHERE_ONLY_LAMBDA", "diagnose_with", "finding", "multifit_timing", "run_case",
+           "run_trial", "score_extended"]
 
 #: the noncentrality b^2 sum(1 - leverage) of a where-only trial's one-station bias
 WHERE_ONLY_LAMBDA = (36.0, 44.0)
@@ -99,6 +99,13 @@ def _first_named(dg):
     return dg.added[0]["effect"] if dg.added else None
 
 
+def finding(dg) -> tuple:
+    """What a diagnosis found, without its sizes: the effects added in order, whether a gap
+    is left unexplained, and the misfits set aside."""
+    return (tuple(a["effect"] for a in dg.added), bool(dg.unexplained),
+            tuple(sorted(map(str, dg.set_aside))))
+
+
 def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0, ab=None):
     """One trial of ``case`` (its shots simulated with the effect, measured, fitted without it
     and diagnosed blind, the diagnosis scored against the truth): a dict row. ``tmpdir``: where
@@ -109,7 +116,7 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0, ab=None):
     towards chi^2/dof ~ 60 (``strong_k``; at most three times). ``ab``: the two
     sensitivity methods in the order to run them (e.g. ("complex", "forward")): the fit is
     diagnosed with each, timed, and scored on the forward-mode diagnosis (the row's
-    ``ab_seconds`` and ``ab_first`` by method, and ``ab_verdicts``)."""
+    ``ab_seconds``, ``ab_first``, ``ab_verdicts`` and ``ab_findings`` by method)."""
     saved = rng.bit_generator.state
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
@@ -228,7 +235,8 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0, ab=None):
         dg, t_diag = runs["forward"]
         out.update({"ab_seconds": {m: r[1] for m, r in runs.items()},
                     "ab_first": {m: _first_named(r[0]) for m, r in runs.items()},
-                    "ab_verdicts": {m: r[0].verdict for m, r in runs.items()}})
+                    "ab_verdicts": {m: r[0].verdict for m, r in runs.items()},
+                    "ab_findings": {m: finding(r[0]) for m, r in runs.items()}})
     else:
         t0 = time.perf_counter()
         dg = diagnose_gap(res, shots, model)
