@@ -482,3 +482,44 @@ def test_validation_tail_probability_of_trials_above_the_limit():
     brute = sum(math.prod(p if o else 1 - p for o, p in zip(out, q, strict=True))
                 for out in itertools.product([0, 1], repeat=len(q)) if sum(out) >= 3)
     assert exceed_pvalue(rows) == pytest.approx(brute, rel=1e-12)
+
+
+def test_a_column_of_rounding_is_no_direction():
+    """The score test of a candidate whose computed column is rounding (the data do not
+    depend on it): without the fit's scale it is a random unit vector, whose chi^2 drop is
+    drawn from chi^2_1 (so p < 0.05 one time in twenty); with it, no score at all. A column
+    that matters, or one of a pair that does, is scored as before."""
+    from cadra.gap.score import _orth, score
+
+    rng = np.random.default_rng(4)
+    n = 300
+    J = rng.normal(size=(n, 6)) * np.array([1e6, 1e4, 1e3, 3e2, 1e5, 1e2])
+    Q, r = _orth(J), rng.normal(size=n)
+    scale = float(np.linalg.norm(J, axis=0).max())
+    drops = [score(Q, r, rng.normal(size=(n, 1)) * 1e-27, n, 6)["dchi2"] for _ in range(400)]
+    assert 0.6 < np.mean(drops) < 1.4                          # chi^2_1: mean 1
+    assert score(Q, r, rng.normal(size=(n, 1)) * 1e-27, n, 6, scale) is None
+    C = rng.normal(size=(n, 1)) * 1e-3 + r[:, None] * 1e-2       # small, but it matters
+    assert score(Q, r, C, n, 6, scale)["dchi2"] == pytest.approx(score(Q, r, C, n, 6)["dchi2"])
+    pair = np.hstack([C, rng.normal(size=(n, 1)) * 1e-27])
+    sc = score(Q, r, pair, n, 6, scale)
+    assert sc["k"] == 1 and sc["dchi2"] == pytest.approx(score(Q, r, C, n, 6)["dchi2"])
+    assert math.isfinite(sc["sigma"][0]) and sc["sigma"][1] == np.inf
+
+
+def test_a_spheres_moment_terms_are_not_scored():
+    """A sphere's record holds positions, which the library's aero terms (all moments) do
+    not move: their candidates get no score (they were scored as rounding's random direction
+    and refitted, from scratch, one time in twenty), while the body, air and station
+    candidates are scored."""
+    from cadra.validation.gap_cases import shot_spec
+    from cadra.validation.gap_measure import measure
+
+    sp = shot_spec("sphere_1")
+    sim = simulate_shot(sp)
+    sd = measure(sim, sim.rigid.with_effects(Effects()), sp, 5, None)
+    res, _ = fit_shots([sd], sim.model)
+    dg = diagnose_gap(res, [sd])
+    kinds = set(dg.ranking["kind"])
+    assert "aero" not in kinds and {"dynamics", "measurement"} <= kinds
+    assert {"density gradient", "cross-flow"} <= set(dg.ranking["candidate"])

@@ -179,8 +179,27 @@ def _orth(A, rcond=1e-10):
     return U[:, s > rcond * max(s.max(), 1e-300)]
 
 
-def score(Q, r, C, n_obs, n_free):
-    """Score test of candidate columns C against the fit basis Q: dict of statistics."""
+#: a candidate's column whose norm is below this fraction of the fit's largest column is
+#: exactly zero: the data do not depend on that parameter. A sphere's pitching-moment terms,
+#: say: the positions its record holds do not depend on them, and their computed derivatives
+#: are rounding (largest entries 1e-27-1e-13, against column norms of 1e4-1e9 for the fit's
+#: own). Scored as a direction, such rounding is a random unit vector: a chi^2 drop drawn from
+#: chi^2_k, so the candidate was refitted (one time in twenty, and from scratch if aero) and
+#: could be added at the test's false-alarm rate. The margin to any column that matters is
+#: many orders of magnitude either way (docs/gap.md, "Ranking").
+ZERO_COLUMN_REL = 1e-10
+
+
+def score(Q, r, C, n_obs, n_free, scale: float | None = None):
+    """Score test of candidate columns C against the fit basis Q: dict of statistics, or
+    None if no column is left. ``scale``: the fit's largest column norm; a column below
+    :data:`ZERO_COLUMN_REL` of it is zero (the parameter's sigma is then not determined)."""
+    zero = np.zeros(C.shape[1], dtype=bool)
+    if scale is not None:
+        zero = np.linalg.norm(C, axis=0) <= ZERO_COLUMN_REL * scale
+        if zero.all():
+            return None
+        C = np.where(zero, 0.0, C)
     Cp = C - Q @ (Q.T @ C)
     Qc = _orth(Cp)
     k = Qc.shape[1]
@@ -195,8 +214,9 @@ def score(Q, r, C, n_obs, n_free):
     p = float(stats.f.sf(F, k, max(dof_after, 1)))
     delta, *_ = np.linalg.lstsq(Cp, r, rcond=None)
     cov = np.linalg.pinv(Cp.T @ Cp) * max(s2, 1.0)
-    return {"dchi2": dchi2, "k": k, "F": F, "p": p, "delta": delta,
-            "sigma": np.sqrt(np.maximum(np.diag(cov), 0.0)),
+    sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    sigma[zero] = np.inf
+    return {"dchi2": dchi2, "k": k, "F": F, "p": p, "delta": delta, "sigma": sigma,
             "dbic": -dchi2 / max(s2, 1.0) + k * math.log(n_obs), "Cp": Cp}
 
 
@@ -286,9 +306,10 @@ def _greedy(result: FitResult, shots: Sequence[ShotData], model: AeroModel,
         J, r = _stack(per, current.model.free_indices().size + len(current.extras))
         n_obs, n_free = r.size, J.shape[1]
         Q = _orth(J)
+        scale = float(np.linalg.norm(J, axis=0).max(initial=0.0))
         lin = {}
         for c in remaining:
-            sc = score(Q, r, _cand_matrix(per, c.name), n_obs, n_free)
+            sc = score(Q, r, _cand_matrix(per, c.name), n_obs, n_free, scale)
             if sc is not None:
                 lin[c.name] = sc
         if not lin:
