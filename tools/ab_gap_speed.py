@@ -4,13 +4,13 @@ Each trial is made as ``tools/validate_gap.py`` makes it (its cases, shots, nois
 then the same fit is diagnosed twice: with every Jacobian by complex step (the method the
 diagnosis used before forward mode) and by forward mode, in alternating order (complex step
 first in even trials), so both see the same machine and the same load. Printed: each
-method's median diagnosis time, the median of the paired ratios (forward / complex) with its
-range, how often the two diagnoses named the same effect first and found the same (the
-effects added, a gap left unexplained or not, the misfits set aside; the verdict's sentence
-also carries sizes, which may differ in their last printed digit), the trials that differ or
-where forward mode was the slower, and the seven-shot multi-fit diagnosis both ways. The
-rows are scored on the forward-mode diagnosis, as the validation scores them (top-1 rate per
-case).
+method's median diagnosis time and their ratio (forward / complex), the median of the paired
+ratios with its range, how often the two diagnoses named the same effect first and found
+the same (the effects added, a gap left unexplained or not, the misfits set aside; the
+verdict's sentence also carries sizes, which may differ in their last printed digit), the
+trials that differ or where forward mode was the slower, and the seven-shot multi-fit
+diagnosis both ways. The rows are scored on the forward-mode diagnosis, as the validation
+scores them (top-1 rate per case).
 
 Usage: python tools/ab_gap_speed.py [--trials 3] [--seed 6] [--cases cg,density,...]
 (about 20 s a trial on one core, 10 min for the default). The last printed line is a JSON
@@ -85,6 +85,9 @@ def run(args) -> dict:
                                                        for r in rows])),
         "diagnosis_median_s_forward": float(np.median([r["ab_seconds"]["forward"]
                                                        for r in rows])),
+        "diagnosis_median_ratio": float(np.median([r["ab_seconds"]["forward"] for r in rows])
+                                        / np.median([r["ab_seconds"]["complex"]
+                                                     for r in rows])),
         "diagnosis_time_ratio_median": float(np.median(ratio)),
         "diagnosis_time_ratio_range": [float(ratio.min()), float(ratio.max())],
         "same_first_rate": float(np.mean([r["ab_first"]["complex"] == r["ab_first"]["forward"]
