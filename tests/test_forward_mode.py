@@ -195,7 +195,8 @@ def test_the_first_compile_runs_once_in_the_background(tmp_path, monkeypatch):
 
 def test_the_environment_chooses_what_auto_means(tmp_path, monkeypatch):
     """CADRA_SENSITIVITIES forces a method for every fit of a process (no background compile
-    when it says complex); a value it does not know is refused, naming the variable."""
+    when it says complex); unset, a process keeps the method it first chose, even once the
+    compile is done; a value it does not know is refused, naming the variable."""
     from cadra.dynamics import tangent
     from cadra.fitting import sensitivity
 
@@ -203,12 +204,15 @@ def test_the_environment_chooses_what_auto_means(tmp_path, monkeypatch):
     monkeypatch.setattr(tangent, "_MODULE", None)
     monkeypatch.setattr(tangent, "_PATH", tmp_path / "cadra_tangent_0.py")
     monkeypatch.setattr(tangent.subprocess, "run", lambda *a, **k: started.append(a))
+    monkeypatch.setattr(sensitivity, "_RESOLVED", None)
     monkeypatch.setenv(sensitivity.METHOD_ENV, "complex")
     assert sensitivity._auto_method() == "complex" and not started
     monkeypatch.setenv(sensitivity.METHOD_ENV, "Forward")
     assert sensitivity._auto_method() == "forward" and not started
     monkeypatch.setenv(sensitivity.METHOD_ENV, "")
     assert sensitivity._auto_method() == "complex" and len(started) == 1   # not ready yet
+    (tmp_path / "cadra_tangent_0.ready").touch()                          # compiled now
+    assert sensitivity._auto_method() == "complex" and len(started) == 1   # kept
     monkeypatch.setenv(sensitivity.METHOD_ENV, "adjoint")
     with pytest.raises(ValueError, match="CADRA_SENSITIVITIES"):
         sensitivity._auto_method()

@@ -31,7 +31,13 @@ def local_client(scheduler: str | None, workers: int | None):
     # 27 % slower on a worker than in a plain process (8.0 s against 6.3 s a shot,
     # docs/campaign.md, "On Dask"). The local cluster's workers keep glibc's default; a
     # threshold set in the environment is still inherited.
-    with dask.config.set({f"{PRE_SPAWN}.MALLOC_TRIM_THRESHOLD_": None}):
+    from cadra.fitting.sensitivity import METHOD_ENV, process_method
+
+    # the workers' fits use this process's sensitivity method: a replicate or a shot is then
+    # the same number here and on a worker, whether or not the tangent code's first compile
+    # has finished in between (docs/fitting.md, "Sensitivities")
+    with dask.config.set({f"{PRE_SPAWN}.MALLOC_TRIM_THRESHOLD_": None,
+                          f"{PRE_SPAWN}.{METHOD_ENV}": process_method()}):
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                dashboard_address=":0", silence_logs=logging.ERROR)
     return Client(cluster), cluster

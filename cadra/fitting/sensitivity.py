@@ -228,19 +228,33 @@ def over_shots(fn, items: list, integ: Integration) -> list:
     return [j.result() for j in jobs]
 
 
+#: what "auto" resolved to in this process, kept for its life (:func:`_auto_method`)
+_RESOLVED: str | None = None
+
+
 def _auto_method() -> str:
-    """What ``method="auto"`` is now: :data:`METHOD_ENV` if set, else forward mode if its
-    compiled code is ready (complex step until then, with the compile started in the
-    background)."""
+    """What ``method="auto"`` is: :data:`METHOD_ENV` if set; otherwise, decided once per
+    process, forward mode if its compiled code is ready, else complex step (with the compile
+    started in the background). A process keeps the method it started with, so none of its
+    results changes when a background compile finishes (the two methods' fits agree only to
+    their stop rule); later processes use forward mode. Dask workers CADRA starts get their
+    parent's (:func:`cadra.campaign.cluster.local_client`)."""
+    global _RESOLVED
     chosen = os.environ.get(METHOD_ENV, "auto").strip().lower() or "auto"
     if chosen not in METHODS:
         raise ValueError(f"{METHOD_ENV} must be one of {METHODS}, got {chosen!r}")
     if chosen != "auto":
         return chosen
-    if tangent.ready():
-        return "forward"
-    tangent.compile_in_background()
-    return "complex"
+    if _RESOLVED is None:
+        _RESOLVED = "forward" if tangent.ready() else "complex"
+        if _RESOLVED == "complex":
+            tangent.compile_in_background()
+    return _RESOLVED
+
+
+def process_method() -> str:
+    """The sensitivity method this process's fits use with ``method="auto"``."""
+    return _auto_method()
 
 
 def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,
