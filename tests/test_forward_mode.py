@@ -206,13 +206,13 @@ def test_the_environment_chooses_what_auto_means(tmp_path, monkeypatch):
     monkeypatch.setattr(tangent.subprocess, "run", lambda *a, **k: started.append(a))
     monkeypatch.setattr(sensitivity, "_RESOLVED", None)
     monkeypatch.setenv(sensitivity.METHOD_ENV, "complex")
-    assert sensitivity._auto_method() == "complex" and not started
+    assert sensitivity.process_method() == "complex" and not started
     monkeypatch.setenv(sensitivity.METHOD_ENV, "Forward")
-    assert sensitivity._auto_method() == "forward" and not started
+    assert sensitivity.process_method() == "forward" and not started
     monkeypatch.setenv(sensitivity.METHOD_ENV, "")
-    assert sensitivity._auto_method() == "complex" and len(started) == 1   # not ready yet
+    assert sensitivity.process_method() == "complex" and len(started) == 1   # not ready yet
     (tmp_path / "cadra_tangent_0.ready").touch()                          # compiled now
-    assert sensitivity._auto_method() == "complex" and len(started) == 1   # kept
+    assert sensitivity.process_method() == "complex" and len(started) == 1   # kept
     monkeypatch.setenv(sensitivity.METHOD_ENV, "adjoint")
     with pytest.raises(ValueError, match="CADRA_SENSITIVITIES"):
-        sensitivity._auto_method()
+        sensitivity.process_method()

@@ -228,17 +228,18 @@ def over_shots(fn, items: list, integ: Integration) -> list:
     return [j.result() for j in jobs]
 
 
-#: what "auto" resolved to in this process, kept for its life (:func:`_auto_method`)
+#: what "auto" resolved to in this process, kept for its life (:func:`process_method`)
 _RESOLVED: str | None = None
 
 
-def _auto_method() -> str:
-    """What ``method="auto"`` is: :data:`METHOD_ENV` if set; otherwise, decided once per
-    process, forward mode if its compiled code is ready, else complex step (with the compile
-    started in the background). A process keeps the method it started with, so none of its
-    results changes when a background compile finishes (the two methods' fits agree only to
-    their stop rule); later processes use forward mode. Dask workers CADRA starts get their
-    parent's (:func:`cadra.campaign.cluster.local_client`)."""
+def process_method() -> str:
+    """The sensitivity method this process's fits use with ``method="auto"``:
+    :data:`METHOD_ENV` if set; otherwise, decided once per process, forward mode if its
+    compiled code is ready, else complex step (with the compile started in the background).
+    A process keeps the method it started with, so none of its results changes when a
+    background compile finishes (the two methods' fits agree only to their stop rule); later
+    processes use forward mode. Dask workers CADRA starts get their parent's
+    (:func:`cadra.campaign.cluster.local_client`)."""
     global _RESOLVED
     chosen = os.environ.get(METHOD_ENV, "auto").strip().lower() or "auto"
     if chosen not in METHODS:
@@ -250,11 +251,6 @@ def _auto_method() -> str:
         if _RESOLVED == "complex":
             tangent.compile_in_background()
     return _RESOLVED
-
-
-def process_method() -> str:
-    """The sensitivity method this process's fits use with ``method="auto"``."""
-    return _auto_method()
 
 
 def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np.ndarray,
@@ -277,7 +273,7 @@ def predict_with_jacobian(y0: np.ndarray, t0: float, times: np.ndarray, phys: np
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if method == "auto":
-        method = _auto_method()
+        method = process_method()
     local_free = np.asarray(local_free, dtype=int)
     aero_free = np.asarray(aero_free, dtype=int)
     phys_dirs = (np.zeros((0, len(phys))) if phys_dirs is None
