@@ -26,6 +26,12 @@ its temporary. A temporary without a lock file (a writer killed in the instant b
 creating it and locking it, or another platform) falls back to the process id on this host.
 A ``.old`` folder whose output is missing (killed in the middle of the swap) is moved back
 into place, not deleted.
+
+A Ctrl-C or SIGTERM leaves nothing either: creating a temporary and entering the ``try``
+that removes it, removing a lock file, and the two renames of an overwrite are never cut
+apart by a signal (:func:`_signals_held` acts on it at the end of those few statements). A
+signal that lands during the overwrite's renames is acted on after them: the output is then
+the whole new one.
 """
 
 from __future__ import annotations
@@ -118,21 +124,58 @@ def _lock_of(temp: Path) -> Path:
 
 
 @contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM for the few statements inside: a signal that arrives there is
+    acted on at the end of the block, as it would have been at its arrival.
+
+    A Python signal handler raises at the next bytecode boundary, so a Ctrl-C landing between
+    creating a temporary (or its lock file) and the ``try`` that removes it would leave it
+    behind. Creating and recording a temporary, and removing a lock, are done inside this
+    block. Only the main thread can set handlers; elsewhere the block holds nothing."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held, previous = [], {}
+
+    def hold(signum, frame):
+        held.append(signum)
+
+    try:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            handler = signal.getsignal(signum)
+            if callable(handler):       # ignored or default: nothing to defer
+                previous[signum] = signal.signal(signum, hold)
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for signum in held:
+            previous[signum](signum, None)   # raises KeyboardInterrupt (or Terminated)
+
+
+@contextlib.contextmanager
 def _locked(temp: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``temp``'s lock file while the block writes ``temp`` (the
-    kernel drops it if this process dies); the lock file is removed at the end."""
+    kernel drops it if this process dies); the lock file is removed at the end, whatever
+    interrupts the block (:func:`_signals_held` around its creation and removal)."""
     if fcntl is None:
         yield
         return
-    lock = _lock_of(temp)
-    fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o600)
+    lock, fd = _lock_of(temp), None
     try:
+        with _signals_held():
+            fd = os.open(lock, os.O_CREAT | os.O_RDWR, 0o600)
         fcntl.flock(fd, fcntl.LOCK_EX)
         yield
     finally:
-        os.close(fd)
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(lock)
+        with _signals_held():
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(lock)
+            if fd is not None:
+                os.close(fd)
 
 
 def _writer_alive(temp: Path, pid: int) -> bool:
@@ -335,8 +378,11 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = F
         raise IsADirectoryError(f"{path} is a directory")
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_temps(path)
-    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)
+    tmp = None
     try:
+        with _signals_held():   # a Ctrl-C here is raised inside the try, which removes tmp
+            fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp",
+                                       dir=path.parent)
         with _locked(Path(tmp)), os.fdopen(fd, "wb") as fh:
             if hasattr(os, "fchmod"):
                 os.fchmod(fh.fileno(), 0o666 & ~_UMASK)
@@ -348,8 +394,9 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = F
                                       "overwrite=True)")
             os.replace(tmp, path)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        if tmp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
         raise
     return path
 
@@ -390,8 +437,11 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False,
         raise FileExistsError(f"{given} exists; refusing to overwrite (pass overwrite=True)")
     path.parent.mkdir(parents=True, exist_ok=True)
     clean_stale_temps(path)
-    tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
+    tmp = old = None
     try:
+        with _signals_held():   # a Ctrl-C here is raised inside the try, which removes tmp
+            tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp",
+                                        dir=path.parent))
         with _locked(tmp):
             os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp's folder is private (0700)
             yield tmp
@@ -401,20 +451,25 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False,
             if path.exists():
                 if not overwrite:
                     raise FileExistsError(f"{given} exists; refusing to overwrite")
-                old = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".old",
-                                            dir=path.parent))
+                with _signals_held():
+                    old = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".old",
+                                                dir=path.parent))
                 with _locked(old):
-                    os.replace(path, old / "d")  # move aside, swap in, delete the old one
-                    try:
-                        os.replace(tmp, path)
-                    except BaseException:
-                        os.replace(old / "d", path)
-                        raise
+                    with _signals_held():    # the two renames are never cut apart
+                        os.replace(path, old / "d")  # move aside, swap in, delete the old
+                        try:
+                            os.replace(tmp, path)
+                        except BaseException:
+                            os.replace(old / "d", path)
+                            raise
                     shutil.rmtree(old, ignore_errors=True)
             else:
                 os.replace(tmp, path)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None and os.path.lexists(path):   # the previous output is not in it
+            shutil.rmtree(old, ignore_errors=True)
         raise
 
 
