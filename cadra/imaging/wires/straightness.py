@@ -44,15 +44,18 @@ def tls_line(pts: np.ndarray):
     return m, t, n, q @ n
 
 
-def _block_t(pts: np.ndarray, mask: np.ndarray, blocks: list, s: float,
-             sys_px: float) -> np.ndarray:
-    """Each block's (index arrays inside ``mask``) mean residual about the total least-squares
-    line of ``pts[mask]``, in its sigma; ``s`` the sigma of one centre, ``sys_px`` a bias
-    a block may share."""
+def _block_t(pts: np.ndarray, mask: np.ndarray, order: np.ndarray, starts: np.ndarray,
+             s: float, sys_px: float) -> np.ndarray:
+    """Each block's mean residual about the total least-squares line of ``pts[mask]``, in
+    its sigma, for the blocks inside ``mask``; the blocks are ``order``'s runs beginning at
+    ``starts`` (a block is wholly in or out); ``s`` the sigma of one centre, ``sys_px`` a
+    bias a block may share."""
     m, _, nrm, _ = tls_line(pts[mask])
-    r = (pts - m) @ nrm
-    return np.array([float(r[b].mean()) / math.sqrt(s * s / len(b) + sys_px**2)
-                     for b in blocks if mask[b[0]]])
+    r = (pts[order] - m) @ nrm
+    n = np.diff(np.append(starts, len(order)))
+    inside = mask[order[starts]]
+    mean = np.add.reduceat(r, starts)[inside] / n[inside]
+    return mean / np.sqrt(s * s / n[inside] + sys_px**2)
 
 
 def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
@@ -84,10 +87,11 @@ def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
         if nb < 3:
             break
         blocks = np.array_split(idx, nb)
+        starts = np.cumsum([0] + [len(b) for b in blocks[:-1]])
         _, _, nrm, _ = tls_line(pts[keep])
         s = max(1.4826 / math.sqrt(2.0) * float(np.median(np.abs(np.diff(pts[idx] @ nrm)))),
                 1e-6)
-        t = _block_t(pts, keep, blocks, s, sys_px)
+        t = _block_t(pts, keep, idx, starts, s, sys_px)
         if np.max(np.abs(t)) <= BLOCK_T_MAX:
             break
         best = (float(t @ t), 0, 0)  # (cost, first block, length)
@@ -95,7 +99,7 @@ def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
             for i in range(nb - length + 1):
                 mask = keep.copy()
                 mask[np.concatenate(blocks[i:i + length])] = False
-                t = _block_t(pts, mask, blocks, s, sys_px)
+                t = _block_t(pts, mask, idx, starts, s, sys_px)
                 cost = float(t @ t) + 2.0 * length
                 if cost < best[0]:
                     best = (cost, i, length)
