@@ -56,6 +56,23 @@ def test_the_model_is_opencvs_brown_conrady_and_its_inverse():
                     (D.distort(uv + [0, h]) - D.distort(uv - [0, h])) / (2 * h)], axis=-1)
     assert np.max(np.abs(D.jacobian(uv) - num)) < 1e-8
 
+    # the calibration's linear basis is the same model, coefficient by coefficient
+    assert np.max(np.abs(uv + D.basis(uv) @ D.coefficients - D.distort(uv))) < 1e-9
+
+
+def test_a_k1_search_undistorts_as_the_distortion_itself():
+    """radial_undistorter (the undeclared-distortion search's many trial k1) gives the image
+    Distortion.undistort_image gives, and refuses an image of another size."""
+    from cadra.optics.distortion import radial_undistorter
+
+    img = np.random.default_rng(3).random((120, 160)).astype(np.float32)
+    undistort = radial_undistorter(160, 120)
+    for k1 in (0.0, 0.013, -0.02):
+        want = Distortion.for_image(160, 120, k1=k1).undistort_image(img)
+        assert np.max(np.abs(undistort(img, k1) - want)) < 1e-5
+    with pytest.raises(ValueError, match="160x120"):
+        undistort(img.T, 0.01)
+
 
 def test_a_radial_distortions_largest_turn_of_a_line_is_at_the_corners():
     """Radial k1 stretches by a = 1 + 3 k1 r^2 along the radius and b = 1 + k1 r^2 across

@@ -37,7 +37,7 @@ import numpy as np
 from cadra.geometry import densify_polygon
 
 __all__ = ["COEFFICIENTS", "DENSIFY_PX", "DistortedProjection", "Distortion", "distorted",
-           "ideal_projection"]
+           "ideal_projection", "radial_undistorter"]
 
 #: the model's coefficients, in the order of its covariance
 COEFFICIENTS = ("k1", "k2", "p1", "p2")
@@ -133,9 +133,20 @@ class Distortion:
         return out
 
     def distort(self, uv) -> np.ndarray:
-        """Ideal image points ``(..., 2)`` px -> where the distorted image records them."""
+        """Ideal image points ``(..., 2)`` px -> where the distorted image records them:
+        ``uv + basis(uv) @ coefficients``, summed here without the ``(..., 2, 4)`` basis (a
+        whole image's map is 2 million points)."""
         uv = np.asarray(uv, dtype=float)
-        return uv + self.basis(uv) @ self.coefficients
+        x, y = self._normalised(uv)
+        k1, k2, p1, p2 = self.coefficients
+        R = self.radius_px
+        r2 = x * x + y * y
+        radial = k1 * r2 + k2 * r2 * r2
+        xy2 = 2.0 * x * y
+        out = np.empty(np.shape(x) + (2,))
+        out[..., 0] = uv[..., 0] + R * (x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x))
+        out[..., 1] = uv[..., 1] + R * (y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2)
+        return out
 
     def jacobian(self, uv) -> np.ndarray:
         """``(..., 2, 2)``: d D / d (u, v) at ideal points ``uv``."""
@@ -188,10 +199,33 @@ class Distortion:
         centre, by OpenCV's Lanczos (8 x 8) interpolation, float32; pixels whose ``D`` falls
         off the record take the nearest edge pixel's value."""
         H, W = image.shape
-        uv = _pixel_grid(W, H)
-        m = self.distort(uv).astype(np.float32)
-        return cv2.remap(np.asarray(image, dtype=np.float32), m[..., 0], m[..., 1],
-                         interpolation=cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+        return _remap(image, self.distort(_pixel_grid(W, H)))
+
+
+def radial_undistorter(width_px: int, height_px: int):
+    """``f(image, k1)``: :meth:`Distortion.undistort_image` of
+    ``Distortion.for_image(width_px, height_px, k1=k1)``, for many ``k1`` on images of that
+    size (a search over ``k1``): the pixel grid and its radial term are computed once, each
+    call only scales and adds them (``D(uv) = uv + k1 R x r^2``, the map to within 1e-12 px
+    of the distortion's own)."""
+    d = Distortion.for_image(width_px, height_px, k1=1.0)
+    uv = _pixel_grid(width_px, height_px)
+    per_k1 = d.distort(uv) - uv
+
+    def undistort(image: np.ndarray, k1: float) -> np.ndarray:
+        if image.shape != (height_px, width_px):
+            raise ValueError(f"an image of {image.shape[1]}x{image.shape[0]} px, not the "
+                             f"{width_px}x{height_px} px this undistorter is for")
+        return _remap(image, uv + float(k1) * per_k1)
+
+    return undistort
+
+
+def _remap(image: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """``image`` sampled at the points ``m`` (H, W, 2) px, Lanczos, edge pixels replicated."""
+    m = m.astype(np.float32)
+    return cv2.remap(np.asarray(image, dtype=np.float32), m[..., 0], m[..., 1],
+                     interpolation=cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
 
     def to_dict(self) -> dict:
         """The facility file's table (``docs/facility_file.md``, "Distortion")."""

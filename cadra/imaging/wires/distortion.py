@@ -21,7 +21,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from cadra.imaging.wires.straightness import tls_line
-from cadra.optics.distortion import Distortion
+from cadra.optics.distortion import Distortion, radial_undistorter
 
 __all__ = ["BOW_Z", "K1_SCAN", "K1_SEARCH", "WireBow", "WireDistortion", "radial_from_centres",
            "radial_from_wires"]
@@ -58,11 +58,10 @@ def radial_from_wires(image: np.ndarray, view, exclude: np.ndarray | None = None
     from cadra.imaging.wires.fit import measure_wires
 
     W, H = view.width_px, view.height_px
+    undistort = radial_undistorter(W, H)
 
     def rms(k1: float) -> float:
-        d = Distortion.for_image(W, H, k1=k1)
-        m = measure_wires(d.undistort_image(image), view, exclude=exclude,
-                          profile_model=False)
+        m = measure_wires(undistort(image, k1), view, exclude=exclude, profile_model=False)
         return m.affine_rms_px if m.ok and math.isfinite(m.affine_rms_px) else 1e3
 
     before = rms(0.0)

@@ -58,6 +58,46 @@ def _block_t(pts: np.ndarray, mask: np.ndarray, order: np.ndarray, starts: np.nd
     return mean / np.sqrt(s * s / n[inside] + sys_px**2)
 
 
+def _best_run(q: np.ndarray, starts: np.ndarray, s: float, sys_px: float,
+              cost_none: float) -> tuple[int, int]:
+    """The contiguous run of blocks (first block, length; ``(0, 0)``: none) whose removal
+    minimizes ``sum t^2`` of the other blocks about their own total least-squares line,
+    plus 2 per block removed, at least two blocks staying; ``q`` the centres in block
+    order, ``cost_none`` the cost of removing none. Every run at once, from each block's
+    count, sums and second moments (prefix sums over the blocks): the line of what a run
+    leaves is that of the totals less the run's, with no refit."""
+    nb = len(starts)
+    o = q.mean(axis=0)                       # about the centres' mean: no cancellation
+    x = q - o
+    n = np.diff(np.append(starts, len(q))).astype(float)
+    sums = np.column_stack([np.add.reduceat(c, starts) for c in
+                            (x[:, 0], x[:, 1], x[:, 0] ** 2, x[:, 1] ** 2, x[:, 0] * x[:, 1])])
+    stats = np.column_stack([n, sums])       # (nb, 6): n, su, sv, suu, svv, suv
+    cum = np.vstack([np.zeros(6), np.cumsum(stats, axis=0)])
+    first, length = (a.ravel() for a in np.meshgrid(np.arange(nb), np.arange(1, nb - 1),
+                                                    indexing="xy"))
+    ok = first + length <= nb
+    first, length = first[ok], length[ok]    # length-major, as the ties are broken
+    left = cum[-1] - (cum[first + length] - cum[first])      # what each run leaves
+    N = left[:, 0]
+    m = left[:, 1:3] / N[:, None]
+    suu = left[:, 3] - N * m[:, 0] ** 2
+    svv = left[:, 4] - N * m[:, 1] ** 2
+    suv = left[:, 5] - N * m[:, 0] * m[:, 1]
+    ang = 0.5 * np.arctan2(2.0 * suv, suu - svv)
+    nrm = np.column_stack([-np.sin(ang), np.cos(ang)])
+    centre = stats[:, 1:3] / n[:, None]      # each block's mean centre, (nb, 2)
+    t = (((centre[None, :, :] - m[:, None, :]) * nrm[:, None, :]).sum(axis=2)
+         / np.sqrt(s * s / n + sys_px ** 2)[None, :])
+    b = np.arange(nb)[None, :]
+    gone = (b >= first[:, None]) & (b < (first + length)[:, None])
+    cost = np.where(gone, 0.0, t * t).sum(axis=1) + 2.0 * length
+    j = int(np.argmin(cost)) if len(cost) else -1
+    if j < 0 or not cost[j] < cost_none:
+        return 0, 0
+    return int(first[j]), int(length[j])
+
+
 def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
                          step_px: float, sys_px: float = BLOCK_SYS_PX
                          ) -> tuple[np.ndarray, float]:
@@ -94,16 +134,7 @@ def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
         t = _block_t(pts, keep, idx, starts, s, sys_px)
         if np.max(np.abs(t)) <= BLOCK_T_MAX:
             break
-        best = (float(t @ t), 0, 0)  # (cost, first block, length)
-        for length in range(1, nb - 1):
-            for i in range(nb - length + 1):
-                mask = keep.copy()
-                mask[np.concatenate(blocks[i:i + length])] = False
-                t = _block_t(pts, mask, idx, starts, s, sys_px)
-                cost = float(t @ t) + 2.0 * length
-                if cost < best[0]:
-                    best = (cost, i, length)
-        _, i, length = best
+        i, length = _best_run(pts[idx], starts, s, sys_px, float(t @ t))
         if length == 0:
             break
         gone = np.concatenate(blocks[i:i + length])
