@@ -219,3 +219,37 @@ def test_m1_table4_grows_small_and_stays_bounded_large():
     assert from_40[-1] - from_40[-3] < 0.5       # growth has stopped (limit cycle)
     assert np.all(np.diff(from_60[::2]) < 0)     # larger motions decay toward it
     assert abs(from_60[-1] - from_40[-1]) < 8.0
+
+
+def test_a_trajectory_blowing_up_in_finite_time_stops_early():
+    """A roll moment growing as p^2 (Cl = K p_hat^2) gives p(t) = p0 / (1 - c p0 t), infinite
+    at t* = 1 / (c p0) = 0.05 s here: the adaptive run shrinks its steps towards t*, and stops
+    when a step of H_MIN_S still misses the tolerance, long before its evaluation budget (as
+    a fit's wild trial step must, which before spent the whole budget: 1.5 s a prediction).
+    Up to the singularity it follows the closed form."""
+    from cadra.dynamics.integrate import adaptive_budget, propagate_adaptive
+    from cadra.dynamics.setup import plane_code
+
+    body = RigidBody(**{**M1, "gravity_m_s2": 0.0})
+    V, p0, t_star = 372.5, 100.0, 0.05
+    q_sd_over_I = 0.5 * body.density_kg_m3 * V**2 * body.area_m2 * body.d_m / 104.208e-7
+    c = 1.0 / (p0 * t_star)                          # p' = c p^2
+    K = c / (q_sd_over_I * (body.d_m / (2 * V)) ** 2)
+    model = model_from_dict({
+        "format": "cadra.aero/1", "name": "blow-up", "angle_plane": "sigma",
+        "coefficients": {"Cl": "K*p_hat*p_hat"}, "parameters": {"K": {"value": K}}})
+    prog = model.compile()
+    t = np.linspace(0.0, 0.1, 201)
+    out = np.empty((t.size, 13))
+    n = propagate_adaptive(Launch(speed_m_s=V, p_rad_s=p0).state(body), 0.0, t, 2e-3, 1e-8,
+                           1e-8, body.phys(), prog.ops, prog.args, prog.starts, model.values(),
+                           plane_code(prog.angle_plane), prog.stack_size, out)
+    assert n < 0 and np.all(np.isnan(out))           # stopped: a failed prediction
+    assert -n < adaptive_budget(0.0, t) / 10          # measured: 15 672 of 300 000
+    early = t[t < 0.8 * t_star]                       # p up to 5 p0: the closed form holds
+    out = np.empty((early.size, 13))
+    ok = propagate_adaptive(Launch(speed_m_s=V, p_rad_s=p0).state(body), 0.0, early, 2e-3,
+                            1e-8, 1e-8, body.phys(), prog.ops, prog.args, prog.starts,
+                            model.values(), plane_code(prog.angle_plane), prog.stack_size, out)
+    assert ok > 0
+    np.testing.assert_allclose(out[:, 10], p0 / (1.0 - c * p0 * early), rtol=1e-6)

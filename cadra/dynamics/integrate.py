@@ -149,6 +149,11 @@ def propagate(y0, t0, t_out, dt_max, phys, ops, args, starts, params, plane, sta
 #: budget grows with the record and only a runaway integration meets it
 MAX_ADAPTIVE_EVALS = 150_000
 EVALS_PER_SECOND = 3_000_000
+#: the smallest step (s) of an adaptive run: a step this small that still misses the
+#: tolerance stops the run (a trajectory blowing up in finite time, from a trial's absurd
+#: parameters, shrinks its steps towards its singularity; the fastest spin a projectile
+#: survives, ~3e4 rad/s, needs steps ~1000x longer)
+H_MIN_S = 1e-9
 
 
 @njit(cache=True)
@@ -196,7 +201,8 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
     forms, where fixed-step RK4 loses its order (docs/dynamics.md).
 
     A run that needs more than :func:`adaptive_budget` derivative evaluations (a tumbling or
-    diverging trajectory, e.g. from absurd starting values) or meets a non-finite state stops;
+    diverging trajectory, e.g. from absurd starting values), meets a non-finite state, or
+    misses the tolerance with a step of :data:`H_MIN_S` (a blow-up in finite time) stops;
     its remaining outputs are NaN, so a caller sees a failed prediction, never a hang.
 
     Returns the number of derivative evaluations (negative when the run was stopped).
@@ -241,7 +247,8 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
                           plane, scratch, coef, stack, k1, k2, k3, k4, tmp)
                 n_eval += 12
                 err = _doubling_error(y1, y2, tol_pos, tol_ang, tau)
-                if n_eval > budget or not np.isfinite(err):
+                if (n_eval > budget or not np.isfinite(err)
+                        or (err > 1.0 and abs(h_try) <= H_MIN_S)):
                     for jj in range(n_out):
                         for i in range(N_STATE):
                             out[jj, i] = np.nan
@@ -257,8 +264,8 @@ def propagate_adaptive(y0, t0, t_out, h_max, tol_pos, tol_ang, phys, ops, args, 
                     h = h_try * max(0.1, 0.9 * err ** -0.2)
                 if abs(h) > h_max:
                     h = h_max * direction
-                if abs(h) < 1e-9:
-                    h = 1e-9 * direction
+                if abs(h) < H_MIN_S:
+                    h = H_MIN_S * direction
             for i in range(N_STATE):
                 out[j, i] = y[i]
     return n_eval

@@ -340,12 +340,17 @@ class FitProblem:
         program = self.model.compile()
         free, held = self.free_extras, self.held_extras
         held_values = [e.value for e in held]
+        runs = [(k, sd, y0, *self.physics(k, extra_values))
+                for k, (sd, y0) in enumerate(zip(self.shots, initial_states, strict=True))]
+
+        def shot(run, integ):   # the shots run in parallel, as the Jacobian's do
+            k, sd, y0, phys, _ = run
+            return predict_states(y0, self.epochs[k], sd.t_s, phys, program, params, integ)
+
         out = []
-        for k, (sd, y0) in enumerate(zip(self.shots, initial_states, strict=True)):
+        for (_, sd, _, _, ref), y in zip(runs, over_shots(shot, runs, self.integration),
+                                         strict=True):
             sid = sd.shot_id
-            phys, ref = self.physics(k, extra_values)
-            y = predict_states(y0, self.epochs[k], sd.t_s, phys, program, params,
-                               self.integration)
             pred = observables(y, ref)
             pred = add_station_terms(pred, free, extra_values, sid, sd.stations, y)
             out.append(add_station_terms(pred, held, held_values, sid, sd.stations, y))
