@@ -78,6 +78,10 @@ ROLL_START_RAD = math.radians(22.5)
 ROLL_RESTART_RAD = math.radians(0.2)
 #: start rolls (rad) of a finned body's first fit of a view, tried in turn until one fits
 ROLL_TRIES_RAD = tuple(math.radians(x) for x in (22.5, 0.0, 45.0, 11.25, 33.75))
+#: ... and beyond the first, while the fit rejects more than this share of its segments: a
+#: start far from the fins' roll can leave the nose and fins rejected and the body slid along
+#: its axis (a point-source station's top view, 54 % rejected: 119 px off)
+ROLL_START_REJECTED = 0.3
 #: a finned body's rounds stop when the roll moves less than this between rounds (rad)
 ROLL_TOL_RAD = math.radians(0.002)
 #: tilt step (rad) of the outline template that gives a view's pose sensitivity to the tilt
@@ -536,8 +540,10 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
             if prev is not None and not prev.ok:
                 continue
             # a finned body's first fit, before its roll is measured, may fail with fins far
-            # from the template's: then the other start rolls are tried
+            # from the template's, or slide along the axis with most segments rejected: then
+            # the other start rolls are tried, and the fit that rejects least is kept
             tries = ROLL_TRIES_RAD if finned and prev is None else (roll,)
+            best = None
             for view_roll in tries:
                 try:
                     att = _measure_view(
@@ -549,7 +555,13 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                     att = _Attempt(None, f"measurement error ({type(exc).__name__}: {exc})")
                 if att.fit is not None and att.fit.ok:
-                    break
+                    share = att.fit.n_rejected / max(att.fit.n_segments, 1)
+                    if best is None or share < best[0]:
+                        best = (share, att, view_roll)
+                    if share <= ROLL_START_REJECTED:
+                        break
+            if best is not None:
+                _, att, view_roll = best
             ok = att.fit is not None and att.fit.ok
             fits[name] = ViewResult(name, image_names[name], ok, att.reason, att.fit, att.wires,
                                     att.affine, tilts[name], att.warnings,
