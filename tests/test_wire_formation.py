@@ -93,3 +93,18 @@ def test_the_widths_derivatives_in_one_pass_are_column_by_column_ones(renders):
         col = (pb.resid(dq, c) - r0) / 1e-4
         assert np.max(np.abs(col)) > 0
         np.testing.assert_allclose(J[:, j], col, rtol=0, atol=1e-9 * np.max(np.abs(col)))
+
+
+def test_a_parameter_the_profiles_do_not_determine_keeps_its_bounds_variance():
+    """The formation's covariance gives no parameter more variance than a uniform spread over
+    its bounds: an undetermined fringe width (sigma 212 px seen, bounds 0.05-4 px) is held to
+    (4 - 0.05) / sqrt(12) px, its correlations kept; a determined one is left alone."""
+    from cadra.imaging.wires.formation import _within_bounds
+
+    cov = np.array([[4e-6, 1e-4, 0.0], [1e-4, 4.5e4, 2e-3], [0.0, 2e-3, 1e-4]])
+    lo, hi = np.array([0.0, 0.05, 0.5]), np.array([16.0, 4.0, 2.0])
+    out = _within_bounds(cov, lo, hi)
+    assert out[1, 1] == pytest.approx((4.0 - 0.05) ** 2 / 12.0)
+    assert out[0, 0] == cov[0, 0] and out[2, 2] == cov[2, 2]
+    corr = lambda c: c[0, 1] / np.sqrt(c[0, 0] * c[1, 1])   # noqa: E731
+    assert corr(out) == pytest.approx(corr(cov))

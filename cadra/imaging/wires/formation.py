@@ -33,7 +33,9 @@ from scipy.stats import chi2
 
 from cadra.imaging.wires.profile import (
     CENTRE_ITERATIONS,
+    CENTRE_TOL_PX,
     FRINGE_W_MIN,
+    SENS_TOL_PX,
     SIGMA_MAX,
     Formation,
     WireProfiles,
@@ -81,12 +83,12 @@ class _Problem:
     def form(q) -> Formation:
         return Formation(math.sqrt(q[0]), math.sqrt(q[1]), q[2])
 
-    def centres(self, q, start=None, rows=None):
+    def centres(self, q, start=None, rows=None, tol=CENTRE_TOL_PX):
         """Every row's centre at ``q``, from the centroids or from ``start`` (converged
-        centres of nearby parameters: a few steps each)."""
+        centres of nearby parameters: a few steps each), to ``tol`` (px)."""
         rows = self.rows if rows is None else rows
         rs = rows if start is None else replace(rows, c0=start)
-        return _fit(rs, q[3:][rows.wire], self.form(q), CENTRE_ITERATIONS, False)[0]
+        return _fit(rs, q[3:][rows.wire], self.form(q), CENTRE_ITERATIONS, False, tol)[0]
 
     def resid(self, q, c, rows=None):
         rows = self.rows if rows is None else rows
@@ -121,16 +123,17 @@ class _Problem:
         """(m, 3 + m): each wire's mean centre shift per unit of each parameter."""
         S = np.zeros((self.m, 3 + self.m))
         wire = self.rows.wire
+        c = self.centres(q, c, tol=SENS_TOL_PX)   # both sides of each difference alike
         for j, d in self._steps(q, step, range(3)).items():
             dq = q.copy()
             dq[j] += d
-            dc = (self.centres(dq, c) - c) / d
+            dc = (self.centres(dq, c, tol=SENS_TOL_PX) - c) / d
             for w in range(self.m):
                 S[w, j] = float(np.nanmean(dc[wire == w]))
         d = np.array(list(self._steps(q, step, range(3, 3 + self.m)).values()))
         dq = q.copy()
         dq[3:] += d
-        dc = (self.centres(dq, c) - c) / d[wire]
+        dc = (self.centres(dq, c, tol=SENS_TOL_PX) - c) / d[wire]
         for w in range(self.m):
             S[w, 3 + w] = float(np.nanmean(dc[wire == w]))
         return S
@@ -162,6 +165,19 @@ class _Problem:
             if not improved or gain < 1e-4 or np.max(np.abs(step)) < 1e-4:
                 break
         return cost, q, c
+
+
+def _within_bounds(cov: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``cov`` with no parameter's variance beyond that of a uniform spread over its bounds
+    ``(hi - lo)^2 / 12`` (its row and column scaled, correlations kept). A parameter the
+    profiles do not determine (the fringe's width when the fringe is faint: a sigma of
+    2e2 px was seen, for a width bounded to 0.05-4 px) otherwise carries a variance its
+    bounds rule out, which the centres' sensitivities to it, mostly rounding, turned into a
+    wire map sigma of millimetres."""
+    cap = (np.asarray(hi, float) - np.asarray(lo, float)) ** 2 / 12.0
+    var = np.diag(cov)
+    f = np.where(var > cap, np.sqrt(cap / np.where(var > 0, var, 1.0)), 1.0)
+    return cov * f[:, None] * f[None, :]
 
 
 def fit_formation(wires: list[WireProfiles], per_wire: int = FORMATION_PROFILES
@@ -202,7 +218,7 @@ def fit_formation(wires: list[WireProfiles], per_wire: int = FORMATION_PROFILES
         c = pb.centres(q)
         r0 = pb.resid(q, c)
         J = pb.jacobian(q, c, r0, _STEP_COV)
-        cov = np.linalg.pinv(J.T @ J) * (cost / pb.dof(len(q)))
+        cov = _within_bounds(np.linalg.pinv(J.T @ J) * (cost / pb.dof(len(q))), pb.lo, pb.hi)
         sens = pb.centre_sens(q, c)
     rms = math.sqrt(cost / max(float(np.sum(pb.rows.m)), 1.0))
     return (Formation(math.sqrt(q[0]), math.sqrt(q[1]), float(q[2]), rms, cov, sens),
@@ -244,7 +260,7 @@ def fit_widths(wires: list[WireProfiles], shared: Formation
         score = float(g @ np.linalg.pinv(F) @ g) / s2 / (1.0 + 1.0 / max(shared.n_images, 1))
         cov = np.zeros((3 + pb.m, 3 + pb.m))
         cov[:3, :3] = shared.cov[:3, :3]
-        cov[3:, 3:] = np.linalg.pinv(F[3:, 3:]) * s2
+        cov[3:, 3:] = _within_bounds(np.linalg.pinv(F[3:, 3:]) * s2, pb.lo[3:], pb.hi[3:])
         sens = pb.centre_sens(q, c)
     rms = math.sqrt(cost / max(float(np.sum(pb.rows.m)), 1.0))
     p = float(chi2.sf(score, 3)) if np.isfinite(score) else 0.0

@@ -60,8 +60,12 @@ CENTRE_ITERATIONS = 8
 #: A profile's centre has converged when Gauss-Newton's step is below this (px); the step is
 #: then taken, leaving an error of a few per cent of it (Gauss-Newton's linear rate at the
 #: profiles' noise): a shot's stations move by < 4e-7 deg and 2e-10 m against a tolerance of
-#: 1e-7 px with the step not taken, a fifth of the centres' time saved.
+#: 1e-7 px with the step not taken, a fifth of the centres' time saved. The centres' finite
+#: differences in the formation (:func:`cadra.imaging.wires.formation`'s sensitivities, steps
+#: of 1e-3) shift them by ~1e-4 px: those use :data:`SENS_TOL_PX` (an error ~5e-8 px, 5e-5 of a
+#: unit sensitivity; the tolerance above gave sensitivities of mostly rounding, 1e-3).
 CENTRE_TOL_PX = 1e-4
+SENS_TOL_PX = 1e-6
 #: A profile's centre is rejected when it moves more than this (px) from its start.
 MAX_CENTRE_SHIFT_PX = 1.0
 
@@ -266,7 +270,7 @@ SCAN_BLUR_PX = 0.6
 
 @numba.njit(cache=True)
 def _fit_rows(P, m, s0, t, cos_t, h, c0, sigma_c, sigma_d, kd, kw, n_iter, want_r, scan,
-              out_c, out_r):
+              tol, out_c, out_r):
     """Per profile: Gauss-Newton of the centre with the linear terms (background 1, x,
     x^2 / 2; opacity O; fringe L), ``n_iter`` steps from ``c0`` (0: the linear fit at ``c0``;
     ``scan``: from the best of ``c0 +`` :data:`_SCAN`). Writes the centres to ``out_c`` and,
@@ -316,7 +320,7 @@ def _fit_rows(P, m, s0, t, cos_t, h, c0, sigma_c, sigma_d, kd, kw, n_iter, want_
                 A[j, 5] = m[i, j] * (-beta[1] - beta[2] * x + beta[3] * dO[jj]
                                      + beta[4] * (dG[jj - 1] - 2.0 * dG[jj] + dG[jj + 1]))
             step = _normal_solve(A, r, 6, M, rhs)
-            if abs(step[5]) < CENTRE_TOL_PX:   # converged: r is the residual at c
+            if abs(step[5]) < tol:   # converged: r is the residual at c
                 out_r[i, :] = r
                 if not want_r:
                     c += step[5]   # Gauss-Newton's error after it is ~ step^2
@@ -371,14 +375,16 @@ def _normal_solve(A, y, p, M, rhs):
 
 
 def _fit(rows: _Rows, h: np.ndarray, f: Formation, n_iter: int = CENTRE_ITERATIONS,
-         want_r: bool = True):
-    """Gauss-Newton fit of each profile's centre (and linear terms) from ``rows.c0``;
-    returns the centres and (if ``want_r``) the residuals (n, k) at them."""
+         want_r: bool = True, tol: float = CENTRE_TOL_PX):
+    """Gauss-Newton fit of each profile's centre (and linear terms) from ``rows.c0``, each
+    stopping at a step below ``tol`` (px); returns the centres and (if ``want_r``) the
+    residuals (n, k) at them."""
     c = np.empty(len(rows.c0))
     r = np.zeros(rows.P.shape)
     _fit_rows(rows.P, rows.m, rows.s0, rows.t, rows.cos_t, np.asarray(h, float), rows.c0,
               f.sigma_c, f.sigma_d, _kernel(f.sigma_d), _kernel(f.fringe_w), n_iter,
-              want_r or n_iter == 0, math.hypot(f.sigma_c, f.sigma_d) < SCAN_BLUR_PX, c, r)
+              want_r or n_iter == 0, math.hypot(f.sigma_c, f.sigma_d) < SCAN_BLUR_PX, tol,
+              c, r)
     return c, r
 
 
