@@ -45,30 +45,27 @@ def _is_lock(path, *args, **kwargs) -> bool:
     return str(path).endswith(".lock")
 
 
+def _write_folder(out):
+    with atomic_output_dir(out) as tmp:
+        (tmp / "a.txt").write_text("x")
+
+
+def _write_file(out):
+    atomic_write_text(out, "x\n")
+
+
+@pytest.mark.parametrize("write, create", [(_write_folder, "mkdtemp"),
+                                           (_write_file, "mkstemp")])
 @pytest.mark.parametrize("step", ["temporary", "lock"])
-def test_ctrl_c_just_after_a_folder_write_starts_leaves_nothing(tmp_path, monkeypatch,
-                                                                python_sigint, step):
+def test_ctrl_c_just_after_a_write_starts_leaves_nothing(tmp_path, monkeypatch, python_sigint,
+                                                        step, write, create):
     if step == "temporary":
-        monkeypatch.setattr(tempfile, "mkdtemp", _interrupt_after(tempfile.mkdtemp))
+        monkeypatch.setattr(tempfile, create, _interrupt_after(getattr(tempfile, create)))
     else:
         monkeypatch.setattr(os, "open", _interrupt_after(os.open, _is_lock))
     with pytest.raises(KeyboardInterrupt):
-        with atomic_output_dir(tmp_path / "out") as tmp:
-            (tmp / "a.txt").write_text("x")
+        write(tmp_path / "out")
     assert not (tmp_path / "out").exists()
-    assert _left_beside(tmp_path) == []
-
-
-@pytest.mark.parametrize("step", ["temporary", "lock"])
-def test_ctrl_c_just_after_a_file_write_starts_leaves_nothing(tmp_path, monkeypatch,
-                                                              python_sigint, step):
-    if step == "temporary":
-        monkeypatch.setattr(tempfile, "mkstemp", _interrupt_after(tempfile.mkstemp))
-    else:
-        monkeypatch.setattr(os, "open", _interrupt_after(os.open, _is_lock))
-    with pytest.raises(KeyboardInterrupt):
-        atomic_write_text(tmp_path / "a.csv", "x\n")
-    assert not (tmp_path / "a.csv").exists()
     assert _left_beside(tmp_path) == []
 
 
