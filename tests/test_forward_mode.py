@@ -193,6 +193,43 @@ def test_the_first_compile_runs_once_in_the_background(tmp_path, monkeypatch):
     assert tangent.ready() and not tangent.compile_in_background() and len(started) == 2
 
 
+def test_threads_asking_for_the_generated_module_at_once_write_it_once(tmp_path, monkeypatch):
+    """A multi-shot fit's shots ask for the tangent code from several threads at its first
+    fit in a process: one writes the generated module, the others wait for it (two threads
+    of a process wrote the same temporary, and the second's rename failed: a validation run
+    stopped with FileNotFoundError)."""
+    import threading
+    import time
+
+    from cadra.dynamics import tangent
+
+    monkeypatch.setattr(tangent, "_PATH", None)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    replace = os.replace
+
+    def slow_replace(src, dst):          # widen the window between writing and renaming
+        time.sleep(0.05)
+        replace(src, dst)
+
+    monkeypatch.setattr(tangent.os, "replace", slow_replace)
+    start, paths, errors = threading.Barrier(6), [], []
+
+    def ask():
+        start.wait()
+        try:
+            paths.append(tangent._path())
+        except OSError as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=ask) for _ in range(6)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == [] and len(set(paths)) == 1 and paths[0].exists()
+    assert [p.name for p in (tmp_path / "tangent").iterdir()] == [paths[0].name]
+
+
 def test_the_environment_chooses_what_auto_means(tmp_path, monkeypatch):
     """CADRA_SENSITIVITIES forces a method for every fit of a process (no background compile
     when it says complex); unset, a process keeps the method it first chose, even once the

@@ -23,6 +23,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -89,6 +90,8 @@ PASSIVE = ("_doubling_error", "adaptive_budget")
 
 _MODULE = None
 _PATH: Path | None = None
+#: one thread of a process writes, imports and compiles the generated module
+_INIT = threading.RLock()
 
 
 def source() -> str:
@@ -105,17 +108,19 @@ def _folder() -> Path:
 
 
 def _path() -> Path:
-    """Where the generated module lives (written on first call in a process)."""
+    """Where the generated module lives (written on first call in a process: by one thread,
+    the fits of a multi-shot problem asking from several at once)."""
     global _PATH
-    if _PATH is None:
-        text = source()
-        key = hashlib.sha256(text.encode()).hexdigest()[:16]
-        path = _folder() / f"cadra_tangent_{key}.py"
-        if not path.exists() or path.read_text() != text:
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_text(text)
-            os.replace(tmp, path)
-        _PATH = path
+    with _INIT:
+        if _PATH is None:
+            text = source()
+            key = hashlib.sha256(text.encode()).hexdigest()[:16]
+            path = _folder() / f"cadra_tangent_{key}.py"
+            if not path.exists() or path.read_text() != text:
+                tmp = path.with_suffix(f".{os.getpid()}-{threading.get_ident()}.tmp")
+                tmp.write_text(text)
+                os.replace(tmp, path)
+            _PATH = path
     return _PATH
 
 
@@ -127,18 +132,23 @@ def module():
     one core: the tangent code is several times the float code. It runs under a file lock,
     so parallel processes (test workers, a campaign's workers) compile once and load the
     cached result; a marker then says the compiled code is there (:func:`ready`)."""
+    with _INIT:
+        return _MODULE if _MODULE is not None else _load()
+
+
+def _load():
+    """:func:`module`'s first call in a process (under ``_INIT``)."""
     global _MODULE
-    if _MODULE is None:
-        path = _path()
-        spec = importlib.util.spec_from_file_location(path.stem, path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[path.stem] = mod
-        spec.loader.exec_module(mod)
-        with FileLock(str(path.with_suffix(".lock"))):
-            _warm(mod)
-            path.with_suffix(".ready").touch()
-            path.with_suffix(".compiling").unlink(missing_ok=True)
-        _MODULE = mod
+    path = _path()
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[path.stem] = mod
+    spec.loader.exec_module(mod)
+    with FileLock(str(path.with_suffix(".lock"))):
+        _warm(mod)
+        path.with_suffix(".ready").touch()
+        path.with_suffix(".compiling").unlink(missing_ok=True)
+    _MODULE = mod
     return _MODULE
 
 

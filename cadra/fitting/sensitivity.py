@@ -24,6 +24,7 @@ attitude about the body axes (rotation vector, rad; applied multiplicatively), a
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
@@ -230,6 +231,7 @@ def over_shots(fn, items: list, integ: Integration) -> list:
 
 #: what "auto" resolved to in this process, kept for its life (:func:`process_method`)
 _RESOLVED: str | None = None
+_DECIDING = threading.Lock()
 
 
 def process_method() -> str:
@@ -246,10 +248,11 @@ def process_method() -> str:
         raise ValueError(f"{METHOD_ENV} must be one of {METHODS}, got {chosen!r}")
     if chosen != "auto":
         return chosen
-    if _RESOLVED is None:
-        _RESOLVED = "forward" if tangent.ready() else "complex"
-        if _RESOLVED == "complex":
-            tangent.compile_in_background()
+    with _DECIDING:   # a multi-shot problem's threads ask at once: one decides
+        if _RESOLVED is None:
+            _RESOLVED = "forward" if tangent.ready() else "complex"
+            if _RESOLVED == "complex":
+                tangent.compile_in_background()
     return _RESOLVED
 
 
