@@ -103,6 +103,9 @@ def test_the_facility_file_carries_a_views_distortion():
     assert d.covariance[0, 0] == 1e-10
     assert fac.stations[0].views["side"].distortion is None
     assert fac.stations[1].views["top"].distortion is None
+    # a calibrated distortion written back as the facility file's table reads the same
+    back = _with_distortion(d.to_dict()).stations[0].views["top"].distortion
+    assert back.to_dict() == d.to_dict()
 
 
 @pytest.mark.parametrize("table, words", [

@@ -201,6 +201,15 @@ class Distortion:
         H, W = image.shape
         return _remap(image, self.distort(_pixel_grid(W, H)))
 
+    def to_dict(self) -> dict:
+        """The facility file's table (``docs/facility_file.md``, "Distortion")."""
+        out = {k: float(getattr(self, k)) for k in COEFFICIENTS}
+        out["centre_px"] = [float(c) for c in self.centre_px]
+        out["radius_px"] = float(self.radius_px)
+        if self.covariance is not None:
+            out["covariance"] = [[float(c) for c in row] for row in self.covariance]
+        return out
+
 
 def radial_undistorter(width_px: int, height_px: int):
     """``f(image, k1)``: :meth:`Distortion.undistort_image` of
@@ -226,15 +235,6 @@ def _remap(image: np.ndarray, m: np.ndarray) -> np.ndarray:
     m = m.astype(np.float32)
     return cv2.remap(np.asarray(image, dtype=np.float32), m[..., 0], m[..., 1],
                      interpolation=cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
-
-    def to_dict(self) -> dict:
-        """The facility file's table (``docs/facility_file.md``, "Distortion")."""
-        out = {k: float(getattr(self, k)) for k in COEFFICIENTS}
-        out["centre_px"] = [float(c) for c in self.centre_px]
-        out["radius_px"] = float(self.radius_px)
-        if self.covariance is not None:
-            out["covariance"] = [[float(c) for c in row] for row in self.covariance]
-        return out
 
 
 class DistortedProjection:
