@@ -323,7 +323,7 @@ def _fit_rows(P, m, s0, t, cos_t, h, c0, sigma_c, sigma_d, kd, kw, n_iter, want_
             if abs(step[5]) < tol:   # converged: r is the residual at c
                 out_r[i, :] = r
                 if not want_r:
-                    c += step[5]   # Gauss-Newton's error after it is ~ step^2
+                    c += step[5]   # taken: a few per cent of it left (CENTRE_TOL_PX)
                 break
             c += min(max(step[5], -0.5), 0.5)
             if it == n_iter - 1 and not want_r:

@@ -44,18 +44,13 @@ def tls_line(pts: np.ndarray):
     return m, t, n, q @ n
 
 
-def _block_t(pts: np.ndarray, mask: np.ndarray, order: np.ndarray, starts: np.ndarray,
-             s: float, sys_px: float) -> np.ndarray:
-    """Each block's mean residual about the total least-squares line of ``pts[mask]``, in
-    its sigma, for the blocks inside ``mask``; the blocks are ``order``'s runs beginning at
-    ``starts`` (a block is wholly in or out); ``s`` the sigma of one centre, ``sys_px`` a
-    bias a block may share."""
-    m, _, nrm, _ = tls_line(pts[mask])
-    r = (pts[order] - m) @ nrm
-    n = np.diff(np.append(starts, len(order)))
-    inside = mask[order[starts]]
-    mean = np.add.reduceat(r, starts)[inside] / n[inside]
-    return mean / np.sqrt(s * s / n[inside] + sys_px**2)
+def _block_t(q: np.ndarray, starts: np.ndarray, s: float, sys_px: float) -> np.ndarray:
+    """Each block's mean residual about the total least-squares line of the centres ``q``
+    (in block order, the blocks beginning at ``starts``), in its sigma; ``s`` the sigma of
+    one centre, ``sys_px`` a bias a block may share."""
+    *_, r = tls_line(q)
+    n = np.diff(np.append(starts, len(q)))
+    return np.add.reduceat(r, starts) / n / np.sqrt(s * s / n + sys_px**2)
 
 
 def _best_run(q: np.ndarray, starts: np.ndarray, s: float, sys_px: float,
@@ -131,7 +126,7 @@ def drop_bent_stretches(pts: np.ndarray, keep: np.ndarray, along: np.ndarray,
         _, _, nrm, _ = tls_line(pts[keep])
         s = max(1.4826 / math.sqrt(2.0) * float(np.median(np.abs(np.diff(pts[idx] @ nrm)))),
                 1e-6)
-        t = _block_t(pts, keep, idx, starts, s, sys_px)
+        t = _block_t(pts[idx], starts, s, sys_px)
         if np.max(np.abs(t)) <= BLOCK_T_MAX:
             break
         i, length = _best_run(pts[idx], starts, s, sys_px, float(t @ t))
