@@ -55,6 +55,7 @@ from cadra.imaging.distorted import (
     wires_miss_cause,
 )
 from cadra.imaging.roll import measure_roll, wrap_period
+from cadra.imaging.silhouette.edges import MAX_EDGE_SIGMA_PX
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 from cadra.imaging.silhouette.template import (
@@ -519,8 +520,12 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
     pose3d = None
     if conical:     # the rough 3-D pose the first shadow templates are made at
         if not all(n in coarse and coarse[n].ok for n in VIEWS):
+            why = "; ".join(f"{n} view: {coarse[n].reason}" for n in VIEWS
+                            if n in coarse and not coarse[n].ok)
             return StationResult(station_id, "failed", "a point-source station needs both "
-                                 "views to place the model in depth", None, results)
+                                 "views to place the model in depth" + (f" ({why})" if why
+                                                                          else ""),
+                                 None, results)
         rough = {}
         for n in VIEWS:
             a, b, phi = pose_from_coarse(coarse[n], _template(body, n, 0.0, 256), nominal[n])
@@ -540,8 +545,9 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
             if prev is not None and not prev.ok:
                 continue
             # a finned body's first fit, before its roll is measured, may fail with fins far
-            # from the template's, or slide along the axis with most segments rejected: then
-            # the other start rolls are tried, and the fit that rejects least is kept
+            # from the template's, or slide along the axis with most segments rejected or its edge
+            # width at stage A's cap: then the other start rolls are tried, and the fit with
+            # an edge width below the cap that rejects least is kept
             tries = ROLL_TRIES_RAD if finned and prev is None else (roll,)
             best = None
             for view_roll in tries:
@@ -555,10 +561,13 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                     att = _Attempt(None, f"measurement error ({type(exc).__name__}: {exc})")
                 if att.fit is not None and att.fit.ok:
-                    share = att.fit.n_rejected / max(att.fit.n_segments, 1)
-                    if best is None or share < best[0]:
-                        best = (share, att, view_roll)
-                    if share <= ROLL_START_REJECTED:
+                    # a try whose edge width ends at stage A's cap fitted no edges: the
+                    # worst kind, whatever share of its segments it kept
+                    score = (att.fit.edge_sigma_px >= 0.999 * MAX_EDGE_SIGMA_PX,
+                             att.fit.n_rejected / max(att.fit.n_segments, 1))
+                    if best is None or score < best[0]:
+                        best = (score, att, view_roll)
+                    if score <= (False, ROLL_START_REJECTED):
                         break
             if best is not None:
                 _, att, view_roll = best

@@ -27,6 +27,10 @@ CORNER_TURN_RAD = 0.3
 #: Outline curvature (1/px) above which the edge model's linear curvature bias no longer
 #: holds (radius < 4 px, a few blur widths): such stretches are treated like corners.
 MAX_EDGE_CURVATURE = 0.25
+#: Largest edge width (the profile's sigma, px) stage A fits. A fit that ends there is not
+#: following edges (a template far from the outline, a finned body at a wrong roll): real
+#: optics at this scale blur to about 1 px.
+MAX_EDGE_SIGMA_PX = 5.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -319,7 +323,7 @@ def _profile_step(prof, Hg, bg, rc):
     # damped and bounded: a strong fringe is nearly the shape of a width change, and a full
     # step can throw the width (and every offset) far off
     s = prof[0]
-    prof[0] = min(max(s + 0.5 * st[0], max(0.8 * s, 0.2)), min(1.25 * s, 5.0))
+    prof[0] = min(max(s + 0.5 * st[0], max(0.8 * s, 0.2)), min(1.25 * s, MAX_EDGE_SIGMA_PX))
     prof[1] = min(max(prof[1] + 0.5 * st[1], -0.5), 0.5)
     prof[2] = min(max(prof[2] + 0.5 * st[2], -S4_MAX * prof[0]), S4_MAX * prof[0])
     a4 = max(abs(prof[1]), A4_FLOOR)

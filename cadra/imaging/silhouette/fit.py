@@ -68,6 +68,11 @@ __all__ = ["FitSettings", "ViewFit", "fit_silhouette"]
 
 #: After two iterations a converging fit moves far less than this (px at the rim).
 MAX_LATE_STEP_PX = 0.3
+#: A step's direction whose column-scaled singular value is below this fraction of the
+#: largest is not taken (truncated SVD): the kept segments do not determine it. Robust
+#: rejection can leave only a slender body's parallel sides, and their noise then set a
+#: step of 10 mm along the axis (a finned body fitted at a wrong roll).
+STEP_RCOND = 1e-2
 
 
 @dataclass(frozen=True)
@@ -245,7 +250,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             colscale = np.linalg.norm(X[keep] * sw[:, None], axis=0)
             colscale[colscale == 0] = 1.0
             beta, *_ = np.linalg.lstsq(X[keep] * sw[:, None] / colscale, y[keep] * sw,
-                                       rcond=None)
+                                       rcond=STEP_RCOND)
             beta = beta / colscale
             e = (y - X @ beta) * np.sqrt(wts)
             mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
