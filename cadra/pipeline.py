@@ -30,7 +30,7 @@ from cadra.flight.starts import start_estimates
 from cadra.gap.score import GapDiagnosis, diagnose_gap
 from cadra.gap.where import where_analysis
 from cadra.imaging.shot import Stage1Result, measure_shot
-from cadra.imaging.station import ViewResult, measure_view
+from cadra.imaging.view import ViewResult, measure_view
 from cadra.synthetic.simulate import (
     ShotSpec,
     SimulatedShot,

@@ -9,7 +9,8 @@ is measured through the shadows' cones.
 import numpy as np
 import pytest
 
-from cadra.imaging.station import measure_station, measure_view
+from cadra.imaging.station import measure_station
+from cadra.imaging.view import measure_view
 from cadra.io.facility_file import load_facility
 from cadra.validation.point_source import (
     BODIES,

@@ -109,7 +109,7 @@ def add_bows(found: dict, bows: dict) -> dict:
 
 def undeclared_bows(station, views) -> dict:
     """The views of ``station`` that declare no distortion but whose wires, as measured
-    (``views``: name -> :class:`cadra.imaging.station.ViewResult`, measured as declared or
+    (``views``: name -> :class:`cadra.imaging.view.ViewResult`, measured as declared or
     with a distortion found before), bow as one radial distortion bows them
     (:func:`cadra.imaging.wires.distortion.radial_from_centres`,
     :attr:`~cadra.imaging.wires.distortion.WireBow.found`): name -> the

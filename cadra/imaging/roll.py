@@ -506,7 +506,7 @@ def measure_roll(body, views, images: dict, fits: dict, tilts: dict, masks: dict
                  previous=None, pose3d=None):
     """The roll of a finned body at one station from both views' fin silhouettes, each view's
     fitted pose held (:func:`measure_station_roll`): ``views`` the station's views, ``fits``
-    their :class:`cadra.imaging.station.ViewResult`, ``tilts`` the axis' tilt out of each
+    their :class:`cadra.imaging.view.ViewResult`, ``tilts`` the axis' tilt out of each
     view's plane, ``masks`` the wire masks, ``settings`` the silhouette fit's; ``previous``
     this station's roll of the last round. A point-source view's outline is its shadow's
     (:func:`conical_outline_px`, at ``pose3d``), a parallel view's the body's projection

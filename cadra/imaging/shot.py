@@ -114,9 +114,9 @@ FORMATION_IMAGES = 3
 
 def shared_formations(tasks: list, body_spec: dict, n_images: int = FORMATION_IMAGES) -> dict:
     """Each view's wire formation, fitted over ``n_images`` of the shot's images of it spread
-    along the range (:func:`cadra.imaging.station.view_formation`): view name -> formation
+    along the range (:func:`cadra.imaging.view.view_formation`): view name -> formation
     (a view none of whose images serves is left out; its images fit their own)."""
-    from cadra.imaging.station import view_formation
+    from cadra.imaging.view import view_formation
 
     out = {}
     for name in VIEWS:

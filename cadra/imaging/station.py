@@ -3,7 +3,7 @@
 :func:`measure_station` is a pure function of plain, picklable data (the station's geometry,
 its images as arrays or paths, the body's spec dict, settings) returning a
 :class:`StationResult`, so a process pool or a Dask scheduler can ship it. Per view
-(docs/stage1.md):
+(docs/stage1.md; the view's own steps, 2-4, in :mod:`cadra.imaging.view`):
 
 1. take the image (an array, :func:`cadra.io.images.station_image`, or a file,
    :func:`cadra.io.images.load_station_image`; a bad one fails that view with its
@@ -32,7 +32,6 @@ Every problem is a reason string on the view or station; nothing raises for bad 
 
 from __future__ import annotations
 
-import functools
 import math
 import os
 from collections.abc import Mapping
@@ -56,21 +55,23 @@ from cadra.imaging.distorted import (
 )
 from cadra.imaging.roll import measure_roll, wrap_period
 from cadra.imaging.silhouette.edges import MAX_EDGE_SIGMA_PX
-from cadra.imaging.silhouette.fit import FitSettings, ViewFit, fit_silhouette
+from cadra.imaging.silhouette.fit import FitSettings, ViewFit
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
-from cadra.imaging.silhouette.template import (
-    make_conical_template,
-    make_template,
-    outline_px,
+from cadra.imaging.view import (
+    ViewAttempt,
+    ViewResult,
+    body_of,
+    fit_view,
+    image_name,
+    model_box,
+    view_image,
+    view_template,
+    view_templates,
 )
-from cadra.io.images import load_station_image, station_image
 from cadra.optics.distortion import distorted
-from cadra.optics.projection import Projection
 
 VIEWS = ("top", "side")
 
-#: Half-width (px) of the pixel mask about each found wire that the silhouette fit ignores.
-WIRE_MASK_HALF_WIDTH_PX = 4.0
 #: roll (rad) of a finned body's templates before its roll is measured: halfway between the
 #: mirror folds at 0 and 45 deg (docs/stage1.md, "Roll of a finned body")
 ROLL_START_RAD = math.radians(22.5)
@@ -85,9 +86,6 @@ ROLL_TRIES_RAD = tuple(math.radians(x) for x in (22.5, 0.0, 45.0, 11.25, 33.75))
 ROLL_START_REJECTED = 0.3
 #: a finned body's rounds stop when the roll moves less than this between rounds (rad)
 ROLL_TOL_RAD = math.radians(0.002)
-#: tilt step (rad) of the outline template that gives a view's pose sensitivity to the tilt
-#: (ViewFit.tilt_sensitivity; linear within 3 % up to 1 deg)
-TILT_STEP_RAD = math.radians(0.3)
 #: A point-source station's rounds stop once the 3-D pose its shadow templates are made at
 #: moves less than this, m (a shadow's shape changes by about size x move / spark distance:
 #: 1e-6 m moves a 30 mm bullet's 1.5 m from its spark by 2e-8 m, 1e-4 px)
@@ -103,25 +101,6 @@ WIRE_RMS_MAX_PX = 0.05
 
 
 @dataclass(frozen=True)
-class ViewResult:
-    """One view's outcome: the fit (or why there is none) and the wire measurement."""
-
-    view: str
-    image_path: str
-    ok: bool
-    reason: str
-    fit: ViewFit | None = None
-    wires: object | None = None            # cadra.imaging.wires.fit.WireMeasurement
-    affine: np.ndarray | None = None       # image -> plane actually used
-    tilt_rad: float = 0.0
-    warnings: tuple[str, ...] = ()
-    seconds: float = 0.0
-    overlay_png: bytes | None = None
-    projection: Projection | None = None   # the view's optics with that affine
-    roll_rad: float = 0.0                  # roll of the template (a finned body's)
-
-
-@dataclass(frozen=True)
 class StationResult:
     """A station's outcome. ``status``: ``"ok"``, ``"warning"`` (measured, see ``warnings``)
     or ``"failed"`` (not measured, see ``reason``)."""
@@ -133,75 +112,6 @@ class StationResult:
     views: dict = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     roll: object | None = None      # a finned body's cadra.imaging.roll.StationRoll
-
-
-@functools.lru_cache(maxsize=8)
-def _body_cached(spec_items: tuple):
-    from cadra.body.spec import body_from_spec
-
-    return body_from_spec(dict(spec_items))
-
-
-def _body(body_spec: dict):
-    """The body of a spec, one object per distinct spec in a process (so its templates,
-    cached per body object, are shared by the stations of a shot)."""
-    from cadra.body.spec import body_from_spec
-
-    try:
-        return _body_cached(tuple(sorted(body_spec.items())))
-    except TypeError:   # an unhashable or unorderable spec: build it afresh
-        return body_from_spec(body_spec)
-
-
-@functools.lru_cache(maxsize=64)
-def _template_cached(body_key, body, view_name: str, tilt_rad: float, n_points: int,
-                     roll_rad: float):
-    return make_template(body, view_name, tilt_rad, n_points=n_points, roll_rad=roll_rad)
-
-
-def _template(body, view_name: str, tilt_rad: float, n_points: int = 1024,
-              roll_rad: float = 0.0):
-    """Outline template, cached per process (a station asks for the same one repeatedly);
-    the roll only for a finned body (a body of revolution's outline does not depend on it)."""
-    roll = float(roll_rad) if isinstance(body, FinnedBody) else 0.0
-    return _template_cached(id(body), body, view_name, float(tilt_rad), int(n_points), roll)
-
-
-@functools.lru_cache(maxsize=64)
-def _conical_template_cached(body_key, body, view, r_ref: tuple, axis: tuple, roll_rad: float,
-                             n_points: int, tilt_rad: float):
-    return make_conical_template(body, view.optics(), np.array(r_ref), np.array(axis),
-                                 n_points=n_points, roll_rad=roll_rad, tilt_rad=tilt_rad)
-
-
-def _view_templates(body, view, tilt_rad: float, roll_rad: float, pose3d, final: bool):
-    """The view's outline template and (``final``) the pair at the tilt +- TILT_STEP_RAD that
-    give the fit's tilt sensitivity. A parallel view's depends on the axis' tilt out of its
-    plane; a point-source view's on the whole 3-D pose ``pose3d`` = (reference point, m; unit
-    axis), the tilt stepped about the film's plane with the axis' film image kept."""
-    if view.projection != "point_source":
-        steps = ((_template(body, view.name, tilt_rad + TILT_STEP_RAD, roll_rad=roll_rad),
-                  _template(body, view.name, tilt_rad - TILT_STEP_RAD, roll_rad=roll_rad),
-                  TILT_STEP_RAD) if final else None)
-        return _template(body, view.name, tilt_rad, roll_rad=roll_rad), steps
-    r_ref, axis = pose3d
-    roll = float(roll_rad) if isinstance(body, FinnedBody) else 0.0
-
-    def at(a, tilt):
-        return _conical_template_cached(id(body), body, view, tuple(r_ref), tuple(a), roll,
-                                        1024, float(tilt))
-    if not final:
-        return at(axis, tilt_rad), None
-    n = np.zeros(3)
-    n[view.sight_axis] = 1.0
-    a = np.asarray(axis, dtype=float)
-    e = a - (a @ n) * n
-    e /= np.linalg.norm(e)
-    tau = math.asin(float(np.clip(a @ n, -1.0, 1.0)))
-    stepped = [np.cos(tau + h) * e + np.sin(tau + h) * n
-               for h in (TILT_STEP_RAD, -TILT_STEP_RAD)]
-    return at(axis, tilt_rad), (at(stepped[0], tilt_rad + TILT_STEP_RAD),
-                                at(stepped[1], tilt_rad - TILT_STEP_RAD), TILT_STEP_RAD)
 
 
 def _station_pose3d(poses: Mapping[str, ViewPose], sphere: bool):
@@ -226,217 +136,6 @@ def _view_pose(fit: ViewFit, wires, view=None) -> ViewPose:
                     sigma_b_m=math.sqrt(fit.cov[1, 1] + s_aff[1] ** 2 + s_dis[1] ** 2),
                     sigma_angle_rad=math.hypot(s_ang, s_dis[2]) if finite else 0.0,
                     projection=wires.projection, tilt_sensitivity=fit.tilt_sensitivity)
-
-
-def _wire_crossings(fit: ViewFit, template, projection, wires) -> list[str]:
-    """Names of found wires whose image comes within the fit band of the model's outline."""
-    if wires is None or not fit.ok:
-        return []
-    poly = outline_px(template, fit.pose, projection)
-    names = []
-    for w in wires.wires:
-        if not w.found:
-            continue
-        p, t = np.asarray(w.point_px, float), np.asarray(w.direction_px, float)
-        n = np.array([-t[1], t[0]])
-        dist = (poly - p) @ n
-        if dist.min() < WIRE_MASK_HALF_WIDTH_PX and dist.max() > -WIRE_MASK_HALF_WIDTH_PX:
-            names.append(w.name)
-    return names
-
-
-@dataclass(frozen=True)
-class _Attempt:
-    """One try at a view: the silhouette fit (or None), why it failed ("" if it did not),
-    the wires found, the affine used and the warnings."""
-
-    fit: ViewFit | None
-    reason: str
-    wires: object | None = None
-    affine: np.ndarray | None = None
-    warnings: tuple[str, ...] = ()
-
-
-def _model_box(img: np.ndarray, coarse, margin: int = 12) -> np.ndarray:
-    """True on the model's rough bounding box (``coarse``, :func:`locate_model`) plus a
-    margin: the pixels the wires' profiles must not use."""
-    exclude = np.zeros(img.shape, bool)
-    u0, v0, u1, v1 = coarse.bbox
-    exclude[max(v0 - margin, 0):v1 + margin + 1, max(u0 - margin, 0):u1 + margin + 1] = True
-    return exclude
-
-
-def _measure_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
-                  coarse=None, final: bool = True, masks: dict | None = None,
-                  roll: float = 0.0, restart: bool = False, formation=None,
-                  pose3d=None) -> _Attempt:
-    """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
-    ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
-    wire mask) keeps the wire mask of the first pass for the refits (same affine);
-    ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
-    so template, changed much since ``prev``: its edge profile was fitted to mismatched fins);
-    ``formation``: the view's wire formation shared over the shot (None: this image's own);
-    ``pose3d``: a point-source view's expected 3-D pose (:func:`_view_templates`). A
-    distorted view's wires and silhouette are both fitted in ``img``, the recorded image,
-    through its distortion."""
-    from cadra.imaging.wires.fit import measure_wires
-    from cadra.imaging.wires.mask import wire_mask
-
-    masks = {} if masks is None else masks
-
-    template, tilt_step = _view_templates(body, view, tilt, roll, pose3d, final)
-    if prev is None:
-        if coarse is None:
-            coarse = locate_model(img, template, view.optics())
-        if not coarse.ok:
-            return _Attempt(None, coarse.reason)
-        wires = measure_wires(img, view, exclude=_model_box(img, coarse), formation=formation,
-                              distortion=view.distortion)
-        if not wires.ok:
-            return _Attempt(None, wires.reason, wires)
-        affine = wires.affine
-        pose0 = pose_from_coarse(coarse, template, distorted(wires.projection, view.distortion))
-        mask = masks[view.name] = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX,
-                                            distortion=view.distortion)
-        # a quick first pass when a refit with better tilts follows
-        # (its sigma is not used: the offsets' correlation is left to the final fit)
-        settings_used = settings if final else replace(
-            settings, max_iter=2,
-            covariance=("scaled" if settings.covariance in ("correlated", "predicted")
-                        else settings.covariance))
-    else:
-        wires, affine = prev.wires, prev.affine
-        pose0 = prev.fit.pose
-        mask = masks.get(view.name)
-        if mask is None:
-            mask = wire_mask(view, affine, img.shape, WIRE_MASK_HALF_WIDTH_PX,
-                             distortion=view.distortion)
-        settings_used = settings
-    if prev is not None and not restart:   # a refit after a small tilt change: few iterations
-        settings_used = replace(settings, max_iter=min(settings.max_iter, 4))
-    warm = prev is not None and not restart
-    fit = fit_silhouette(img, template, distorted(wires.projection, view.distortion), pose0,
-                         exclude=mask,
-                         settings=settings_used,
-                         edge_sigma0=prev.fit.edge_sigma_px if warm else 0.9,
-                         noise_coef=prev.fit.noise_coef if warm else None,
-                         edge_profile0=prev.fit.edge_profile if warm else None,
-                         centroid=final, tilt_step=tilt_step)
-    if not fit.ok:
-        return _Attempt(fit, fit.reason, wires, affine)
-    warn = list(fit.warnings)
-    if wires.reason:
-        warn.append(wires.reason)
-    for w in wires.wires:
-        if not w.found:
-            warn.append(w.reason or f"wire {w.name!r} not found")
-        elif w.dropped_px > 0.0:
-            warn.append(f"wire {w.name!r}: {w.dropped_px:.0f} px of it left out, its centres "
-                        f"there off its line together (a shock or flow line along it?)")
-    crossing = _wire_crossings(fit, template, wires.projection, wires)
-    if crossing:
-        warn.append(f"model crosses wire(s) {', '.join(repr(c) for c in crossing)}: "
-                    f"{fit.n_segments} edge segments used, pixels on the wire masked")
-    return _Attempt(fit, "", wires, affine, tuple(warn))
-
-
-def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: float = 0.0,
-                 settings: FitSettings | None = None, formation=None) -> ViewResult:
-    """One view of one station from its image alone, in the manner of trackpy's ``locate``:
-    find the model, fit the wires and the silhouette, and return the view's
-    :class:`ViewResult` (pose in the view's plane with its covariance, the wires' affine).
-
-    ``image``: a grey ``uint8``/``uint16`` array (or a float array in [0, 1]); ``view``: the
-    facility's :class:`cadra.facility.reference.View`; ``body_spec``: the shot's model table
-    (or a body); ``tilt_rad``: the axis' tilt out of this view's plane, which only the other
-    view sees (:func:`measure_station` alternates the two views to settle it; here it is
-    given, 0 by default); ``roll_rad``: a finned body's roll for its outline template;
-    ``formation``: the view's wire formation fitted over several images
-    (:func:`view_formation`; None: this image's own).
-    """
-    import time
-
-    if view.projection == "point_source":
-        raise ValueError(f"station {view.station} {view.name}: a point-source view's shadow "
-                         f"depends on the model's depth, which only the station's other view "
-                         f"gives; measure the station (measure_station)")
-    t0 = time.perf_counter()
-    settings = FitSettings() if settings is None else settings
-    body = body_spec if hasattr(body_spec, "kind") else _body(body_spec)
-    name = f"station {view.station} {view.name} image"
-    img = np.asarray(image)
-    if img.dtype.kind == "f":
-        if img.shape != (view.height_px, view.width_px) or not np.all(np.isfinite(img)):
-            return ViewResult(view.name, name, False, "a float image must be finite and of the "
-                              f"view's size {view.width_px}x{view.height_px} px")
-        img = img.astype(np.float32)
-    else:
-        img = station_image(img, view.width_px, view.height_px, view.bit_depth, name)
-        if not isinstance(img, np.ndarray):
-            return ViewResult(view.name, name, False, img.reason)
-    coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
-    att = _measure_view(img, view, body, float(tilt_rad), settings, coarse=coarse, final=True,
-                        roll=float(roll_rad), formation=formation)
-    ok = att.fit is not None and att.fit.ok
-    return ViewResult(view.name, name, ok, att.reason, att.fit, att.wires, att.affine,
-                      float(tilt_rad), att.warnings, time.perf_counter() - t0,
-                      projection=None if att.wires is None else att.wires.projection,
-                      roll_rad=float(roll_rad))
-
-
-def _image_name(station_id: int, view: str, source) -> str:
-    """What a view's image is called in the tables: its path, or where it came from."""
-    if isinstance(source, str | os.PathLike):
-        return str(source)
-    return f"station {station_id} {view} image (in memory)"
-
-
-def _view_image(view, src, name: str):
-    """A view's image as a float array (or the loader's failure, with its ``reason``)."""
-    if isinstance(src, str | os.PathLike):
-        return load_station_image(src, view.width_px, view.height_px, view.bit_depth)
-    return station_image(src, view.width_px, view.height_px, view.bit_depth, name)
-
-
-def view_formation(sources, body_spec):
-    """One view's wire image formation, fitted over a few of a shot's images of it.
-
-    ``sources``: ``(view, image)`` pairs, the facility's view of each station and its image
-    (an array or a file); ``body_spec``: the shot's model table. Each image's model is
-    located roughly, its wires' clean profiles are taken outside it
-    (:func:`cadra.imaging.wires.fit.wire_profiles`) and all are fitted together
-    (:func:`cadra.imaging.wires.formation.fit_formation`). Returns the
-    :class:`~cadra.imaging.wires.profile.Formation` (``n_images`` the images used), or None
-    when no image gives three wires' profiles or the fit fails: the images then fit their
-    own.
-    """
-    from cadra.imaging.wires.fit import wire_profiles
-    from cadra.imaging.wires.formation import fit_formation
-
-    body = body_spec if hasattr(body_spec, "kind") else _body(body_spec)
-    profiles, n = [], 0
-    for view, src in sources:
-        try:
-            img = _view_image(view, src, f"station {view.station} {view.name} image")
-            if not isinstance(img, np.ndarray):
-                continue
-            coarse = locate_model(img, _template(body, view.name, 0.0, 256), view.optics())
-            if not coarse.ok:
-                continue
-            got = wire_profiles(img, view, exclude=_model_box(img, coarse),
-                                distortion=view.distortion)
-        except Exception:  # noqa: BLE001 - that image's station reports it; others serve
-            continue
-        if len(got) >= 3:
-            profiles += got
-            n += 1
-    if not n:
-        return None
-    try:
-        formation, _ = fit_formation(profiles)
-    except (ValueError, np.linalg.LinAlgError):
-        return None
-    return replace(formation, n_images=n)
 
 
 def measure_station(station: Station, images: Mapping[str, np.ndarray | str | os.PathLike],
@@ -486,10 +185,10 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
     import time
 
     settings = FitSettings() if settings is None else settings
-    body = _body(body_spec)
+    body = body_of(body_spec)
     station_id = station.id
     conical = point_source_station(station, body)
-    image_names = {n: _image_name(station_id, n, src) for n, src in images.items()}
+    image_names = {n: image_name(station_id, n, src) for n, src in images.items()}
     images_in, images, results = images, {}, {}
     sphere = body.kind == "sphere"
     for name in VIEWS:
@@ -502,18 +201,18 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
         if src is None:
             results[name] = ViewResult(name, "", False, "no image listed in the shot file")
             continue
-        img = _view_image(view, src, image_names[name])
+        img = view_image(view, src, image_names[name])
         if not isinstance(img, np.ndarray):
             results[name] = ViewResult(name, image_names[name], False, img.reason)
             continue
         images[name] = img
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
     nominal = {n: distorted(v.optics(), v.distortion) for n, v in station.views.items()}
-    coarse = {n: locate_model(img, _template(body, n, 0.0, 256), nominal[n])
+    coarse = {n: locate_model(img, view_template(body, n, 0.0, 256), nominal[n])
               for n, img in images.items()}
     tilts = {"top": 0.0, "side": 0.0}
     if not sphere and all(n in coarse and coarse[n].ok for n in VIEWS):
-        phi = {n: pose_from_coarse(coarse[n], _template(body, n, 0.0, 256), nominal[n])[2]
+        phi = {n: pose_from_coarse(coarse[n], view_template(body, n, 0.0, 256), nominal[n])[2]
                for n in VIEWS}
         a = axis_from_projected_angles(phi["side"], phi["top"])
         tilts = {"top": math.asin(a[2]), "side": math.asin(a[1])}
@@ -528,7 +227,7 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
                                  None, results)
         rough = {}
         for n in VIEWS:
-            a, b, phi = pose_from_coarse(coarse[n], _template(body, n, 0.0, 256), nominal[n])
+            a, b, phi = pose_from_coarse(coarse[n], view_template(body, n, 0.0, 256), nominal[n])
             rough[n] = ViewPose(a, b, phi if math.isfinite(phi) else 0.0, 1e-4, 1e-4, 1e-3,
                                 projection=nominal[n])
         pose3d = _station_pose3d(rough, sphere)
@@ -545,25 +244,31 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
             if prev is not None and not prev.ok:
                 continue
             # a finned body's first fit, before its roll is measured, may fail with fins far
-            # from the template's, or slide along the axis with most segments rejected or its edge
-            # width at stage A's cap: then the other start rolls are tried, and the fit with
-            # an edge width below the cap that rejects least is kept
-            tries = ROLL_TRIES_RAD if finned and prev is None else (roll,)
+            # from the template's, or slide along the axis with most segments rejected or its
+            # edge width at stage A's cap: then the other start rolls are tried, and the fit
+            # with an edge width below the cap that rejects least is kept. A refit at a new
+            # roll starts afresh from the last pose, and (that failing or as poor) from the
+            # rough location, as a first fit at that roll
+            restart = (prev is not None
+                       and abs(wrap_period(roll - prev.roll_rad)) > ROLL_RESTART_RAD)
+            tries = (tuple((r, None) for r in ROLL_TRIES_RAD) if finned and prev is None
+                     else ((roll, prev), (roll, None)) if restart else ((roll, prev),))
             best = None
-            for view_roll in tries:
+            for view_roll, start in tries:
                 try:
-                    att = _measure_view(
-                        img, station.views[name], body, tilts[name], settings, prev,
+                    att = fit_view(
+                        img, station.views[name], body, tilts[name], settings, start,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
                         formation=(formations or {}).get(name), pose3d=pose3d,
-                        restart=prev is not None and abs(wrap_period(view_roll - prev.roll_rad))
-                        > ROLL_RESTART_RAD)
+                        restart=start is not None and restart)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
-                    att = _Attempt(None, f"measurement error ({type(exc).__name__}: {exc})")
+                    att = ViewAttempt(None, f"measurement error ({type(exc).__name__}: {exc})")
                 if att.fit is not None and att.fit.ok:
-                    # a try whose edge width ends at stage A's cap fitted no edges: the
-                    # worst kind, whatever share of its segments it kept
-                    score = (att.fit.edge_sigma_px >= 0.999 * MAX_EDGE_SIGMA_PX,
+                    # a try whose edge width ends at stage A's cap fitted no edges, one whose
+                    # kept segments leave its pose undetermined fitted too few: the worst
+                    # kind, whatever share of its segments it kept
+                    score = (att.fit.edge_sigma_px >= 0.999 * MAX_EDGE_SIGMA_PX
+                             or not att.fit.determined,
                              att.fit.n_rejected / max(att.fit.n_segments, 1))
                     if best is None or score < best[0]:
                         best = (score, att, view_roll)
@@ -623,7 +328,7 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
 
         for name, img in images.items():
             r = results[name]
-            tpl = (_view_templates(body, station.views[name], r.tilt_rad, r.roll_rad, pose3d,
+            tpl = (view_templates(body, station.views[name], r.tilt_rad, r.roll_rad, pose3d,
                                    False)[0] if r.fit is not None and r.fit.ok else None)
             # drawn on a distorted view's ideal image, where its wires, outline and
             # reference point are
@@ -648,7 +353,7 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
         view = station.views[name]
         if view.distortion is not None or not coarse.get(name, None) or not coarse[name].ok:
             return None
-        return radial_from_wires(images[name], view, _model_box(images[name], coarse[name]))
+        return radial_from_wires(images[name], view, model_box(images[name], coarse[name]))
 
     wrong = _views_disagree(pose, results, radial if explain else None)
     if wrong:

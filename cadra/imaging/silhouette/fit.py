@@ -167,6 +167,9 @@ class ViewFit:
     #: ``tilt_step``. The tilt comes from the other view's angle, so its error moves this
     #: view's pose; cadra.imaging.combine propagates it (docs/stage1.md, step 5)
     tilt_sensitivity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: False when the last step's kept segments left a direction of the pose undetermined
+    #: (:data:`STEP_RCOND`): the pose is not converged and that direction's sigma is huge
+    determined: bool = True
 
 
 def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
@@ -208,6 +211,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     it = 0
     outside = 0.0
     diverged = False
+    determined = True
     band = settings.band_for(float(profile[0]))
     A_lin = projection.from_plane_jacobian(pose[:2])   # plane (m) -> pixel displacement
     for it in range(1, settings.max_iter + 1):  # noqa: B007 (it is reported)
@@ -248,9 +252,10 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         for _ in range(3):  # robust: drop outlying segments (dust, wire crossings)
             sw = np.sqrt(wts[keep])
             colscale = np.linalg.norm(X[keep] * sw[:, None], axis=0)
-            colscale[colscale == 0] = 1.0
-            beta, *_ = np.linalg.lstsq(X[keep] * sw[:, None] / colscale, y[keep] * sw,
-                                       rcond=STEP_RCOND)
+            live = colscale > 0     # (a column of zeros, the curvature of straight edges
+            colscale[~live] = 1.0   # alone, is no direction to determine)
+            beta, _, rank, _ = np.linalg.lstsq(X[keep] * sw[:, None] / colscale,
+                                               y[keep] * sw, rcond=STEP_RCOND)
             beta = beta / colscale
             e = (y - X @ beta) * np.sqrt(wts)
             mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
@@ -260,6 +265,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             keep = new_keep
         n_rej = int((~keep).sum())
         npar = X.shape[1]
+        determined = rank >= int(live.sum())
         if keep.sum() < npar + 5:
             return _failed("too few consistent edge segments", pose, outside)
         # covariance on the kept segments (docs/stage1.md, "Sigma"): the formal one scaled by
@@ -299,7 +305,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         # converged: the step is below the tolerance or a small fraction of the pose's own
         # sigma (re-banding at a new pose re-draws the noise; steps below that are jitter)
         sig_px = math.sqrt(max(np.trace(A_lin @ cov[:2, :2] @ A_lin.T), 0.0))
-        if move < max(settings.tol_px, 0.5 * sig_px) and not widened:
+        if move < max(settings.tol_px, 0.5 * sig_px) and not widened and determined:
             converged = True
             break
     if settings.covariance in ("correlated", "predicted") and not diverged:
@@ -343,6 +349,10 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     if diverged:
         warnings.append(f"silhouette fit: a late step of > {MAX_LATE_STEP_PX} px was rejected "
                         f"(edge model failing in part of the outline); last pose kept")
+    elif not determined:
+        warnings.append(f"silhouette fit: the {n_k} edge segments kept ({n_rej} rejected) do "
+                        f"not determine the pose (a template far from the outline?); not "
+                        f"converged")
     elif not converged:
         warnings.append(f"silhouette fit not converged in {settings.max_iter} iterations")
     if outside > 0.0:
@@ -357,7 +367,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         n_rejected=n_rej, iterations=it, converged=converged, outline_outside_frac=outside,
         centroid_ref_px=cen[0], centroid_axis_px_rad=cen[1], centroid_pose=cen[2],
         warnings=tuple(warnings), noise_coef=seg.noise_coef,
-        edge_profile=tuple(float(x) for x in seg.profile), tilt_sensitivity=tilt_sens)
+        edge_profile=tuple(float(x) for x in seg.profile), tilt_sensitivity=tilt_sens,
+        determined=determined)
 
 
 def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
