@@ -334,3 +334,50 @@ def test_tilt_sensitivity_matches_refits_with_tilted_templates(kind, tilt_deg, r
     assert sens[0] == pytest.approx(brute[0], rel=rel)
     assert abs(sens[1] - brute[1]) < 0.05 * abs(brute[0])
     assert fit.tilt_sensitivity == (0.0, 0.0, 0.0)        # not asked for: not computed
+
+
+
+def test_a_step_the_kept_edges_do_not_determine_is_not_taken():
+    """The pose step on a slender body's two parallel sides alone (the nose, base and fins
+    rejected): they fix the position across the axis and the rotation, not the position
+    along the axis. The step fits the sides' offsets, has no component along the axis (in
+    pixels), and says the pose is undetermined. With the base's segments added it is the
+    plain least-squares step on the segments kept. (A step set by the sides' noise once slid an outline
+    80 px along its axis.)"""
+    from cadra.imaging.silhouette.fit import _robust_step
+
+    rng = np.random.default_rng(3)
+    alpha = math.radians(7.0)
+    axis = np.array([math.cos(alpha), math.sin(alpha)])
+    normal = np.array([-axis[1], axis[0]])
+    scale = 1e-4                          # m per px
+    s = np.linspace(-60.0, 60.0, 16)      # segments along each side, px from the reference
+    rows, offsets = [], []
+    true = np.array([0.3 * scale, -0.2 * scale, 2e-3])    # (a_m, b_m, phi_rad)
+    for side in (1.0, -1.0):
+        n = side * normal
+        for si in s:
+            # offset = n . (translation + phi x lever), the lever along the axis in px
+            row = [n[0] / scale, n[1] / scale, side * si, 0.0]   # px per m, px per rad
+            rows.append(row)
+            offsets.append(np.dot(row[:3], true))
+    X = np.array(rows)
+    y = np.array(offsets) + rng.normal(0.0, 0.01, len(offsets))
+    wts = np.full(len(y), 1e4)
+    keep = np.ones(len(y), bool)
+    px_unit = np.array([scale, scale, 1.0 / 20.0, np.nan])
+    beta, kept, determined = _robust_step(X, y, wts, keep, px_unit, 4.0)
+    assert not determined and kept.sum() >= 30
+    move_px = beta[:2] / scale
+    assert abs(move_px @ axis) < 1e-9                       # nothing along the axis
+    assert abs(move_px @ normal - true[:2] @ normal / scale) < 0.01
+    assert abs(beta[2] - true[2]) < 1e-4
+    # the base: two segments facing back along the axis fix the position along it
+    base = np.array([[-axis[0] / scale, -axis[1] / scale, 0.0, 0.0]] * 2)
+    X2 = np.vstack([X, base])
+    y2 = np.concatenate([y, base @ np.r_[true, 0.0]])
+    beta2, kept2, determined2 = _robust_step(X2, y2, np.full(len(y2), 1e4),
+                                         np.ones(len(y2), bool), px_unit, 4.0)
+    plain = np.linalg.lstsq(X2[kept2, :3], y2[kept2], rcond=None)[0]
+    assert determined2
+    np.testing.assert_allclose(beta2[:3], plain, rtol=1e-9, atol=1e-15)

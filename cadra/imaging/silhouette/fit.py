@@ -239,6 +239,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         profile = seg.profile
         noise_coef = seg.noise_coef
         ref_px = projection.from_plane(pose[:2])
+        scale = math.sqrt(abs(np.linalg.det(projection.to_plane_jacobian(ref_px))))  # m/px
+        rim = 0.5 * math.sqrt(template.area_m2 / math.pi) / scale                  # px
         lever = projection.to_plane(seg.foot_px) - pose[:2]        # plane, m
         cols = [seg.normal @ A_lin[:, 0], seg.normal @ A_lin[:, 1]]
         if fit_phi:
@@ -249,23 +251,13 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         y = seg.delta_px
         wts = 1.0 / seg.var_px2
         keep = np.isfinite(y) & np.isfinite(wts) & (wts > 0)
-        for _ in range(3):  # robust: drop outlying segments (dust, wire crossings)
-            sw = np.sqrt(wts[keep])
-            colscale = np.linalg.norm(X[keep] * sw[:, None], axis=0)
-            live = colscale > 0     # (a column of zeros, the curvature of straight edges
-            colscale[~live] = 1.0   # alone, is no direction to determine)
-            beta, _, rank, _ = np.linalg.lstsq(X[keep] * sw[:, None] / colscale,
-                                               y[keep] * sw, rcond=STEP_RCOND)
-            beta = beta / colscale
-            e = (y - X @ beta) * np.sqrt(wts)
-            mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
-            new_keep = keep & (np.abs(e) <= settings.outlier_sigma * max(mad, 1e-12))
-            if new_keep.sum() == keep.sum() or new_keep.sum() < 0.5 * keep.sum():
-                break   # nothing more to drop, or a noise-free image (mad ~ 0)
-            keep = new_keep
-        n_rej = int((~keep).sum())
         npar = X.shape[1]
-        determined = rank >= int(live.sum())
+        px_unit = np.full(npar, np.nan)   # each column's parameter per px of the outline's
+        px_unit[:2] = scale                # move (a rotation's at the rim); the curvature's
+        if fit_phi:                        # a nuisance (NaN)
+            px_unit[2] = 1.0 / rim
+        beta, keep, determined = _robust_step(X, y, wts, keep, px_unit, settings.outlier_sigma)
+        n_rej = int((~keep).sum())
         if keep.sum() < npar + 5:
             return _failed("too few consistent edge segments", pose, outside)
         # covariance on the kept segments (docs/stage1.md, "Sigma"): the formal one scaled by
@@ -287,8 +279,6 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             dpose[2] = beta[2]
         if it > 3:   # damp late iterations: re-banding noise can make full steps oscillate
             dpose *= 0.5
-        scale = math.sqrt(abs(np.linalg.det(projection.to_plane_jacobian(ref_px))))
-        rim = 0.5 * math.sqrt(template.area_m2 / math.pi) / scale
         move = np.hypot(*(A_lin @ dpose[:2])) + (abs(dpose[2]) * rim if fit_phi else 0.0)
         if it > 2 and move > MAX_LATE_STEP_PX:
             # a converging fit does not jump late: a stage-A failure (a strong fringe, a
@@ -369,6 +359,39 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         warnings=tuple(warnings), noise_coef=seg.noise_coef,
         edge_profile=tuple(float(x) for x in seg.profile), tilt_sensitivity=tilt_sens,
         determined=determined)
+
+
+def _robust_step(X: np.ndarray, y: np.ndarray, wts: np.ndarray, keep: np.ndarray,
+                 px_unit: np.ndarray, outlier_sigma: float):
+    """The pose step by weighted least squares ``X beta ~ y`` (weights ``wts``) on the
+    segments ``keep``, outlying segments dropped at ``outlier_sigma`` robust sigma (dust,
+    wire crossings; at most three passes, and never half of them at once).
+
+    The step is solved in pixels (``px_unit[j]``: column j's parameter per pixel of the
+    outline's move; NaN: a nuisance column, scaled to the pose columns' size), and a direction
+    whose singular value is below :data:`STEP_RCOND` of the largest is not taken: the least
+    pixel move that fits. Returns (beta, the segments kept, determined: no direction of a
+    nonzero column was left out)."""
+    unit = np.ones(X.shape[1])
+    for _ in range(3):
+        sw = np.sqrt(wts[keep])
+        norms = np.linalg.norm(X[keep] * sw[:, None], axis=0)
+        live = norms > 0    # (a column of zeros, the curvature of straight edges alone, is
+        pose = np.isfinite(px_unit)     # no direction to determine)
+        unit = np.where(pose, px_unit, 1.0)
+        size = np.max(norms[pose] * px_unit[pose], initial=0.0) or 1.0
+        nuisance = ~pose & live
+        unit[nuisance] = size / norms[nuisance]
+        beta, _, rank, _ = np.linalg.lstsq(X[keep] * sw[:, None] * unit, y[keep] * sw,
+                                           rcond=STEP_RCOND)
+        beta = beta * unit
+        e = (y - X @ beta) * np.sqrt(wts)
+        mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
+        new_keep = keep & (np.abs(e) <= outlier_sigma * max(mad, 1e-12))
+        if new_keep.sum() == keep.sum() or new_keep.sum() < 0.5 * keep.sum():
+            break   # nothing more to drop, or a noise-free image (mad ~ 0)
+        keep = new_keep
+    return beta, keep, bool(rank >= int(live.sum()))
 
 
 def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
