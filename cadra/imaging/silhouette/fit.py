@@ -382,16 +382,21 @@ def _robust_step(X: np.ndarray, y: np.ndarray, wts: np.ndarray, keep: np.ndarray
         size = np.max(norms[pose] * px_unit[pose], initial=0.0) or 1.0
         nuisance = ~pose & live
         unit[nuisance] = size / norms[nuisance]
-        beta, _, rank, _ = np.linalg.lstsq(X[keep] * sw[:, None] * unit, y[keep] * sw,
-                                           rcond=STEP_RCOND)
-        beta = beta * unit
+        Xs, ys = X[keep] * sw[:, None], y[keep] * sw
+        sv = np.linalg.svd(Xs * unit, compute_uv=False)
+        rank = int(np.count_nonzero(sv > STEP_RCOND * sv[0])) if sv.size else 0
+        if rank >= int(live.sum()):     # determined: the plain step (columns at unit norm)
+            colscale = np.where(live, norms, 1.0)
+            beta = np.linalg.lstsq(Xs / colscale, ys, rcond=None)[0] / colscale
+        else:
+            beta = np.linalg.lstsq(Xs * unit, ys, rcond=STEP_RCOND)[0] * unit
         e = (y - X @ beta) * np.sqrt(wts)
         mad = 1.4826 * np.median(np.abs(e[keep] - np.median(e[keep])))
         new_keep = keep & (np.abs(e) <= outlier_sigma * max(mad, 1e-12))
         if new_keep.sum() == keep.sum() or new_keep.sum() < 0.5 * keep.sum():
             break   # nothing more to drop, or a noise-free image (mad ~ 0)
         keep = new_keep
-    return beta, keep, bool(rank >= int(live.sum()))
+    return beta, keep, rank >= int(live.sum())
 
 
 def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
