@@ -25,7 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from cadra.body.model import Body, make_body
 
@@ -145,6 +144,8 @@ def solve_capsule_oml(d_m: float, h_m: float, R1_m: float, R2_m: float,
     if not (f_lo > 0 > f_hi):
         raise ValueError(f"h_m: no afterbody cone half-angle in (0, 90) deg gives h = {h} m "
                          f"with d={d}, R1={R1}, R2={R2}, l1={l1} m")
+    from scipy.optimize import brentq  # here: scipy.optimize costs a process 0.5 s
+
     theta = brentq(f, lo, hi, xtol=1e-16, rtol=4 * np.finfo(float).eps, maxiter=200)
     st = _stations(theta, d, R1, R2, l1)
     sin_t, cos_t = np.sin(theta), np.cos(theta)
