@@ -26,12 +26,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import least_squares
-from scipy.stats import chi2 as chi2_dist
 
 from cadra.motion import _checks
 from cadra.motion._named import ByName
 from cadra.motion.nonrolling import nonrolling_rate
 from cadra.motion.starts import fft_exponents, linear_amplitudes, pencil_exponents
+from cadra.stats import chi2_p_value
 
 
 class MotionFitError(RuntimeError):
@@ -170,9 +170,7 @@ class EpicyclicFit(ByName):
     def chi2_p_value(self) -> float:
         """P(chi^2 >= this chi^2) with :attr:`dof` degrees of freedom: how likely the angle
         sigmas alone leave residuals this large (NaN without degrees of freedom)."""
-        if self.dof <= 0 or not np.isfinite(self.chi2):
-            return float("nan")
-        return float(chi2_dist.sf(self.chi2, self.dof))
+        return chi2_p_value(self.chi2, self.dof)
 
     def predict(self, s, derivative: bool = False) -> np.ndarray:
         """The fitted xi (or dxi/ds) at ``s``, in the frame the fit was made in."""
