@@ -156,6 +156,40 @@ def _signals_held() -> Iterator[None]:
             previous[signum](signum, None)   # raises KeyboardInterrupt (or Terminated)
 
 
+#: stop requests (a Ctrl-C's KeyboardInterrupt, SIGTERM's) that a finalizer swallowed: Python
+#: drops an exception raised inside a ``__del__`` (numba's compiler collects llvmlite objects
+#: often), so a signal landing there was lost and the command ran on to write its outputs.
+#: :func:`watch_swallowed_stops` records them; no output is committed after one
+#: (:func:`raise_swallowed_stop`).
+_SWALLOWED: list[BaseException] = []
+
+
+def watch_swallowed_stops() -> None:
+    """Record a stop request (a :class:`KeyboardInterrupt`) that Python drops because it was
+    raised inside a finalizer; other such reports go to the hook as before. Idempotent."""
+    hook = sys.unraisablehook
+    if getattr(hook, "_cadra_records_stops", False):
+        return
+
+    def record(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            _SWALLOWED.append(unraisable.exc_value)
+        else:
+            hook(unraisable)
+
+    record._cadra_records_stops = True
+    sys.unraisablehook = record
+
+
+def raise_swallowed_stop() -> None:
+    """Raise the stop request a finalizer swallowed (:func:`watch_swallowed_stops`), if any:
+    called before an output is committed, and by a command when its work returns."""
+    if _SWALLOWED:
+        exc = _SWALLOWED[0]
+        _SWALLOWED.clear()
+        raise exc
+
+
 @contextlib.contextmanager
 def _locked(temp: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``temp``'s lock file while the block writes ``temp`` (the
@@ -392,6 +426,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes, overwrite: bool = F
             if not overwrite and path.exists():  # appeared while we were writing
                 raise FileExistsError(f"{path} exists; refusing to overwrite (pass "
                                       "overwrite=True)")
+            raise_swallowed_stop()
             os.replace(tmp, path)
     except BaseException:
         if tmp is not None:
@@ -448,6 +483,7 @@ def atomic_output_dir(path: str | os.PathLike, overwrite: bool = False,
             (tmp / OUTPUT_MARKER).write_text(f"kind: {kind}\nwritten by CADRA: --overwrite "
                                              f"replaces it with another {kind} output\n",
                                              encoding="utf-8")
+            raise_swallowed_stop()
             if path.exists():
                 if not overwrite:
                     raise FileExistsError(f"{given} exists; refusing to overwrite")

@@ -94,3 +94,48 @@ def test_held_signals_are_acted_on_once_and_handlers_restored(python_sigint):
             reached = True                      # the signal did not cut the block
     assert reached
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+SWALLOWED = """
+import gc, os, signal, sys
+from pathlib import Path
+from cadra.atomic import atomic_output_dir, atomic_write_text
+from cadra.cli._format import console_main
+
+class Collected:
+    def __del__(self):   # where numba's compiler collects llvmlite objects
+        os.kill(os.getpid(), signal.SIG{sig})   # lands inside the finalizer
+
+def body(argv):
+    out = Path(argv[0])
+    Collected()          # collected at once: its finalizer runs, the signal lands there
+    gc.collect()
+    {write}
+    print("finished")
+    return 0
+
+sys.exit(console_main("demo", body, sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("sig, status, line", [("INT", 130, "demo: interrupted"),
+                                                ("TERM", 143, "demo: terminated")])
+@pytest.mark.parametrize("write", [
+    "atomic_write_text(out / 'a.txt', 'x')",
+    "with atomic_output_dir(out / 'd') as tmp:\n        (tmp / 'f.txt').write_text('x')"])
+def test_a_stop_a_finalizer_swallowed_still_stops_the_command(tmp_path, sig, status, line,
+                                                              write):
+    """Python drops an exception raised inside a ``__del__``: a Ctrl-C landing in a finalizer
+    (numba's compiler collects llvmlite objects often; a CI run saw one) was lost, and the
+    command wrote its outputs and exited 0. The stop is recorded and raised before the output
+    is committed: one line, the signal's status, nothing written."""
+    import subprocess
+
+    code = SWALLOWED.replace("{sig}", sig).replace("{write}", write)
+    run = subprocess.run([sys.executable, "-c", code, str(tmp_path / "out")],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == status, run.stderr
+    assert run.stderr.strip().splitlines() == [line], run.stderr
+    assert "finished" not in run.stdout
+    out = tmp_path / "out"
+    assert not out.exists() or sorted(os.listdir(out)) == []

@@ -226,11 +226,15 @@ def console_main(prog: str, body, argv) -> int:
     :data:`EXIT_TERMINATED` (:func:`take_sigterm`), a terminal that cannot show
     a character with a plain-text stand-in (:func:`plain_text_streams`); returns the exit
     status."""
+    from cadra.atomic import raise_swallowed_stop, watch_swallowed_stops
+
     take_ctrl_c()
     take_sigterm()
+    watch_swallowed_stops()
     plain_text_streams()
     try:
         status = body(argv)
+        raise_swallowed_stop()   # a Ctrl-C that a finalizer swallowed still ends it so
         sys.stdout.flush()   # a closed stdout shows here, inside the handler below
         return status
     except Terminated:
