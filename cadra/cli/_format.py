@@ -233,7 +233,13 @@ def console_main(prog: str, body, argv) -> int:
     watch_swallowed_stops()
     plain_text_streams()
     try:
-        status = body(argv)
+        try:
+            status = body(argv)
+        except Exception:
+            # a Ctrl-C that a finalizer swallowed can leave a library half-done (numba's
+            # cache then fails to save a function whose compile it cut): the stop is the cause
+            raise_swallowed_stop()
+            raise
         raise_swallowed_stop()   # a Ctrl-C that a finalizer swallowed still ends it so
         sys.stdout.flush()   # a closed stdout shows here, inside the handler below
         return status
