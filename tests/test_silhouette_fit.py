@@ -342,8 +342,8 @@ def test_a_step_the_kept_edges_do_not_determine_is_not_taken():
     rejected): they fix the position across the axis and the rotation, not the position
     along the axis. The step fits the sides' offsets, has no component along the axis (in
     pixels), and says the pose is undetermined. With the base's segments added it is the
-    plain least-squares step on the segments kept. (A step set by the sides' noise once slid an outline
-    80 px along its axis.)"""
+    plain least-squares step on the segments kept. (A step set by the sides' noise once slid
+    an outline 80 px along its axis.)"""
     from cadra.imaging.silhouette.fit import _robust_step
 
     rng = np.random.default_rng(3)
