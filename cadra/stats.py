@@ -4,7 +4,8 @@
 reads runs of sign as evidence of unmodelled terms): the segmented roll fit's segment table
 and the gap diagnosis's sequence tests both use it. :func:`chi2_p_value` and
 :data:`POOR_MINIMUM_P` say when a converged fit (the 6-DOF fit, the classic reduction, the
-roll fit) is far above its noise: converged to a poor minimum.
+roll fit) is far above its noise: converged to a poor minimum; :func:`chi2_quantile` is the
+threshold a chi^2 statistic is held to (the wires' agreement tests).
 """
 
 from __future__ import annotations
@@ -13,7 +14,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import chdtrc, ndtr  # scipy.stats' own formulas, without its 0.5 s import
+
+# scipy.stats' own formulas, from scipy.special: importing scipy.stats costs a process 0.5 s
+from scipy.special import chdtrc, gammaincinv, ndtr
 
 #: p-value of chi^2 below which a converged fit is said to have converged to a poor minimum:
 #: noise of the stated sigmas alone leaves residuals this large less than once in a million
@@ -26,6 +29,12 @@ def chi2_p_value(chi2: float, dof: int) -> float:
     if dof <= 0 or not math.isfinite(chi2):
         return math.nan
     return float(chdtrc(dof, chi2))
+
+
+def chi2_quantile(q: float, dof: float) -> float:
+    """The value a chi^2 variable with ``dof`` degrees of freedom stays below with probability
+    ``q`` (scipy.stats' ``chi2.ppf``, by its own formula)."""
+    return float(2.0 * gammaincinv(0.5 * dof, q))
 
 
 @dataclass(frozen=True)
@@ -70,4 +79,4 @@ def runs_of_sign(values) -> Runs:
     return Runs(n, runs, int(lengths.max()), expected, z, float(2 * ndtr(-abs(z))))
 
 
-__all__ = ["Runs", "runs_of_sign"]
+__all__ = ["POOR_MINIMUM_P", "Runs", "chi2_p_value", "chi2_quantile", "runs_of_sign"]

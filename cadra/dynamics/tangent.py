@@ -132,6 +132,8 @@ def module():
     one core: the tangent code is several times the float code. It runs under a file lock,
     so parallel processes (test workers, a campaign's workers) compile once and load the
     cached result; a marker then says the compiled code is there (:func:`ready`)."""
+    if _MODULE is not None:     # loaded: every propagation asks, from every thread
+        return _MODULE
     with _INIT:
         return _MODULE if _MODULE is not None else _load()
 

@@ -68,8 +68,8 @@ __all__ = ["FitSettings", "ViewFit", "fit_silhouette"]
 
 #: After two iterations a converging fit moves far less than this (px at the rim).
 MAX_LATE_STEP_PX = 0.3
-#: A step's direction whose column-scaled singular value is below this fraction of the
-#: largest is not taken (truncated SVD): the kept segments do not determine it. Robust
+#: A step's direction whose singular value (the step in pixels) is below this fraction of
+#: the largest is not taken (truncated SVD): the kept segments do not determine it. Robust
 #: rejection can leave only a slender body's parallel sides, and their noise then set a
 #: step of 10 mm along the axis (a finned body fitted at a wrong roll).
 STEP_RCOND = 1e-2
@@ -372,7 +372,6 @@ def _robust_step(X: np.ndarray, y: np.ndarray, wts: np.ndarray, keep: np.ndarray
     whose singular value is below :data:`STEP_RCOND` of the largest is not taken: the least
     pixel move that fits. Returns (beta, the segments kept, determined: no direction of a
     nonzero column was left out)."""
-    unit = np.ones(X.shape[1])
     for _ in range(3):
         sw = np.sqrt(wts[keep])
         norms = np.linalg.norm(X[keep] * sw[:, None], axis=0)

@@ -21,6 +21,7 @@ import numpy as np
 
 from cadra.imaging.wires.straightness import tls_line
 from cadra.optics.distortion import Distortion, radial_undistorter
+from cadra.stats import chi2_quantile
 
 __all__ = ["BOW_Z", "K1_SCAN", "K1_SEARCH", "WireBow", "WireDistortion", "radial_from_centres",
            "radial_from_wires"]
@@ -117,10 +118,8 @@ class WireBow:
     @property
     def agrees(self) -> bool:
         """Do the wires bow as one radial distortion bows them (not one wire alone)?"""
-        from scipy.stats import chi2
-
         dof = self.n_wires - 1
-        return dof >= 1 and self.chi2_wires <= chi2.ppf(1.0 - BOW_AGREE_P, dof)
+        return dof >= 1 and self.chi2_wires <= chi2_quantile(1.0 - BOW_AGREE_P, dof)
 
     @property
     def found(self) -> bool:

@@ -86,7 +86,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from cadra.facility.reference import View
 from cadra.imaging.wires.affine import corner_sigma_px, formation_cov, solve_affine_gls
@@ -102,6 +101,7 @@ from cadra.imaging.wires.phase import line_phases, phase_gain, systematic_cov
 from cadra.imaging.wires.profile import Formation, WireProfiles, fit_centres
 from cadra.imaging.wires.straightness import MODEL_BLOCK_SYS_PX
 from cadra.optics.projection import Projection
+from cadra.stats import chi2_quantile
 
 __all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_profiles"]
 
@@ -322,8 +322,7 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
     sens = {i: formation.sens[k] for k, i in enumerate(collected)}
     centroid = _solve_affine(view, fits)
     t2, n_lines = _disagreement(model, centroid.wires)
-    # chi2's quantile as scipy.stats computes it (importing scipy.stats costs 0.5 s a process)
-    if t2 <= 2.0 * gammaincinv(0.5 * max(n_lines, 1), 1.0 - MODEL_AGREEMENT_P):
+    if t2 <= chi2_quantile(1.0 - MODEL_AGREEMENT_P, max(n_lines, 1)):
         out = _solve_affine(view, model, formation, sens)
     else:   # the formation does not describe these wires (a PSF far from Gaussian?)
         notes.append(f"wire profile model disagrees with the wires' centroids (chi2 {t2:.0f} "

@@ -29,7 +29,6 @@ import math
 from dataclasses import replace
 
 import numpy as np
-from scipy.special import chdtrc
 
 from cadra.imaging.wires.profile import (
     CENTRE_ITERATIONS,
@@ -43,6 +42,7 @@ from cadra.imaging.wires.profile import (
     _linear_resid,
     _Rows,
 )
+from cadra.stats import chi2_p_value
 
 __all__ = ["FORMATION_PROFILES", "SHARED_P", "fit_formation", "fit_widths"]
 
@@ -263,8 +263,7 @@ def fit_widths(wires: list[WireProfiles], shared: Formation
         cov[3:, 3:] = _within_bounds(np.linalg.pinv(F[3:, 3:]) * s2, pb.lo[3:], pb.hi[3:])
         sens = pb.centre_sens(q, c)
     rms = math.sqrt(cost / max(float(np.sum(pb.rows.m)), 1.0))
-    # chi2's survival function, as scipy.stats computes it (without its 0.5 s import)
-    p = float(chdtrc(3, score)) if np.isfinite(score) else 0.0
+    p = chi2_p_value(score, 3) if np.isfinite(score) else 0.0
     return (Formation(shared.sigma_c, shared.sigma_d, shared.fringe_w, rms, cov, sens,
                       shared=True, n_images=shared.n_images), [float(v) for v in q[3:]],
             score, p)
