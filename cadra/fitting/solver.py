@@ -24,6 +24,7 @@ Pure function over plain data: :func:`fit` takes :class:`cadra.flight.data.ShotD
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -41,6 +42,25 @@ from cadra.flight.data import ShotData
 
 #: statuses of a fit; only the first counts as a result
 STATUSES = ("converged", "max_iterations", "stalled", "failed")
+
+#: the damping's floor (scaled space)
+LAMBDA_MIN = 1e-12
+
+#: environment variable that chooses the damping schedule of every fit of a process:
+#: ``search`` (default: an accepted step is also tried less damped while the linear model
+#: predicts its gain) or ``classic`` (Marquardt's: one trial per damping, divided by ten after
+#: each accepted step; what the fit did before, kept for the speed A/B); docs/fitting.md,
+#: "Solver"
+DAMPING_ENV = "CADRA_DAMPING"
+DAMPINGS = ("search", "classic")
+
+
+def damping() -> str:
+    """The damping schedule this process's fits use (:data:`DAMPING_ENV`)."""
+    chosen = os.environ.get(DAMPING_ENV, "search").strip().lower() or "search"
+    if chosen not in DAMPINGS:
+        raise ValueError(f"{DAMPING_ENV} must be one of {DAMPINGS}, got {chosen!r}")
+    return chosen
 
 
 @dataclass(frozen=True)
@@ -314,6 +334,10 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     def evaluate(p, xv, ys):
         return problem.predict_from(p, xv, ys)
 
+    def noise_floor(scale):
+        return options.noise_tol_sigma**2 * scale
+
+    search = damping() == "search"
     history = []
     status = "failed"
     lam = options.lambda_start
@@ -383,8 +407,11 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                            f"{math.sqrt(max(gn_decrease / scale, 0.0)):.1e} sigma")
                 break
             accepted = False
-            while lam <= options.lambda_max:
-                dls, dap, _ = _step(per, Ca, ga, ds, da, lam, options.rcond)
+
+            def trial(lam, per=per, Ca=Ca, ga=ga, ds=ds, da=da, params=params, xvals=xvals):
+                """The step damped by ``lam``: (chi^2 there, its predicted decrease,
+                parameters, extras, epoch states)."""
+                dls, dap, predicted = _step(per, Ca, ga, ds, da, lam, options.rcond)
                 p_try = params.copy()
                 p_try[aero_idx] = np.clip(params[aero_idx] + dap[:na], lo, hi)
                 x_try = xvals + dap[na:]
@@ -397,6 +424,21 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                     chi2_try = _chi2(states, evaluate(p_try, x_try, ys)) + prior_chi2(model, p_try)
                 except (FloatingPointError, ZeroDivisionError):
                     chi2_try = math.inf
+                return chi2_try, predicted, p_try, x_try, ys
+
+            while lam <= options.lambda_max:
+                chi2_try, predicted, p_try, x_try, ys = trial(lam)
+                if chi2_try < chi2 and search:
+                    # the lambda search: while the linear model predicts the gain (half of
+                    # it at least), the step damped ten times less is tried too, and the best
+                    # kept; a trial costs a prediction, a Jacobian a dozen or more
+                    while (lam > LAMBDA_MIN and chi2 - chi2_try >= 0.5 * predicted
+                           and predicted > noise_floor(scale)):
+                        less = trial(lam / 10.0)
+                        if not less[0] < chi2_try:
+                            break
+                        lam /= 10.0
+                        chi2_try, predicted, p_try, x_try, ys = less
                 if chi2_try < chi2:
                     kept = [(st.y_nom, st.pred, st.jac) for st in states]
                     for st, y in zip(states, ys, strict=True):
@@ -413,7 +455,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                     params, xvals = p_try, x_try
                     chi2_before, chi2 = chi2, chi2_jac
                     history.append(chi2)
-                    lam = max(lam / 10.0, 1e-12)
+                    lam = max(lam / 10.0, LAMBDA_MIN)
                     accepted = True
                     break
                 lam *= 10.0
@@ -431,4 +473,5 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                         iterations, t_start, options, lam, xvals)
 
 
-__all__ = ["STATUSES", "FitOptions", "FitProblem", "LOCAL_NAMES", "default_local_free", "fit"]
+__all__ = ["DAMPINGS", "DAMPING_ENV", "LAMBDA_MIN", "STATUSES", "FitOptions", "FitProblem",
+           "LOCAL_NAMES", "damping", "default_local_free", "fit"]

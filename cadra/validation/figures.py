@@ -51,8 +51,9 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "validate_gap": ("Gap diagnosis on shots whose effect is withheld from the analyst",
                      "gap.md"),
     "gap_detection": ("Gap diagnosis: detection efficiency near the limit", "gap.md"),
-    "ab_gap_speed": ("Gap diagnosis: its time with forward-mode sensitivities against complex "
-                     "step, on the same fits in one run", "gap.md"),
+    "ab_gap_speed": ("Gap diagnosis: its time now (forward mode, the lambda search) against "
+                     "before (complex step, the classic damping), on the same fits in one run",
+                     "gap.md"),
     "validate_motion": ("Classic motion methods against seeds 000 and 001", "motion.md"),
     "validate_tricyclic": ("Seed 002 Table 2: tricyclic fits of nonplanar tunnel runs",
                            "motion.md"),

@@ -52,7 +52,7 @@ from cadra.validation.gap_scoring import (
     size_within_2sigma,
 )
 
-__all__ = ["CASES", "CASE_OF_EFFECT", "EXTENDED_CASES", "STRONG_RCHI2", "STRONG_REDRAWS",
+__all__ = ["AB_ARMS", "CASES", "CASE_OF_EFFECT", "EXTENDED_CASES", "STRONG_RCHI2", "STRONG_REDRAWS",
            "WHERE_ONLY_LAMBDA", "diagnose_with", "finding", "multifit_timing", "run_case",
            "run_trial", "score_extended"]
 
@@ -76,23 +76,35 @@ CASES = ["cg", "inertia_asym", "products", "density", "crossflow", "cm3", "cmq2"
          "station_bias", "timing", "scale", "null", "out_of_library", *EXTENDED_CASES]
 
 
-def diagnose_with(method: str, res, shots, model):
-    """:func:`cadra.gap.score.diagnose_gap` with every Jacobian by ``method`` ("forward" or
-    "complex", through :data:`cadra.fitting.sensitivity.METHOD_ENV`): (diagnosis, seconds)."""
+#: the diagnosis's configurations the speed A/B times (:func:`diagnose_with`): arm ->
+#: (sensitivities, the fit's damping schedule). ``before``: complex step and Marquardt's
+#: classic schedule, what the diagnosis did before forward mode and the lambda search;
+#: ``forward``: forward mode alone; ``now``: forward mode and the lambda search, the default
+AB_ARMS = {"before": ("complex", "classic"), "forward": ("forward", "classic"),
+           "now": ("forward", "search")}
+
+
+def diagnose_with(arm: str, res, shots, model):
+    """:func:`cadra.gap.score.diagnose_gap` in configuration ``arm`` of :data:`AB_ARMS`
+    (through :data:`cadra.fitting.sensitivity.METHOD_ENV` and
+    :data:`cadra.fitting.solver.DAMPING_ENV`): (diagnosis, seconds)."""
     from cadra.fitting.sensitivity import METHOD_ENV
+    from cadra.fitting.solver import DAMPING_ENV
     from cadra.gap.score import diagnose_gap
 
-    before = os.environ.get(METHOD_ENV)
-    os.environ[METHOD_ENV] = method
+    keys = (METHOD_ENV, DAMPING_ENV)
+    before = {k: os.environ.get(k) for k in keys}
+    os.environ.update(zip(keys, AB_ARMS[arm], strict=True))
     try:
         t0 = time.perf_counter()
         dg = diagnose_gap(res, shots, model)
         return dg, time.perf_counter() - t0
     finally:
-        if before is None:
-            os.environ.pop(METHOD_ENV, None)
-        else:
-            os.environ[METHOD_ENV] = before
+        for k, v in before.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _first_named(dg):
@@ -113,10 +125,10 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0, ab=None):
     diagnosis) unless ``force``. A strong-effect trial draws one of STRONG_SUBCASES at k times
     its usual size (k log-uniform in 0.01-1 on the M1 sets); when the fit without it lands
     outside STRONG_RCHI2 the same trial (shots, direction, noise) is redone with k rescaled
-    towards chi^2/dof ~ 60 (``strong_k``; at most three times). ``ab``: the two
-    sensitivity methods in the order to run them (e.g. ("complex", "forward")): the fit is
-    diagnosed with each, timed, and scored on the forward-mode diagnosis (the row's
-    ``ab_seconds``, ``ab_first``, ``ab_verdicts`` and ``ab_findings`` by method)."""
+    towards chi^2/dof ~ 60 (``strong_k``; at most three times). ``ab``: the
+    configurations of :data:`AB_ARMS` in the order to run them (e.g. ("before", "now")): the
+    fit is diagnosed with each, timed, and scored on the ``now`` diagnosis (the row's
+    ``ab_seconds``, ``ab_first``, ``ab_verdicts`` and ``ab_findings`` by arm)."""
     saved = rng.bit_generator.state
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
@@ -232,7 +244,7 @@ def run_trial(case, rng, tmpdir, force=False, strong_k=None, _depth=0, ab=None):
         return out             # not a trial of this case: the caller draws another
     if ab:
         runs = {m: diagnose_with(m, res, shots, model) for m in ab}
-        dg, t_diag = runs["forward"]
+        dg, t_diag = runs["now"]
         out.update({"ab_seconds": {m: r[1] for m, r in runs.items()},
                     "ab_first": {m: _first_named(r[0]) for m, r in runs.items()},
                     "ab_verdicts": {m: r[0].verdict for m, r in runs.items()},
@@ -348,14 +360,14 @@ def score_extended(case, out, dg, res, expected, truth, where, named, groups, su
     return out
 
 
-def run_case(case, rng, tmpdir, trials: int, progress: bool = False, ab: bool = False):
+def run_case(case, rng, tmpdir, trials: int, progress: bool = False, ab=()):
     """``trials`` trials of ``case`` from the generator ``rng``: ([row, ...], the number of
     draws drawn again). A draw whose effect does not matter (rms up 20 %, or a coefficient
     moved by more than its sigma) is not a trial of the case: it is drawn again, at most
     MAX_REDRAWS times (STRONG_REDRAWS for a strong effect), and counted; the last is kept
     whatever it gives. ``progress``: a progress bar (tqdm). ``ab``: each trial diagnosed
-    with both sensitivity methods, complex step first in even trials and forward mode first
-    in odd ones (:func:`run_trial`)."""
+    in these configurations of :data:`AB_ARMS`, in this order in even trials and the
+    reverse in odd ones (:func:`run_trial`)."""
     steps = range(trials)
     if progress:
         from tqdm import tqdm
@@ -364,8 +376,7 @@ def run_case(case, rng, tmpdir, trials: int, progress: bool = False, ab: bool = 
     rows, n_redrawn = [], 0
     for i in steps:
         n_max = STRONG_REDRAWS if case == "strong" else MAX_REDRAWS
-        order = (None if not ab else ("complex", "forward") if i % 2 == 0
-                 else ("forward", "complex"))
+        order = (None if not ab else tuple(ab) if i % 2 == 0 else tuple(ab)[::-1])
         for attempt in range(n_max + 1):
             row = run_trial(case, rng, tmpdir, force=attempt == n_max, ab=order)
             if "verdict" in row:
@@ -378,8 +389,8 @@ def run_case(case, rng, tmpdir, trials: int, progress: bool = False, ab: bool = 
 def multifit_timing(seed: int = 0, methods=None) -> dict:
     """Diagnosis time of one seven-shot M2 multi-fit (every M2 sample shot, stage-one noise, a
     2 um z bias at station 9 in every shot: a facility effect), and what it found.
-    ``methods``: also the diagnosis with each of these sensitivity methods, timed
-    (``multifit_ab_seconds``, ``multifit_ab_first``)."""
+    ``methods``: also the diagnosis in each of these configurations of
+    :data:`AB_ARMS`, timed (``multifit_ab_seconds``, ``multifit_ab_first``)."""
     from cadra.dynamics.effects import Effects
     from cadra.fitting import fit_shots
     from cadra.gap.score import diagnose_gap
