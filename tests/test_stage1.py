@@ -84,6 +84,26 @@ def test_the_wires_formation_is_fitted_once_per_view(m2_shot):
         measure_shot(m2_shot / "shot.toml", workers=1, progress=False, formation="shot")
 
 
+def test_each_image_file_is_read_once_in_one_process(m2_shot, monkeypatch):
+    """The view's formation pass reads some of the shot's images first (here all three
+    stations'); measured in the same process, the stations take those from it instead of
+    decoding the files again, and still name each image by its file."""
+    import cadra.imaging.view as view_mod
+
+    reads = []
+    load = view_mod.load_station_image
+
+    def counted(path, *args):
+        reads.append(Path(path).name)
+        return load(path, *args)
+
+    monkeypatch.setattr(view_mod, "load_station_image", counted)
+    res = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False)
+    assert not res.any_failed
+    assert sorted(reads) == sorted(f"st0{i}_{v}.png" for i in (1, 2, 3) for v in ("top", "side"))
+    assert all(Path(p).parent.name == "images" for p in res.quality["image"])
+
+
 def test_bad_images_flag_their_station_only(m2_shot, tmp_path):
     shot = _copy(m2_shot, tmp_path)
     (shot / "images" / "st01_top.png").unlink()                       # missing

@@ -112,10 +112,13 @@ def _task(args):
 FORMATION_IMAGES = 3
 
 
-def shared_formations(tasks: list, body_spec: dict, n_images: int = FORMATION_IMAGES) -> dict:
+def shared_formations(tasks: list, body_spec: dict, n_images: int = FORMATION_IMAGES,
+                      decoded: dict | None = None) -> dict:
     """Each view's wire formation, fitted over ``n_images`` of the shot's images of it spread
     along the range (:func:`cadra.imaging.view.view_formation`): view name -> formation
-    (a view none of whose images serves is left out; its images fit their own)."""
+    (a view none of whose images serves is left out; its images fit their own).
+    ``decoded``: a dict that receives the image files read, ``(station, view name) ->``
+    :class:`~cadra.io.images.DecodedImage`."""
     from cadra.imaging.view import view_formation
 
     out = {}
@@ -126,7 +129,7 @@ def shared_formations(tasks: list, body_spec: dict, n_images: int = FORMATION_IM
             continue
         pick = np.unique(np.linspace(0, len(have) - 1, min(n_images, len(have)))
                          .round().astype(int))
-        f = view_formation([have[i] for i in pick], body_spec)
+        f = view_formation([have[i] for i in pick], body_spec, decoded)
         if f is not None:
             out[name] = f
     return out
@@ -339,16 +342,20 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
         body = body_from_spec(dict(shot.model))
         for station, *_ in tasks:
             point_source_station(station, body)
+    workers = _workers(workers, len(tasks))
+    decoded = {}   # the files the formation pass read, for stations measured here
     if isinstance(formation, Mapping):
         formations = dict(formation)
     elif formation == "view":
-        formations = shared_formations(tasks, dict(shot.model))
+        formations = shared_formations(tasks, dict(shot.model),
+                                       decoded=decoded if workers == 1 else None)
     elif formation == "image":
         formations = {}
     else:
         raise ValueError(f"formation must be 'view', 'image' or a mapping view -> formation, "
                          f"not {formation!r}")
-    tasks = [(*t, formations) for t in tasks]
+    tasks = [(st, {n: decoded.get((st.id, n), src) for n, src in views.items()}, *rest,
+              formations) for st, views, *rest in tasks]
     results = _run(tasks, workers, f"cadra1 {shot.shot_id}" if progress else None)
     times = {rec.station: rec.time_s for rec in shot.stations}
     results = with_roll_track(results, times)
@@ -364,11 +371,16 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
                         formations=formations)
 
 
+def _workers(workers: int | None, n_tasks: int) -> int:
+    """The processes ``n_tasks`` stations are measured in (``workers`` None: the cores)."""
+    workers = cores.available() if workers is None else max(int(workers), 1)
+    return min(workers, n_tasks) or 1
+
+
 def _run(tasks: list, workers: int | None, label: str | None) -> list[StationResult]:
     """The station tasks, in a process pool of ``workers`` (default: the cores; 1 = here),
     with a progress bar labelled ``label`` (None: none)."""
-    workers = cores.available() if workers is None else max(int(workers), 1)
-    workers = min(workers, len(tasks)) or 1
+    workers = _workers(workers, len(tasks))
     bar = None
     if label is not None:
         from tqdm import tqdm

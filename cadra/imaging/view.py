@@ -29,7 +29,7 @@ from cadra.imaging.silhouette.template import (
     make_template,
     outline_px,
 )
-from cadra.io.images import load_station_image, station_image
+from cadra.io.images import DecodedImage, load_station_image, station_image
 from cadra.optics.distortion import distorted
 from cadra.optics.projection import Projection
 
@@ -288,6 +288,8 @@ def image_name(station_id: int, view: str, source) -> str:
     """What a view's image is called in the tables: its path, or where it came from."""
     if isinstance(source, str | os.PathLike):
         return str(source)
+    if isinstance(source, DecodedImage):
+        return source.path
     return f"station {station_id} {view} image (in memory)"
 
 
@@ -295,10 +297,12 @@ def view_image(view, src, name: str):
     """A view's image as a float array (or the loader's failure, with its ``reason``)."""
     if isinstance(src, str | os.PathLike):
         return load_station_image(src, view.width_px, view.height_px, view.bit_depth)
+    if isinstance(src, DecodedImage):
+        return src.pixels
     return station_image(src, view.width_px, view.height_px, view.bit_depth, name)
 
 
-def view_formation(sources, body_spec):
+def view_formation(sources, body_spec, decoded: dict | None = None):
     """One view's wire image formation, fitted over a few of a shot's images of it.
 
     ``sources``: ``(view, image)`` pairs, the facility's view of each station and its image
@@ -308,7 +312,8 @@ def view_formation(sources, body_spec):
     (:func:`cadra.imaging.wires.formation.fit_formation`). Returns the
     :class:`~cadra.imaging.wires.profile.Formation` (``n_images`` the images used), or None
     when no image gives three wires' profiles or the fit fails: the images then fit their
-    own.
+    own. ``decoded``: a dict that receives each image file read, as
+    ``(station, view name) -> DecodedImage``.
     """
     from cadra.imaging.wires.fit import wire_profiles
     from cadra.imaging.wires.formation import fit_formation
@@ -320,6 +325,8 @@ def view_formation(sources, body_spec):
             img = view_image(view, src, f"station {view.station} {view.name} image")
             if not isinstance(img, np.ndarray):
                 continue
+            if decoded is not None and isinstance(src, str | os.PathLike):
+                decoded[(view.station, view.name)] = DecodedImage(str(src), img)
             coarse = locate_model(img, view_template(body, view.name, 0.0, 256), view.optics())
             if not coarse.ok:
                 continue
