@@ -84,23 +84,32 @@ def test_the_wires_formation_is_fitted_once_per_view(m2_shot):
         measure_shot(m2_shot / "shot.toml", workers=1, progress=False, formation="shot")
 
 
-def test_each_image_file_is_read_once_in_one_process(m2_shot, monkeypatch):
+def test_each_image_is_read_and_its_wires_first_pass_made_once_in_one_process(m2_shot,
+                                                                              monkeypatch):
     """The view's formation pass reads some of the shot's images first (here all three
-    stations'); measured in the same process, the stations take those from it instead of
-    decoding the files again, and still name each image by its file."""
+    stations'), locates the model and makes the wires' centroid pass; measured in the same
+    process, the stations go on from those instead of doing them again, and still name each
+    image by its file."""
     import cadra.imaging.view as view_mod
+    import cadra.imaging.wires.fit as wires_mod
 
-    reads = []
-    load = view_mod.load_station_image
+    reads, passes = [], []
+    load, first = view_mod.load_station_image, wires_mod._centroid_pass
 
     def counted(path, *args):
         reads.append(Path(path).name)
         return load(path, *args)
 
+    def counted_pass(*args):
+        passes.append(1)
+        return first(*args)
+
     monkeypatch.setattr(view_mod, "load_station_image", counted)
+    monkeypatch.setattr(wires_mod, "_centroid_pass", counted_pass)
     res = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False)
     assert not res.any_failed
     assert sorted(reads) == sorted(f"st0{i}_{v}.png" for i in (1, 2, 3) for v in ("top", "side"))
+    assert len(passes) == 6
     assert all(Path(p).parent.name == "images" for p in res.quality["image"])
 
 

@@ -113,12 +113,12 @@ FORMATION_IMAGES = 3
 
 
 def shared_formations(tasks: list, body_spec: dict, n_images: int = FORMATION_IMAGES,
-                      decoded: dict | None = None) -> dict:
+                      prepared: dict | None = None) -> dict:
     """Each view's wire formation, fitted over ``n_images`` of the shot's images of it spread
     along the range (:func:`cadra.imaging.view.view_formation`): view name -> formation
     (a view none of whose images serves is left out; its images fit their own).
-    ``decoded``: a dict that receives the image files read, ``(station, view name) ->``
-    :class:`~cadra.io.images.DecodedImage`."""
+    ``prepared``: a dict that receives the images read and begun, ``(station, view name)
+    ->`` :class:`~cadra.imaging.view.PreparedImage`."""
     from cadra.imaging.view import view_formation
 
     out = {}
@@ -129,7 +129,7 @@ def shared_formations(tasks: list, body_spec: dict, n_images: int = FORMATION_IM
             continue
         pick = np.unique(np.linspace(0, len(have) - 1, min(n_images, len(have)))
                          .round().astype(int))
-        f = view_formation([have[i] for i in pick], body_spec, decoded)
+        f = view_formation([have[i] for i in pick], body_spec, prepared)
         if f is not None:
             out[name] = f
     return out
@@ -343,18 +343,18 @@ def measure_shot(shot: ShotFile | str | os.PathLike,
         for station, *_ in tasks:
             point_source_station(station, body)
     workers = _workers(workers, len(tasks))
-    decoded = {}   # the files the formation pass read, for stations measured here
+    prepared = {}   # the images the formation pass read and began, for stations measured here
     if isinstance(formation, Mapping):
         formations = dict(formation)
     elif formation == "view":
         formations = shared_formations(tasks, dict(shot.model),
-                                       decoded=decoded if workers == 1 else None)
+                                       prepared=prepared if workers == 1 else None)
     elif formation == "image":
         formations = {}
     else:
         raise ValueError(f"formation must be 'view', 'image' or a mapping view -> formation, "
                          f"not {formation!r}")
-    tasks = [(st, {n: decoded.get((st.id, n), src) for n, src in views.items()}, *rest,
+    tasks = [(st, {n: prepared.get((st.id, n), src) for n, src in views.items()}, *rest,
               formations) for st, views, *rest in tasks]
     results = _run(tasks, workers, f"cadra1 {shot.shot_id}" if progress else None)
     times = {rec.station: rec.time_s for rec in shot.stations}

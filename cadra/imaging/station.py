@@ -58,6 +58,7 @@ from cadra.imaging.silhouette.edges import MAX_EDGE_SIGMA_PX
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 from cadra.imaging.view import (
+    PreparedImage,
     ViewAttempt,
     ViewResult,
     body_of,
@@ -208,7 +209,10 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
         images[name] = img
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
     nominal = {n: distorted(v.optics(), v.distortion) for n, v in station.views.items()}
-    coarse = {n: locate_model(img, view_template(body, n, 0.0, 256), nominal[n])
+    # an image the shot's formation pass began (PreparedImage) was located there alike
+    prepared = {n: src for n, src in images_in.items() if isinstance(src, PreparedImage)}
+    coarse = {n: (prepared[n].coarse if n in prepared
+                  else locate_model(img, view_template(body, n, 0.0, 256), nominal[n]))
               for n, img in images.items()}
     tilts = {"top": 0.0, "side": 0.0}
     if not sphere and all(n in coarse and coarse[n].ok for n in VIEWS):
@@ -260,7 +264,8 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
                         img, station.views[name], body, tilts[name], settings, start,
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
                         formation=(formations or {}).get(name), pose3d=pose3d,
-                        restart=start is not None and restart)
+                        restart=start is not None and restart,
+                        first_pass=prepared[name].first_pass if name in prepared else None)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                     att = ViewAttempt(None, f"measurement error ({type(exc).__name__}: {exc})")
                 if att.fit is not None and att.fit.ok:

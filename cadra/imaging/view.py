@@ -29,7 +29,7 @@ from cadra.imaging.silhouette.template import (
     make_template,
     outline_px,
 )
-from cadra.io.images import DecodedImage, load_station_image, station_image
+from cadra.io.images import load_station_image, station_image
 from cadra.optics.distortion import distorted
 from cadra.optics.projection import Projection
 
@@ -169,14 +169,16 @@ def model_box(img: np.ndarray, coarse, margin: int = 12) -> np.ndarray:
 def fit_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
                   coarse=None, final: bool = True, masks: dict | None = None,
                   roll: float = 0.0, restart: bool = False, formation=None,
-                  pose3d=None) -> ViewAttempt:
+                  pose3d=None, first_pass=None) -> ViewAttempt:
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
     ``restart``: start the edge model afresh from ``prev``'s pose (a finned body whose roll,
     so template, changed much since ``prev``: its edge profile was fitted to mismatched fins);
     ``formation``: the view's wire formation shared over the shot (None: this image's own);
-    ``pose3d``: a point-source view's expected 3-D pose (:func:`view_templates`). A
+    ``pose3d``: a point-source view's expected 3-D pose (:func:`view_templates`);
+    ``first_pass``: the wires' centroid pass made already with ``coarse``'s box
+    (:class:`PreparedImage`; :func:`cadra.imaging.wires.fit.measure_wires`). A
     distorted view's wires and silhouette are both fitted in ``img``, the recorded image,
     through its distortion."""
     from cadra.imaging.wires.fit import measure_wires
@@ -191,7 +193,7 @@ def fit_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
         if not coarse.ok:
             return ViewAttempt(None, coarse.reason)
         wires = measure_wires(img, view, exclude=model_box(img, coarse), formation=formation,
-                              distortion=view.distortion)
+                              distortion=view.distortion, first_pass=first_pass)
         if not wires.ok:
             return ViewAttempt(None, wires.reason, wires)
         affine = wires.affine
@@ -284,11 +286,26 @@ def measure_view(image, view, body_spec, *, tilt_rad: float = 0.0, roll_rad: flo
                       roll_rad=float(roll_rad))
 
 
+@dataclass(frozen=True, eq=False)
+class PreparedImage:
+    """A station's image the shot's formation pass has read and begun
+    (:func:`view_formation`): its ``pixels`` (float32 in [0, 1]) from ``path`` (None: an
+    array in memory), the model's rough location on it (``coarse``, located as the station
+    locates it) and its wires' centroid pass outside that box (``first_pass``, None if none
+    was made). A station measured in the same process goes on from these instead of doing
+    them again; it names the image by its file."""
+
+    path: str | None
+    pixels: np.ndarray
+    coarse: object
+    first_pass: object | None
+
+
 def image_name(station_id: int, view: str, source) -> str:
     """What a view's image is called in the tables: its path, or where it came from."""
     if isinstance(source, str | os.PathLike):
         return str(source)
-    if isinstance(source, DecodedImage):
+    if isinstance(source, PreparedImage) and source.path is not None:
         return source.path
     return f"station {station_id} {view} image (in memory)"
 
@@ -297,12 +314,12 @@ def view_image(view, src, name: str):
     """A view's image as a float array (or the loader's failure, with its ``reason``)."""
     if isinstance(src, str | os.PathLike):
         return load_station_image(src, view.width_px, view.height_px, view.bit_depth)
-    if isinstance(src, DecodedImage):
+    if isinstance(src, PreparedImage):
         return src.pixels
     return station_image(src, view.width_px, view.height_px, view.bit_depth, name)
 
 
-def view_formation(sources, body_spec, decoded: dict | None = None):
+def view_formation(sources, body_spec, prepared: dict | None = None):
     """One view's wire image formation, fitted over a few of a shot's images of it.
 
     ``sources``: ``(view, image)`` pairs, the facility's view of each station and its image
@@ -312,10 +329,10 @@ def view_formation(sources, body_spec, decoded: dict | None = None):
     (:func:`cadra.imaging.wires.formation.fit_formation`). Returns the
     :class:`~cadra.imaging.wires.profile.Formation` (``n_images`` the images used), or None
     when no image gives three wires' profiles or the fit fails: the images then fit their
-    own. ``decoded``: a dict that receives each image file read, as
-    ``(station, view name) -> DecodedImage``.
+    own. ``prepared``: a dict that receives each image read, as ``(station, view name) ->``
+    :class:`PreparedImage`.
     """
-    from cadra.imaging.wires.fit import wire_profiles
+    from cadra.imaging.wires.fit import centroid_pass
     from cadra.imaging.wires.formation import fit_formation
 
     body = body_spec if hasattr(body_spec, "kind") else body_of(body_spec)
@@ -325,13 +342,19 @@ def view_formation(sources, body_spec, decoded: dict | None = None):
             img = view_image(view, src, f"station {view.station} {view.name} image")
             if not isinstance(img, np.ndarray):
                 continue
-            if decoded is not None and isinstance(src, str | os.PathLike):
-                decoded[(view.station, view.name)] = DecodedImage(str(src), img)
-            coarse = locate_model(img, view_template(body, view.name, 0.0, 256), view.optics())
-            if not coarse.ok:
+            # located as the station locates it (through the view's distortion), so the
+            # station can go on from here
+            coarse = locate_model(img, view_template(body, view.name, 0.0, 256),
+                                  distorted(view.optics(), view.distortion))
+            first = (centroid_pass(img, view, exclude=model_box(img, coarse),
+                                   distortion=view.distortion) if coarse.ok else None)
+            if prepared is not None:
+                prepared[(view.station, view.name)] = PreparedImage(
+                    str(src) if isinstance(src, str | os.PathLike) else None, img, coarse,
+                    first)
+            if first is None:
                 continue
-            got = wire_profiles(img, view, exclude=model_box(img, coarse),
-                                distortion=view.distortion)
+            got = first.profiles()
         except Exception:  # noqa: BLE001 - that image's station reports it; others serve
             continue
         if len(got) >= 3:

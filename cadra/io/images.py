@@ -33,17 +33,6 @@ class ImageProblem:
         return False
 
 
-@dataclass(frozen=True, eq=False)
-class DecodedImage:
-    """An image file already read by :func:`load_station_image`: ``pixels`` (float32 in
-    [0, 1]) from ``path``. A shot's stage one reads a few of its images to fit the wires'
-    formation first; a station measured in the same process then takes them from here
-    instead of decoding the file again. It is named by its path in every table."""
-
-    path: str
-    pixels: np.ndarray
-
-
 def load_station_image(path: str | Path, width_px: int, height_px: int,
                        bit_depth: int) -> np.ndarray | ImageProblem:
     """The image as float32 in [0, 1] (full scale of its bit depth), or an :class:`ImageProblem`.

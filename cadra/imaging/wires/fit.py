@@ -77,7 +77,9 @@ Method (all lengths in pixels unless a name ends in ``_m``):
 
 :func:`measure_wires` is a pure function of plain arrays; its results are frozen dataclasses of
 floats, tuples and numpy arrays (picklable, for a process pool). :func:`wire_profiles` gives
-an image's clean profiles, for a formation fitted over several images.
+an image's clean profiles, for a formation fitted over several images; the centroid pass they
+come from (:func:`centroid_pass`) can be handed to :func:`measure_wires` later, which then
+goes on from it instead of making it again.
 """
 
 from __future__ import annotations
@@ -103,7 +105,8 @@ from cadra.imaging.wires.straightness import MODEL_BLOCK_SYS_PX
 from cadra.optics.projection import Projection
 from cadra.stats import chi2_quantile
 
-__all__ = ["WireFit", "WireMeasurement", "measure_wires", "wire_profiles"]
+__all__ = ["CentroidPass", "WireFit", "WireMeasurement", "centroid_pass", "measure_wires",
+           "wire_profiles"]
 
 #: Below this total blur (px) of the wires' fitted formation the profile model is not used
 #: (the centroid and its phase term are): at 0.4 px optics blur a few per cent error in the
@@ -238,22 +241,51 @@ def _kept(g: Profiles) -> WireProfiles:
                         g.wp.cos_t)
 
 
+@dataclass(frozen=True, eq=False)
+class CentroidPass:
+    """Steps 1-6 over one image of a view (:func:`centroid_pass`): each wire's centroid line
+    (``fits``) and each found wire's clean profiles (``collected``, wire index ->
+    :class:`~cadra.imaging.wires.line.Profiles`), made with the ``exclude`` mask and
+    ``settings`` ``(search_px, step_px, half_window, distortion)`` it records."""
+
+    fits: list
+    collected: dict
+    exclude: np.ndarray | None
+    settings: tuple
+
+    def profiles(self) -> list[WireProfiles]:
+        """The clean profiles the centroid lines kept, a wire each."""
+        return [_kept(g) for g in self.collected.values()]
+
+
+def centroid_pass(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
+                  search_px: float = 30.0, step_px: float = 4.0,
+                  half_window: int = 8, distortion=None) -> CentroidPass:
+    """Steps 1-6 of :func:`measure_wires` (arguments as there), kept: what the image
+    formation is fitted from (:meth:`CentroidPass.profiles`) and where
+    :func:`measure_wires` goes on (its ``first_pass``)."""
+    img, exclude = _checked_image(image, exclude)
+    fits, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window,
+                                     True, distortion)
+    return CentroidPass(fits, collected, exclude,
+                        (search_px, step_px, half_window, distortion))
+
+
 def wire_profiles(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
                   search_px: float = 30.0, step_px: float = 4.0,
                   half_window: int = 8, distortion=None) -> list[WireProfiles]:
     """The clean profiles of each wire of ``view`` found in ``image`` (the centroid lines'
     kept profiles; arguments as :func:`measure_wires`): what the image formation is fitted
     from (:func:`cadra.imaging.wires.formation.fit_formation`, over one image or several)."""
-    img, exclude = _checked_image(image, exclude)
-    _, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window, True,
-                                  distortion)
-    return [_kept(g) for g in collected.values()]
+    return centroid_pass(image, view, exclude, search_px, step_px, half_window,
+                         distortion).profiles()
 
 
 def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
                   search_px: float = 30.0, step_px: float = 4.0,
                   half_window: int = 8, profile_model: bool = True,
-                  formation: Formation | None = None, distortion=None) -> WireMeasurement:
+                  formation: Formation | None = None, distortion=None,
+                  first_pass: CentroidPass | None = None) -> WireMeasurement:
     """Find every wire of ``view`` in ``image`` and solve the image->plane affine.
 
     Parameters
@@ -278,6 +310,8 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
         none). Each wire's profiles are then taken along its curved image, and their centres
         mapped to ideal pixels, where the line is fitted: the lines, the affine and every
         pixel coordinate returned are the ideal image's (docs/stage1.md, "Distorted images").
+    first_pass : :func:`centroid_pass` of this image made already (the shot's formation
+        pass); used when its mask and settings are these, else made again.
 
     Returns
     -------
@@ -291,8 +325,15 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
     crossing or the reference mark count in ``n_rejected``.
     """
     img, exclude = _checked_image(image, exclude)
-    fits, collected = _centroid_pass(img, view, exclude, search_px, step_px, half_window,
-                                     profile_model, distortion)
+    if (profile_model and first_pass is not None
+            and first_pass.settings[:3] == (search_px, step_px, half_window)
+            and first_pass.settings[3] is distortion
+            and (exclude is None) == (first_pass.exclude is None)
+            and (exclude is None or np.array_equal(exclude, first_pass.exclude))):
+        fits, collected = list(first_pass.fits), first_pass.collected
+    else:
+        fits, collected = _centroid_pass(img, view, exclude, search_px, step_px,
+                                         half_window, profile_model, distortion)
     if not (profile_model and collected):
         return _solve_affine(view, fits)
     # the formation from the profiles the centroid lines kept (or the view's, held); then
