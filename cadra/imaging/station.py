@@ -209,8 +209,11 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
         images[name] = img
     # first guess of each view's out-of-plane tilt from the other view's rough axis angle
     nominal = {n: distorted(v.optics(), v.distortion) for n, v in station.views.items()}
-    # an image the shot's formation pass began (PreparedImage) was located there alike
-    prepared = {n: src for n, src in images_in.items() if isinstance(src, PreparedImage)}
+    # an image the shot's formation pass began (PreparedImage) was located there alike,
+    # through the view's distortion as it was declared
+    prepared = {n: src for n, src in images_in.items()
+                if isinstance(src, PreparedImage) and n in station.views
+                and src.distortion is station.views[n].distortion}
     coarse = {n: (prepared[n].coarse if n in prepared
                   else locate_model(img, view_template(body, n, 0.0, 256), nominal[n]))
               for n, img in images.items()}
@@ -238,6 +241,7 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
         tilts = _tilts_of(station, pose3d[1])
     fits: dict[str, ViewResult] = {}
     masks: dict[str, np.ndarray] = {}
+    wires_made: dict = {}   # each view's wires, measured once for its first fits' tries
     finned = isinstance(body, FinnedBody)
     roll, station_roll = ROLL_START_RAD, None
     rounds = (2 if conical else 1) if sphere else (max_rounds + 2 if finned else max_rounds)
@@ -265,7 +269,8 @@ def _measure_once(station: Station, images, body_spec: dict, settings: FitSettin
                         coarse[name], final=sphere or _round > 0, masks=masks, roll=view_roll,
                         formation=(formations or {}).get(name), pose3d=pose3d,
                         restart=start is not None and restart,
-                        first_pass=prepared[name].first_pass if name in prepared else None)
+                        first_pass=prepared[name].first_pass if name in prepared else None,
+                        wires_made=wires_made)
                 except Exception as exc:  # noqa: BLE001 - one bad image must not stop a shot
                     att = ViewAttempt(None, f"measurement error ({type(exc).__name__}: {exc})")
                 if att.fit is not None and att.fit.ok:

@@ -169,7 +169,8 @@ def model_box(img: np.ndarray, coarse, margin: int = 12) -> np.ndarray:
 def fit_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
                   coarse=None, final: bool = True, masks: dict | None = None,
                   roll: float = 0.0, restart: bool = False, formation=None,
-                  pose3d=None, first_pass=None) -> ViewAttempt:
+                  pose3d=None, first_pass=None, wires_made: dict | None = None
+                  ) -> ViewAttempt:
     """Wires + silhouette of one loaded image; ``prev`` a previous ViewResult to warm-start,
     ``coarse`` the model's rough location (:func:`locate_model`); ``masks`` (view name ->
     wire mask) keeps the wire mask of the first pass for the refits (same affine);
@@ -178,7 +179,10 @@ def fit_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
     ``formation``: the view's wire formation shared over the shot (None: this image's own);
     ``pose3d``: a point-source view's expected 3-D pose (:func:`view_templates`);
     ``first_pass``: the wires' centroid pass made already with ``coarse``'s box
-    (:class:`PreparedImage`; :func:`cadra.imaging.wires.fit.measure_wires`). A
+    (:class:`PreparedImage`; :func:`cadra.imaging.wires.fit.measure_wires`);
+    ``wires_made`` (view name -> the wires measured with ``coarse``'s box) keeps the first
+    try's wires for the station's other tries at a first fit (a finned body's start rolls,
+    a restart from the rough location): the same image, box and formation. A
     distorted view's wires and silhouette are both fitted in ``img``, the recorded image,
     through its distortion."""
     from cadra.imaging.wires.fit import measure_wires
@@ -192,8 +196,13 @@ def fit_view(img, view, body, tilt: float, settings: FitSettings, prev=None,
             coarse = locate_model(img, template, view.optics())
         if not coarse.ok:
             return ViewAttempt(None, coarse.reason)
-        wires = measure_wires(img, view, exclude=model_box(img, coarse), formation=formation,
-                              distortion=view.distortion, first_pass=first_pass)
+        wires = None if wires_made is None else wires_made.get(view.name)
+        if wires is None:
+            wires = measure_wires(img, view, exclude=model_box(img, coarse),
+                                  formation=formation, distortion=view.distortion,
+                                  first_pass=first_pass)
+            if wires_made is not None:
+                wires_made[view.name] = wires
         if not wires.ok:
             return ViewAttempt(None, wires.reason, wires)
         affine = wires.affine
@@ -292,13 +301,16 @@ class PreparedImage:
     (:func:`view_formation`): its ``pixels`` (float32 in [0, 1]) from ``path`` (None: an
     array in memory), the model's rough location on it (``coarse``, located as the station
     locates it) and its wires' centroid pass outside that box (``first_pass``, None if none
-    was made). A station measured in the same process goes on from these instead of doing
-    them again; it names the image by its file."""
+    was made), both through the view's ``distortion`` then. A station measured in the same
+    process goes on from these while its view has that distortion (not when it measures
+    again with a distortion it found) instead of doing them again; it names the image by
+    its file."""
 
     path: str | None
     pixels: np.ndarray
     coarse: object
     first_pass: object | None
+    distortion: object | None = None
 
 
 def image_name(station_id: int, view: str, source) -> str:
@@ -351,7 +363,7 @@ def view_formation(sources, body_spec, prepared: dict | None = None):
             if prepared is not None:
                 prepared[(view.station, view.name)] = PreparedImage(
                     str(src) if isinstance(src, str | os.PathLike) else None, img, coarse,
-                    first)
+                    first, view.distortion)
             if first is None:
                 continue
             got = first.profiles()
