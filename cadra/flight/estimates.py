@@ -151,11 +151,27 @@ def _drag_k(shot: ShotData) -> tuple[float, float]:
     return float(sol.x[2]), float(sol.x[1])
 
 
+def _sine_gain(a11, a12, a22, b1, b2):
+    """The sum of squares the least squares ``a C + b S`` removes from ``v``, from the
+    products ``a11 = C.C``, ``a12 = C.S``, ``a22 = S.S``, ``b1 = C.v``, ``b2 = S.v`` (arrays
+    or floats): the 2x2 normal equations in closed form; a pair that is nearly one direction
+    counts as its better single column."""
+    det = a11 * a22 - a12 * a12
+    tiny = 1e-12 * (a11 + a22) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pair = (a22 * b1 * b1 - 2.0 * a12 * b1 * b2 + a11 * b2 * b2) / det
+        one = np.maximum(np.where(a11 > 0, b1 * b1 / a11, 0.0),
+                         np.where(a22 > 0, b2 * b2 / a22, 0.0))
+    return np.where(det > tiny, pair, one)
+
+
 def _damped_sine(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
     """(omega, lambda, relative residual) of ``v(t) = poly2 + e^(lambda t)(A cos + B sin)``.
 
-    Variable projection: the linear coefficients are solved for each (omega, lambda); omega is
-    first found on a grid up to the sampling's Nyquist frequency.
+    Variable projection: the quadratic is projected out once (an orthonormal basis of its
+    span), and for each (omega, lambda) the sine pair's least squares is a 2x2 solve in
+    closed form; omega is first found on a grid up to the sampling's Nyquist frequency (all
+    of the grid at once), then refined with lambda by Nelder-Mead.
     """
     ok = np.isfinite(v)
     t, v = t[ok], v[ok]
@@ -164,28 +180,39 @@ def _damped_sine(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
     t = t - t.mean()
     dt = np.median(np.diff(t))
     w_max = 0.95 * math.pi / dt
+    Q, _ = np.linalg.qr(np.column_stack([np.ones_like(t), t, t * t]))
 
-    def design(w, lam):
-        e = np.exp(lam * t)
-        return np.column_stack([np.ones_like(t), t, t * t, e * np.cos(w * t), e * np.sin(w * t)])
+    def perp(X):
+        """``X`` without its part in the quadratic's span (rows: samples)."""
+        return X - Q @ (Q.T @ X)
+
+    r0 = perp(v)
+    rss0 = float(r0 @ r0)
 
     def cost(p):
-        X = design(*p)
-        c, *_ = np.linalg.lstsq(X, v, rcond=None)
-        r = v - X @ c
-        return float(r @ r)
+        w, lam = p
+        e = np.exp(lam * t)
+        X = perp(np.column_stack([e * np.cos(w * t), e * np.sin(w * t)]))
+        (a11, a12), (_, a22) = (X.T @ X).tolist()
+        b1, b2 = (r0 @ X).tolist()
+        det = a11 * a22 - a12 * a12
+        if det > 1e-12 * (a11 + a22) ** 2:
+            gain = (a22 * b1 * b1 - 2.0 * a12 * b1 * b2 + a11 * b2 * b2) / det
+        else:   # as _sine_gain
+            gain = max(b1 * b1 / a11 if a11 > 0 else 0.0, b2 * b2 / a22 if a22 > 0 else 0.0)
+        return max(rss0 - gain, 0.0)
 
     span = t[-1] - t[0]
     grid = np.linspace(2 * math.pi / span, w_max, 400)
-    costs = [cost((w, 0.0)) for w in grid]
+    wt = t[:, None] * grid[None, :]
+    C, S = perp(np.cos(wt)), perp(np.sin(wt))
+    costs = rss0 - _sine_gain(np.sum(C * C, axis=0), np.sum(C * S, axis=0),
+                              np.sum(S * S, axis=0), r0 @ C, r0 @ S)
     w0 = grid[int(np.argmin(costs))]
     sol = minimize(cost, [w0, 0.0], method="Nelder-Mead",
                    options={"xatol": 1e-4, "fatol": 1e-14, "maxiter": 400})
     w, lam = sol.x
-    base = np.column_stack([np.ones_like(t), t, t * t])
-    c, *_ = np.linalg.lstsq(base, v, rcond=None)
-    r0 = v - base @ c
-    rel = math.sqrt(sol.fun / max(float(r0 @ r0), 1e-300))
+    rel = math.sqrt(sol.fun / max(rss0, 1e-300))
     if rel > 0.7 or not (0 < w < w_max):
         return math.nan, math.nan, rel
     return abs(float(w)), float(lam), rel
