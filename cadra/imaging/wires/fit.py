@@ -361,14 +361,15 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
         model[i], _ = line_from_centres(fits[i].name, c, g.fixed, g.ax, np.isfinite(c),
                                          step_px, g.n_inside, MODEL_BLOCK_SYS_PX, distortion)
     sens = {i: formation.sens[k] for k, i in enumerate(collected)}
-    centroid = _solve_affine(view, fits)
-    t2, n_lines = _disagreement(model, centroid.wires)
+    # the centroid lines with their errors (the centroids' own affine only if it is used)
+    centroid = fits if sum(f.found for f in fits) < 3 else _line_errors(view, fits, None)[0]
+    t2, n_lines = _disagreement(model, centroid)
     if t2 <= chi2_quantile(1.0 - MODEL_AGREEMENT_P, max(n_lines, 1)):
         out = _solve_affine(view, model, formation, sens)
     else:   # the formation does not describe these wires (a PSF far from Gaussian?)
         notes.append(f"wire profile model disagrees with the wires' centroids (chi2 {t2:.0f} "
                      f"over {n_lines} lines): centroids used")
-        out = centroid
+        out = _solve_affine(view, fits)
     reason = "; ".join(x for x in (out.reason, *notes) if x)
     return replace(out, reason=reason) if reason != out.reason else out
 
@@ -401,25 +402,13 @@ def _disagreement(model: list[WireFit], centroid) -> tuple[float, int]:
     return t2, n
 
 
-def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None = None,
-                  sens: dict | None = None) -> WireMeasurement:
-    found = [f for f in fits if f.found]
-    n_found = len(found)
-
-    def fail(reason):
-        return WireMeasurement(False, reason, None, None, tuple(fits), math.nan, math.nan,
-                               n_found)
-
-    if n_found < 3:
-        missing = ", ".join(repr(f.name) for f in fits if not f.found)
-        return fail(f"only {n_found} of {len(fits)} wires found (missing {missing}); at least 3 "
-                    f"are needed for the image->plane map")
-    scale = view.scale_m_per_px
-    lines = [_gauss_points(f) if f.found else None for f in fits]
-    # each Gauss point's perpendicular error: sqrt(2) x the line's offset sigma (floored),
-    # independent; plus the centroid's phase bias, common to the line's centres (step 7)
+def _line_errors(view: View, fits: list[WireFit], formation: Formation | None):
+    """Each found line's error: ``fits`` with their phase term's sigma (``sigma_sys_px``),
+    each line's (2, 2) covariance of its Gauss points' perpendicular errors (px^2; None for
+    a wire not found) and the phase gain: sqrt(2) x the line's offset sigma (floored),
+    independent, plus the centroid's phase bias, common to the line's centres (step 7; the
+    profile model's centres, ``formation`` given, carry none: step 8)."""
     width_px = [view.wire_width_px(w) for w in view.wires]
-    # (the profile model's centres carry no phase bias: no phase term, step 8)
     phases = [line_phases(f.centres_px, f.point_px, f.direction_px, f.profile_axis)
               if f.found and formation is None else None for f in fits]
     gain = ((math.nan,) * 3 if formation is not None else
@@ -435,6 +424,25 @@ def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None =
         fits[i] = WireFit(**{**f.__dict__,
                              "sigma_sys_px": 0.5 * math.sqrt(max(float(sys_cov.sum()), 0.0))})
         cov_px.append(2.0 * max(f.sigma_offset_px, 1e-4) ** 2 * np.eye(2) + sys_cov)
+    return fits, cov_px, gain
+
+
+def _solve_affine(view: View, fits: list[WireFit], formation: Formation | None = None,
+                  sens: dict | None = None) -> WireMeasurement:
+    found = [f for f in fits if f.found]
+    n_found = len(found)
+
+    def fail(reason):
+        return WireMeasurement(False, reason, None, None, tuple(fits), math.nan, math.nan,
+                               n_found)
+
+    if n_found < 3:
+        missing = ", ".join(repr(f.name) for f in fits if not f.found)
+        return fail(f"only {n_found} of {len(fits)} wires found (missing {missing}); at least 3 "
+                    f"are needed for the image->plane map")
+    scale = view.scale_m_per_px
+    lines = [_gauss_points(f) if f.found else None for f in fits]
+    fits, cov_px, gain = _line_errors(view, fits, formation)
     cov_m = [None if c is None else c * scale ** 2 for c in cov_px]
     reason, prior = "", False
     sol = solve_affine_gls(view, lines, cov_m, prior=False)
