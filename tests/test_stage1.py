@@ -296,3 +296,23 @@ def test_views_that_are_not_the_station_s_fail_it(m2_shot, tmp_path):
         worst = q[q["station"] == st]["affine_rms_px"].max()
         assert worst > WIRE_RMS_MAX_PX or t.loc[st, "x_consistency"] > X_CONSISTENCY_MAX
     assert t.loc[2, "status"] == "ok" and abs(t.loc[2, "x_consistency"]) < 4
+
+
+@pytest.mark.parametrize("dtype,bits", [(np.uint8, 8), (np.uint16, 16)])
+def test_an_image_array_becomes_its_full_scale_fraction(dtype, bits):
+    """A grey array to float32 in [0, 1]: value x float32(1 / (2^bits - 1)), the product
+    rounded once (both factors are exact in float32, so their float64 product is exact),
+    within a float32 rounding of value / (2^bits - 1); black is 0, full scale 1; a wrong
+    bit depth or size is refused."""
+    from cadra.io.images import station_image
+
+    img = np.random.default_rng(bits).integers(0, 2**bits, (30, 40)).astype(dtype)
+    img[0, 0], img[0, 1] = 0, 2**bits - 1
+    got = station_image(img, 40, 30, bits)
+    assert got.dtype == np.float32
+    scale = float(np.float32(1.0 / (2**bits - 1)))
+    assert np.array_equal(got, (img.astype(np.float64) * scale).astype(np.float32))
+    exact = img.astype(np.float64) / (2**bits - 1)
+    assert np.all(np.abs(got - exact) <= 2.0**-23 * exact)
+    assert got[0, 0] == 0.0 and abs(got[0, 1] - 1.0) <= 2.0**-23
+    assert not station_image(img, 40, 30, 24 - bits) and not station_image(img, 30, 40, bits)

@@ -99,4 +99,5 @@ def station_image(img: np.ndarray, width_px: int, height_px: int, bit_depth: int
     if img.shape != (height_px, width_px):
         return ImageProblem(name, f"{img.shape[1]}x{img.shape[0]} px, the view declares "
                                   f"{width_px}x{height_px}")
-    return img.astype(np.float32) * np.float32(1.0 / (2**bits - 1))
+    # one pass (the cast is exact, the product rounded once, as in astype then multiply)
+    return np.multiply(img, np.float32(1.0 / (2**bits - 1)), dtype=np.float32)
