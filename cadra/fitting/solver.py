@@ -334,9 +334,6 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
     def evaluate(p, xv, ys):
         return problem.predict_from(p, xv, ys)
 
-    def noise_floor(scale):
-        return options.noise_tol_sigma**2 * scale
-
     search = damping() == "search"
     history = []
     status = "failed"
@@ -433,7 +430,7 @@ def fit(shots: Sequence[ShotData], model: AeroModel, initial_states: Sequence[np
                     # it at least), the step damped ten times less is tried too, and the best
                     # kept; a trial costs a prediction, a Jacobian a dozen or more
                     while (lam > LAMBDA_MIN and chi2 - chi2_try >= 0.5 * predicted
-                           and predicted > noise_floor(scale)):
+                           and predicted > options.noise_tol_sigma**2 * scale):
                         less = trial(lam / 10.0)
                         if not less[0] < chi2_try:
                             break

@@ -151,18 +151,15 @@ def _drag_k(shot: ShotData) -> tuple[float, float]:
     return float(sol.x[2]), float(sol.x[1])
 
 
-def _sine_gain(a11, a12, a22, b1, b2):
+def _sine_gain(a11: float, a12: float, a22: float, b1: float, b2: float) -> float:
     """The sum of squares the least squares ``a C + b S`` removes from ``v``, from the
-    products ``a11 = C.C``, ``a12 = C.S``, ``a22 = S.S``, ``b1 = C.v``, ``b2 = S.v`` (arrays
-    or floats): the 2x2 normal equations in closed form; a pair that is nearly one direction
-    counts as its better single column."""
+    products ``a11 = C.C``, ``a12 = C.S``, ``a22 = S.S``, ``b1 = C.v``, ``b2 = S.v``: the 2x2
+    normal equations in closed form; a pair that is nearly one direction counts as its
+    better single column."""
     det = a11 * a22 - a12 * a12
-    tiny = 1e-12 * (a11 + a22) ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        pair = (a22 * b1 * b1 - 2.0 * a12 * b1 * b2 + a11 * b2 * b2) / det
-        one = np.maximum(np.where(a11 > 0, b1 * b1 / a11, 0.0),
-                         np.where(a22 > 0, b2 * b2 / a22, 0.0))
-    return np.where(det > tiny, pair, one)
+    if det > 1e-12 * (a11 + a22) ** 2:
+        return (a22 * b1 * b1 - 2.0 * a12 * b1 * b2 + a11 * b2 * b2) / det
+    return max(b1 * b1 / a11 if a11 > 0 else 0.0, b2 * b2 / a22 if a22 > 0 else 0.0)
 
 
 def _damped_sine(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
@@ -194,21 +191,15 @@ def _damped_sine(t: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
         e = np.exp(lam * t)
         X = perp(np.column_stack([e * np.cos(w * t), e * np.sin(w * t)]))
         (a11, a12), (_, a22) = (X.T @ X).tolist()
-        b1, b2 = (r0 @ X).tolist()
-        det = a11 * a22 - a12 * a12
-        if det > 1e-12 * (a11 + a22) ** 2:
-            gain = (a22 * b1 * b1 - 2.0 * a12 * b1 * b2 + a11 * b2 * b2) / det
-        else:   # as _sine_gain
-            gain = max(b1 * b1 / a11 if a11 > 0 else 0.0, b2 * b2 / a22 if a22 > 0 else 0.0)
-        return max(rss0 - gain, 0.0)
+        return max(rss0 - _sine_gain(a11, a12, a22, *(r0 @ X).tolist()), 0.0)
 
     span = t[-1] - t[0]
     grid = np.linspace(2 * math.pi / span, w_max, 400)
     wt = t[:, None] * grid[None, :]
     C, S = perp(np.cos(wt)), perp(np.sin(wt))
-    costs = rss0 - _sine_gain(np.sum(C * C, axis=0), np.sum(C * S, axis=0),
-                              np.sum(S * S, axis=0), r0 @ C, r0 @ S)
-    w0 = grid[int(np.argmin(costs))]
+    products = zip(*(x.tolist() for x in (np.sum(C * C, axis=0), np.sum(C * S, axis=0),
+                                           np.sum(S * S, axis=0), r0 @ C, r0 @ S)), strict=True)
+    w0 = grid[int(np.argmax([_sine_gain(*x) for x in products]))]
     sol = minimize(cost, [w0, 0.0], method="Nelder-Mead",
                    options={"xatol": 1e-4, "fatol": 1e-14, "maxiter": 400})
     w, lam = sol.x
