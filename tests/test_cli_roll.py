@@ -144,7 +144,7 @@ def test_each_frame_keeps_its_own_roll_sigma(tmp_path):
 def test_a_roll_fit_far_above_the_noise_is_warned_about(tmp_path, capsys):
     """Sigmas written 5x too small: chi^2/nu ~25, p(chi^2) ~ 0: a poor minimum as cadra2 fit
     says it (its worst channel and station), exit status 1."""
-    traj, _ = _files(tmp_path, duration_s=4.0)
+    traj, _ = _files(tmp_path, duration_s=1.5)
     head = [line for line in traj.read_text().splitlines() if line.startswith("#")]
     table = pd.read_csv(traj, comment="#")
     table["sigma_phi_deg"] = table["sigma_phi_deg"] / 5.0
