@@ -208,7 +208,7 @@ def test_band_pixels_match_brute_force_nearest_edge():
     tpl = make_template(capsule("M2"), "top", tilt_rad=0.2)
     M = np.array([[1.27e-4, 2e-7, -0.03], [-3e-7, 1.27e-4, -0.03]])
     poly = outline_px(tpl, (0.0012, -0.0007, 0.3), ParallelProjection.for_axes((0, 1), M))
-    geo = outline_geometry(poly)
+    geo = outline_geometry(poly, 3.0)
     band = 3.5
     lin, sd, edge, t = band_pixels(geo, band, (480, 480))
     W = 480

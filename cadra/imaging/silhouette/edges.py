@@ -48,7 +48,7 @@ class Outline:
     perimeter: float
 
 
-def outline_geometry(poly: np.ndarray) -> Outline:
+def outline_geometry(poly: np.ndarray, corner_clear_px: float) -> Outline:
     """Per-edge geometry of the pixel outline ``poly`` (N, 2): normals, vertex curvature,
     flats, arc length and the sharp corners (turn > :data:`CORNER_TURN_RAD`, or curvature
     > :data:`MAX_EDGE_CURVATURE`) that stage A keeps clear of."""
@@ -491,9 +491,7 @@ class EdgeSegments:
     resid_rms: float
     noise_coef: np.ndarray    # variance model v0 + v1 m + v2 m^2 (m = model intensity)
     profile: np.ndarray       # global edge profile (s0, a0, s4, a4), see _gn_accumulate
-    #: per-pixel arrays for the centroid method; ``info`` the fitted pixels' linear index,
-    #: segment and information about its offset, and the band's half-width (px); and
-    #: (``FitSettings.covariance`` =
+    #: per-pixel arrays for the centroid method, and (``FitSettings.covariance`` =
     #: "correlated" or "predicted") ``state``, stage A's final :class:`StageAState`
     pixels: dict = field(default_factory=dict)
 
@@ -501,16 +499,14 @@ class EdgeSegments:
 @numba.njit(cache=True)
 def _segment_geometry(d, k, K, w, L, D, delta, s, e, t, normal, p0, dv, kap_px):
     """Per segment: mean outward normal (x, y), outline point (x, y) and curvature, each
-    pixel weighted by its information about the segment's offset; and those weights."""
+    pixel weighted by its information about the segment's offset."""
     acc = np.zeros((6, K))
-    info = np.empty(d.shape[0])
     for j in range(d.shape[0]):
         q = k[j]
         z = (delta[q] - d[j]) / s
         p = math.exp(-0.5 * z * z) / SQRT2PI
         c = (D[q] - L[q]) * p / s
         wi = w[j] * (c * c)
-        info[j] = wi
         ej = e[j]
         acc[0, q] += wi
         acc[1, q] += wi * normal[ej, 0]
@@ -519,7 +515,7 @@ def _segment_geometry(d, k, K, w, L, D, delta, s, e, t, normal, p0, dv, kap_px):
         acc[4, q] += wi * (p0[ej, 1] + t[j] * dv[ej, 1])
         acc[5, q] += wi * kap_px[j]
     return (acc[1] / acc[0], acc[2] / acc[0], acc[3] / acc[0], acc[4] / acc[0],
-            acc[5] / acc[0], info)
+            acc[5] / acc[0])
 
 
 def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
@@ -545,14 +541,12 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     fs = geo.s0[e] + t * geo.ell[e]
     bad = np.zeros(len(lin), bool)
     if len(geo.corner_s):
-        # stretches of outline near a sharp corner, at the current edge width: chunked to
-        # bound the temporary's size
-        clear = settings.corner_clear_for(float(profile0[0]))
+        # stretches of outline near a sharp corner: chunked to bound the temporary's size
         for c0 in range(0, len(geo.corner_s), 64):
             cs = geo.corner_s[c0:c0 + 64]
             dist = np.abs(fs[:, None] - cs[None, :])
             dist = np.minimum(dist, geo.perimeter - dist)
-            bad |= dist.min(axis=1) < clear
+            bad |= dist.min(axis=1) < settings.corner_clear_px
     if exclude is not None:
         bad = bad | exclude.ravel()[lin]
     I = img.ravel()[lin]
@@ -593,11 +587,10 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     s = float(prof[0])
     npix = len(I_u)
     # segment geometry, weighted by the pixels' information about delta
-    nx, ny, fx, fy, kap, info = _segment_geometry(d_u, k, K, w, L, D, delta, s, e[use], t[use],
+    nx, ny, fx, fy, kap = _segment_geometry(d_u, k, K, w, L, D, delta, s, e[use], t[use],
                                             geo.normal, geo.p0, geo.d, kap_all[use])
     nn = np.hypot(nx, ny)
-    pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D,
-              "info": (lin[use], k, info, band)}
+    pixels = {"lin": lin, "d": d, "seg_all": remap[seg], "L": L, "D": D}
     if settings.covariance in ("correlated", "predicted"):
         # the final state, for measure.silhouette.noise (the final pose's sigma only)
         pixels["state"] = StageAState(lin[use], I_u, d_u, k, w, L, D, delta, prof, c4,

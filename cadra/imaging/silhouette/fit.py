@@ -50,9 +50,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from cadra.geometry import densify_polygon
 from cadra.imaging.silhouette.centroid import centroid_pose
-from cadra.imaging.silhouette.edges import band_pixels, outline_geometry, stage_a
+from cadra.imaging.silhouette.edges import outline_geometry, stage_a
 from cadra.imaging.silhouette.noise import (
     noise_autocovariance,
     segment_correlation,
@@ -82,10 +84,7 @@ class FitSettings:
     #: 3.5 px band left its sigma 2-3x too large (docs/stage1.md, "Wide edges")
     band_widths: float = 3.3
     segment_px: float = 8.0         # contour segment length
-    #: pixels this many fitted edge widths or less along the outline from a sharp corner are
-    #: not used: there the straight edge's blurred profile is wrong by the blur's mass past the
-    #: corner (docs/stage1.md, "Corners")
-    corner_clear_widths: float = 2.5
+    corner_clear_px: float = 3.0    # segments this close to a sharp corner are not used
     min_fill: float = 0.6           # a segment needs this fraction of its expected pixels
     max_iter: int = 8               # pose iterations (band rebuilt each time)
     tol_px: float = 2e-4            # stop when the pose moves less than this (px at the rim)
@@ -103,11 +102,6 @@ class FitSettings:
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
     warm_rounds: int = 2            # stage-A outer rounds warm-started from the last pose
     dark_level: str = "tied"        # "tied": D = r L + c image-wide; "segment": D per segment
-
-    def corner_clear_for(self, edge_width_px: float) -> float:
-        """The clearance (px along the outline) kept from a sharp corner for an edge of this
-        fitted width (px)."""
-        return self.corner_clear_widths * edge_width_px
 
     def band_for(self, edge_width_px: float) -> float:
         """The band's half-width (px) for an edge of this fitted width (px)."""
@@ -237,7 +231,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         band_prev, band = band, (settings.band_for(float(profile[0])) if outside == 0.0
                                  else b0)
         widened = band > 1.1 * band_prev
-        geo = outline_geometry(poly)
+        geo = outline_geometry(poly, settings.corner_clear_px)
         seg = stage_a(img, geo, settings, exclude, profile, None if widened else noise_coef,
                       band_px=band)
         if seg is None:
@@ -340,8 +334,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
            else (nan2, math.nan, (math.nan,) * 3))
     tilt_sens = (0.0, 0.0, 0.0)
     if tilt_step is not None and fit_phi:
-        tilt_sens = _tilt_sensitivity(tilt_step, pose, projection, seg, X, wts, keep,
-                                      fit_phi, img.shape)
+        tilt_sens = _tilt_sensitivity(tilt_step, pose, projection, seg, X, wts, keep, fit_phi)
     warnings = []
     if diverged:
         warnings.append(f"silhouette fit: a late step of > {MAX_LATE_STEP_PX} px was rejected "
@@ -405,34 +398,48 @@ def _robust_step(X: np.ndarray, y: np.ndarray, wts: np.ndarray, keep: np.ndarray
     return beta, keep, rank >= int(live.sum())
 
 
-def _tilt_sensitivity(tilt_step, pose, projection, seg, X, wts, keep, fit_phi, shape):
+def _along_normal(feet: np.ndarray, normals: np.ndarray, poly: np.ndarray,
+                  reach_px: float = 3.0) -> np.ndarray:
+    """Signed distance t (px) from each foot along its normal to the closed polyline ``poly``
+    (the crossing nearest the foot within ``reach_px``; NaN if none). The polyline is
+    densified to 1-px edges and only the edges at a foot's 24 nearest points (a k-d tree)
+    are tried."""
+    P = densify_polygon(poly)
+    E = np.roll(P, -1, axis=0) - P
+    k_near = min(24, len(P))
+    _, idx = cKDTree(P).query(feet, k=k_near)
+    idx = np.concatenate([idx, (idx - 1) % len(P)], axis=1)     # the edges ending there too
+    d = P[idx] - feet[:, None, :]                                  # (feet, candidates, 2)
+    e = E[idx]
+    n = normals[:, None, :]
+    # p + t n = P_i + s E_i:  t = cross(P_i - p, E_i) / cross(n, E_i),
+    #                         s = cross(P_i - p, n) / cross(n, E_i)
+    den = n[..., 0] * e[..., 1] - n[..., 1] * e[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]) / den
+        sp = (d[..., 0] * n[..., 1] - d[..., 1] * n[..., 0]) / den
+    ok = (np.abs(den) > 1e-12) & (sp >= 0.0) & (sp <= 1.0) & (np.abs(t) <= reach_px)
+    t = np.where(ok, t, np.inf)
+    out = t[np.arange(len(feet)), np.argmin(np.abs(t), axis=1)]
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+def _tilt_sensitivity(tilt_step, pose, projection, seg, X, wts, keep, fit_phi):
     """d(pose)/d(tilt) from the segments' own weighted least squares. From the template at
-    tilt - h to the one at tilt + h each fitted pixel's signed distance from the outline
-    changes by dd_j, and to first order a segment's fitted offset by the mean of its pixels'
-    dd_j, each weighted by its information about the offset (stage A's model is a function
-    of offset - d); the pose then moves by the weighted least-squares solution for those
-    changes (the same design: position, angle and curvature bias), over 2h. Per pixel, not
-    at the segment's foot: beside a sharp corner the outline's change is not one move along
-    the segment's normal (the corner itself slides along the outline as the tilt changes).
-    A central difference: a silhouette depends on |tilt|, so near zero tilt a one-sided step
-    sees the curvature of |tilt|, not the derivative. The outline's change of curvature (the
-    curvature-bias column) is left out; the position part is within a few per cent of full
-    refits (tests/test_silhouette_fit.py)."""
+    tilt - h to the one at tilt + h the outline moves each segment's foot by D_k along its
+    normal, so the fitted offsets would change by -D_k: to first order the pose moves by the
+    weighted least-squares solution for -D (the same design: position, angle and curvature
+    bias), over 2h. A central difference: a silhouette depends on |tilt|, so near zero tilt a
+    one-sided step sees the curvature of |tilt|, not the derivative. The outline's change of
+    curvature (the curvature-bias column) is left out: it changed nothing on the capsules
+    and, from the nearest vertex, blew up near a bullet's base corner at small tilt; the
+    position part is within 1-30 % of full refits (tests/test_silhouette_fit.py)."""
     template_p, template_m, h = tilt_step
-    lin_u, k, info, band = seg.pixels["info"]
-    dist = []
-    for template in (template_p, template_m):
-        lin, d, _, _ = band_pixels(outline_geometry(outline_px(template, pose, projection)),
-                                   band + 1.0, shape)
-        at = np.minimum(np.searchsorted(lin, lin_u), max(len(lin) - 1, 0))
-        found = (lin[at] == lin_u) if len(lin) else np.zeros(len(lin_u), bool)
-        dist.append(np.where(found, d[at] if len(lin) else 0.0, np.nan))
-    dd = dist[0] - dist[1]
-    good = np.isfinite(dd)
-    K = len(seg.delta_px)
-    den = np.bincount(k[good], info[good], minlength=K)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rhs = np.bincount(k[good], info[good] * dd[good], minlength=K) / den
+    poly_p = outline_px(template_p, pose, projection)
+    poly_m = outline_px(template_m, pose, projection)
+    D = (_along_normal(seg.foot_px, seg.normal, poly_p)
+         - _along_normal(seg.foot_px, seg.normal, poly_m))
+    rhs = -D
     use = keep & np.isfinite(rhs)
     if use.sum() < X.shape[1] + 5:
         return (0.0, 0.0, 0.0)
