@@ -84,7 +84,9 @@ class FitSettings:
     #: 3.5 px band left its sigma 2-3x too large (docs/stage1.md, "Wide edges")
     band_widths: float = 3.3
     segment_px: float = 8.0         # contour segment length
-    corner_clear_px: float = 3.0    # segments this close to a sharp corner are not used
+    #: pixels this close (along the outline) to a sharp corner are not used: 2.6 edge widths
+    #: at the default blur (docs/stage1.md, "corners"); fixed in pixels, never the fitted width
+    corner_clear_px: float = 2.0
     min_fill: float = 0.6           # a segment needs this fraction of its expected pixels
     max_iter: int = 8               # pose iterations (band rebuilt each time)
     tol_px: float = 2e-4            # stop when the pose moves less than this (px at the rim)
