@@ -138,6 +138,33 @@ def test_wide_edges_band_follows_the_width():
     assert 0.75 < z < 1.3, z
 
 
+
+def test_wide_edges_fit_the_outlines_size(monkeypatch):
+    """Under a 2 px optics blur every edge of the M-80 reads ~0.016 px inside the outline at
+    the true pose (0.002 px at the default blur), and the bullet's ends, a flat base against
+    a long curved nose, turn that into an along-axis error: -0.0105 px mean at 20 deg of tilt
+    (6 views). Wide edges therefore fit a uniform edge offset beside the pose
+    (``FitSettings.edge_offset``), and the mean error goes (a view-to-view spread of
+    ~0.007 px remains at this blur, noise-free: docs/stage1.md, "Wide edges")."""
+    import cadra.synthetic.cases as cases
+    from cadra.body import bullet_preset
+
+    body = bullet_preset("M80")
+    orig = cases.axis_from_inclinations
+    monkeypatch.setattr(cases, "axis_from_inclinations",
+                        lambda th, ps: orig(math.radians(20.0), ps))
+    quiet = RenderConfig(read_noise_sigma=0.0005, shot_noise_sigma=0.0005,
+                         film_grain_sigma=0.0, optics_blur_sigma_px=2.0, bit_depth=16)
+    rng = np.random.default_rng(3)
+    views = [random_view_case(body, rng, quiet) for _ in range(6)]
+    u = {}
+    for mode in ("never", "wide"):
+        st = FitSettings(edge_offset=mode)
+        u[mode] = np.array([case_errors(c, measure_case(c, body, st), body)[0][0]
+                            for c in views])
+    assert np.mean(u["never"]) < -0.007, u            # the effect is there without the offset
+    assert abs(np.mean(u["wide"])) < 0.003, u
+
 def test_strong_fringe_keeps_every_view_on_one_profile():
     """A strong diffraction fringe (0.25): the noise model's quadratic in the intensity dips
     below zero mid-range, and a warm start's weights, floored at that quadratic's value at

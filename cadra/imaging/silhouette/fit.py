@@ -24,9 +24,11 @@ Stage one's main method (seed 004, "Data Reduction and Analysis"; docs/stage1.md
     blurred convex edge lies inside the true outline by ``(blur variance along the tangent)
     kappa / 2`` (Mendonca et al., ECCV 2004); a diffraction fringe adds a term of the same
     form. ``c`` (px^2) is fitted, not assumed, so the correction holds for a PSF shape or a
-    fringe the measurement does not model. Iterated to convergence (band and segments re-built
-    at each pose). Uncertainty: Newey-West sandwich over the contour-ordered segment residuals,
-    so correlated noise (film grain) and misfit show up in the sigma.
+    fringe the measurement does not model. Wide edges add ``- e``, a uniform offset of every
+    edge (``FitSettings.edge_offset``: the outline's apparent size). Iterated to convergence
+    (band and segments re-built at each pose). Uncertainty: Newey-West sandwich over the
+    contour-ordered segment residuals, so correlated noise (film grain) and misfit show up
+    in the sigma.
 
 Method (b), the area centroid, is :mod:`cadra.imaging.silhouette.centroid`; the outline
 template :mod:`cadra.imaging.silhouette.template`; stage A (the per-segment edge offsets and
@@ -100,6 +102,11 @@ class FitSettings:
     covariance: str = "predicted"
     noise_lag_px: int = 5           # pixel-noise correlation measured to this lag
     fit_curvature_bias: bool = True
+    #: a uniform offset of every edge (the outline's apparent size) fitted beside the pose:
+    #: "wide" (default) for wide edges only, where the band has widened past ``band_px``
+    #: (docs/stage1.md, "Wide edges"), "always" or "never"; never for a sphere, whose
+    #: curvature bias is already a size change
+    edge_offset: str = "wide"
     fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
     warm_rounds: int = 2            # stage-A outer rounds warm-started from the last pose
@@ -113,6 +120,9 @@ class FitSettings:
         if self.covariance not in ("predicted", "correlated", "scaled", "sandwich"):
             raise ValueError(f"FitSettings.covariance: expected 'predicted', 'correlated', "
                              f"'scaled' or 'sandwich', got {self.covariance!r}")
+        if self.edge_offset not in ("wide", "always", "never"):
+            raise ValueError(f"FitSettings.edge_offset: expected 'wide', 'always' or 'never', "
+                             f"got {self.edge_offset!r}")
         if self.dark_level not in ("tied", "segment"):
             raise ValueError(f"FitSettings.dark_level: expected 'tied' or 'segment', got "
                              f"{self.dark_level!r}")
@@ -201,6 +211,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     # does not move the centre, but leaving it out lets an uneven set of rejected segments
     # turn the edges' common offset into a centre shift)
     fit_c = settings.fit_curvature_bias
+    e0 = 0.0
     nan3 = np.full((3, 3), np.nan)
     H, W = img.shape
     profile = (np.array(edge_profile0, float) if edge_profile0 is not None
@@ -249,6 +260,11 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             cols.append(np.einsum("ij,ij->i", seg.normal, (lever @ Jrot.T) @ A_lin.T))
         if fit_c:
             cols.append(-seg.kappa)
+        fit_e0 = (fit_c and not template.axisymmetric_point
+                  and (settings.edge_offset == "always"
+                       or (settings.edge_offset == "wide" and band > settings.band_px)))
+        if fit_e0:
+            cols.append(-np.ones(len(seg.kappa)))
         X = np.column_stack(cols)
         y = seg.delta_px
         wts = 1.0 / seg.var_px2
@@ -287,7 +303,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             # clutter feature) produced this step; keep the last pose and say so
             diverged = True
             break
-        c_bias = float(beta[-1]) if fit_c else 0.0
+        c_bias = float(beta[npar - 1 - int(fit_e0)]) if fit_c else 0.0
+        e0 = float(beta[-1]) if fit_e0 else 0.0
         pose = pose + dpose
         cov = np.full((3, 3), 0.0)
         idx = [0, 1, 2] if fit_phi else [0, 1]
@@ -330,7 +347,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     cov_fin = np.where(np.isfinite(cov), cov, 0.0)
     cov_px = Jp @ cov_fin @ Jp.T
     # offsets about the fitted outline (a sphere: about its mean, the radius change)
-    resid = seg.delta_px + c_bias * seg.kappa
+    resid = seg.delta_px + c_bias * seg.kappa + e0
     nan2 = (math.nan, math.nan)
     cen = (centroid_pose(img, template, projection, pose, seg, exclude) if centroid
            else (nan2, math.nan, (math.nan,) * 3))
