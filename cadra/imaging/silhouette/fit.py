@@ -105,7 +105,8 @@ class FitSettings:
     #: a uniform offset of every edge (the outline's apparent size) fitted beside the pose:
     #: "wide" (default) for wide edges only, where the band has widened past ``band_px``
     #: (docs/stage1.md, "Wide edges"), "always" or "never"; never for a sphere, whose
-    #: curvature bias is already a size change
+    #: curvature bias is already a size change, nor a finned body, whose fits at trial rolls
+    #: run wide
     edge_offset: str = "wide"
     fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
     cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
@@ -260,7 +261,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             cols.append(np.einsum("ij,ij->i", seg.normal, (lever @ Jrot.T) @ A_lin.T))
         if fit_c:
             cols.append(-seg.kappa)
-        fit_e0 = (fit_c and not template.axisymmetric_point
+        fit_e0 = (fit_c and not template.axisymmetric_point and not template.finned
                   and (settings.edge_offset == "always"
                        or (settings.edge_offset == "wide" and band > settings.band_px)))
         if fit_e0:

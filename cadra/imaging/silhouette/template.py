@@ -42,6 +42,9 @@ class Template:
     tilt_rad: float
     axisymmetric_point: bool      # a sphere: the in-plane angle is not observable
     principal_is_axis: bool       # the body axis is the major (True) or minor principal axis
+    #: a finned body's (its outline depends on the roll): no uniform edge offset is fitted to
+    #: it (docs/stage1.md, "Wide edges")
+    finned: bool = False
 
 
 def make_template(body: Body | FinnedBody, view_name: str, tilt_rad: float = 0.0,
@@ -63,7 +66,7 @@ def make_template(body: Body | FinnedBody, view_name: str, tilt_rad: float = 0.0
     principal_is_axis = bool(m2[0, 0] >= m2[1, 1])
     return Template(outline_m=poly, centroid_m=centroid, area_m2=area, tilt_rad=float(tilt_rad),
                     axisymmetric_point=body.kind == "sphere",
-                    principal_is_axis=principal_is_axis)
+                    principal_is_axis=principal_is_axis, finned=isinstance(body, FinnedBody))
 
 
 
@@ -92,7 +95,8 @@ def make_conical_template(body: Body | FinnedBody, projection: Projection, r_ref
     area, centroid, m2 = polygon_moments(poly)
     return Template(outline_m=poly, centroid_m=centroid, area_m2=area, tilt_rad=float(tilt_rad),
                     axisymmetric_point=body.kind == "sphere",
-                    principal_is_axis=bool(m2[0, 0] >= m2[1, 1]))
+                    principal_is_axis=bool(m2[0, 0] >= m2[1, 1]),
+                    finned=isinstance(body, FinnedBody))
 
 
 def rot(phi: float) -> np.ndarray:
