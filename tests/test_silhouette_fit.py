@@ -139,6 +139,26 @@ def test_wide_edges_band_follows_the_width():
 
 
 
+def test_axis_in_the_views_plane_to_rounding(monkeypatch):
+    """An M-80 in the view's plane, fitted with templates 1e-15 and 1e-12 rad out of it (a
+    tilt from float arithmetic): the end faces' ellipses, 1e-15 of the radius wide, folded
+    the polygon and put u 0.46-0.57 px off on these views. Now as in the plane exactly."""
+    import cadra.synthetic.cases as cases
+    from cadra.body import bullet_preset
+
+    body = bullet_preset("M80")
+    orig = cases.axis_from_inclinations
+    monkeypatch.setattr(cases, "axis_from_inclinations", lambda th, ps: orig(0.0, ps))
+    quiet = RenderConfig(read_noise_sigma=0.0005, shot_noise_sigma=0.0005,
+                         film_grain_sigma=0.0, bit_depth=16)
+    rng = np.random.default_rng(3)
+    for _ in range(2):
+        case = random_view_case(body, rng, quiet)
+        for tilt in (1e-15, 1e-12):
+            e, _ = case_errors(case, measure_case(case, body, tilt_rad=tilt), body)
+            assert np.all(np.abs(e) < 0.005), (tilt, e)
+
+
 def test_wide_edges_fit_the_outlines_size(monkeypatch):
     """Under a 2 px optics blur every edge of the M-80 reads ~0.016 px inside the outline at
     the true pose (0.002 px at the default blur), and the bullet's ends, a flat base against

@@ -35,6 +35,11 @@ from cadra.body.model import Body, meridian
 _SPACING_GRID = 97
 
 
+#: :func:`_view_geometry`: below this |sin| of the axis' angle out of the view's plane the
+#: axis is taken as in the plane (docs/bodies.md)
+KAP_ZERO = 1e-8
+
+
 def _view_geometry(body: Body, R_FB, P_view):
     """σ, κ, p̂, q̂ of the view (module docstring), validating the inputs."""
     R = np.asarray(R_FB, dtype=float)
@@ -55,6 +60,12 @@ def _view_geometry(body: Body, R_FB, P_view):
     kap = float(abs(np.cross(P[0], P[1]) @ a))
     n = np.hypot(sig, kap)
     sig, kap = sig / n, kap / n
+    if kap < KAP_ZERO:
+        # the axis in the view's plane to rounding: the end faces' ellipses are below 1e-8 of
+        # the radius wide, and their vertices' float noise made the polygon fold (a template
+        # 1e-15 rad out of the plane put a fit 0.5 px off); exactly in the plane they are
+        # straight edges
+        sig, kap = 1.0, 0.0
     ph = A / np.hypot(A[0], A[1]) if sig > 0 else np.array([1.0, 0.0])
     qh = np.array([-ph[1], ph[0]])
     return sig, kap, ph, qh
