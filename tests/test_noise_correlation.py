@@ -56,7 +56,7 @@ def test_autocovariance_is_the_generating_noise_correlation(multiplicative):
     comes out as ``beta`` (it scales with the intensity), additive noise as ``alpha``."""
     sc, white = 0.02, 0.004
     img, poly, K = _disc_scene(multiplicative, seed=3, sigma_c=sc, white=white)
-    geo = outline_geometry(poly, 3.0)
+    geo = outline_geometry(poly)
     # the noise model (v0 + v1 m + v2 m^2) the image was made with
     coef = np.array([white**2, 0.0, sc**2]) if multiplicative else np.array(
         [white**2 + sc**2, 0.0, 0.0])
@@ -85,8 +85,7 @@ def test_offset_covariance_matches_a_monte_carlo_of_the_renderer_grain():
     case = random_view_case(M2, np.random.default_rng(5), cfg)
     tpl = make_template(M2, case.view.name, case.tilt_rad)
     st = FitSettings()
-    geo = outline_geometry(outline_px(tpl, np.array(case.pose), case.projection),
-                           st.corner_clear_px)
+    geo = outline_geometry(outline_px(tpl, np.array(case.pose), case.projection))
     a = grain_correlation_kernel(cfg.film_grain_length_px)
     h = len(a) // 2
     lags = [(du, dv) for dv in range(h + 1) for du in range(-h, h + 1)

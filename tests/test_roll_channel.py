@@ -232,4 +232,4 @@ def test_noise_autocovariance_that_is_no_covariance_is_not_used():
     t = np.linspace(0, 2 * np.pi, 1024, endpoint=False)
     poly = np.column_stack([200.3 + 100 * np.cos(t), 199.6 + 100 * np.sin(t)])
     coef = np.array([white**2 + 0.5e-4, 0.0, 0.0])
-    assert noise_autocovariance(img, outline_geometry(poly, 3.0), None, coef, 5) is None
+    assert noise_autocovariance(img, outline_geometry(poly), None, coef, 5) is None

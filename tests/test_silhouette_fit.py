@@ -138,7 +138,6 @@ def test_wide_edges_band_follows_the_width():
     assert 0.75 < z < 1.3, z
 
 
-
 def test_axis_in_the_views_plane_to_rounding(monkeypatch):
     """An M-80 in the view's plane, fitted with templates 1e-15 and 1e-12 rad out of it (a
     tilt from float arithmetic): the end faces' ellipses, 1e-15 of the radius wide, folded
@@ -184,6 +183,7 @@ def test_wide_edges_fit_the_outlines_size(monkeypatch):
                             for c in views])
     assert np.mean(u["never"]) < -0.007, u            # the effect is there without the offset
     assert abs(np.mean(u["wide"])) < 0.003, u
+
 
 def test_strong_fringe_keeps_every_view_on_one_profile():
     """A strong diffraction fringe (0.25): the noise model's quadratic in the intensity dips
@@ -255,7 +255,7 @@ def test_band_pixels_match_brute_force_nearest_edge():
     tpl = make_template(capsule("M2"), "top", tilt_rad=0.2)
     M = np.array([[1.27e-4, 2e-7, -0.03], [-3e-7, 1.27e-4, -0.03]])
     poly = outline_px(tpl, (0.0012, -0.0007, 0.3), ParallelProjection.for_axes((0, 1), M))
-    geo = outline_geometry(poly, 3.0)
+    geo = outline_geometry(poly)
     band = 3.5
     lin, sd, edge, t = band_pixels(geo, band, (480, 480))
     W = 480

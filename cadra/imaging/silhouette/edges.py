@@ -48,7 +48,7 @@ class Outline:
     perimeter: float
 
 
-def outline_geometry(poly: np.ndarray, corner_clear_px: float) -> Outline:
+def outline_geometry(poly: np.ndarray) -> Outline:
     """Per-edge geometry of the pixel outline ``poly`` (N, 2): normals, vertex curvature,
     flats, arc length and the sharp corners (turn > :data:`CORNER_TURN_RAD`, or curvature
     > :data:`MAX_EDGE_CURVATURE`) that stage A keeps clear of."""

@@ -212,6 +212,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
     # does not move the centre, but leaving it out lets an uneven set of rejected segments
     # turn the edges' common offset into a centre shift)
     fit_c = settings.fit_curvature_bias
+    # the uniform edge offset (docs/stage1.md, "Wide edges"): for which bodies, and when
+    e0_body = fit_c and not template.axisymmetric_point and not template.finned
     e0 = 0.0
     nan3 = np.full((3, 3), np.nan)
     H, W = img.shape
@@ -245,7 +247,7 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
         band_prev, band = band, (settings.band_for(float(profile[0])) if outside == 0.0
                                  else b0)
         widened = band > 1.1 * band_prev
-        geo = outline_geometry(poly, settings.corner_clear_px)
+        geo = outline_geometry(poly)
         seg = stage_a(img, geo, settings, exclude, profile, None if widened else noise_coef,
                       band_px=band)
         if seg is None:
@@ -261,9 +263,8 @@ def fit_silhouette(img: np.ndarray, template: Template, projection: Projection,
             cols.append(np.einsum("ij,ij->i", seg.normal, (lever @ Jrot.T) @ A_lin.T))
         if fit_c:
             cols.append(-seg.kappa)
-        fit_e0 = (fit_c and not template.axisymmetric_point and not template.finned
-                  and (settings.edge_offset == "always"
-                       or (settings.edge_offset == "wide" and band > settings.band_px)))
+        fit_e0 = e0_body and (settings.edge_offset == "always"
+                              or (settings.edge_offset == "wide" and band > settings.band_px))
         if fit_e0:
             cols.append(-np.ones(len(seg.kappa)))
         X = np.column_stack(cols)

@@ -92,7 +92,7 @@ def noise_autocovariance(img: np.ndarray, geo: Outline, exclude, noise_coef,
     H, W = img.shape
     # the ring needs no precision: every 8th vertex of the outline is 8x faster
     step = max(len(geo.p0) // 128, 1)
-    ring_geo = outline_geometry(geo.p0[::step], 0.0) if step > 1 else geo
+    ring_geo = outline_geometry(geo.p0[::step]) if step > 1 else geo
     lin, d, _, _ = band_pixels(ring_geo, outer_px, img.shape)
     keep = np.abs(d) >= inner_px
     if exclude is not None:

@@ -103,7 +103,7 @@ def blurred_polygon(poly: np.ndarray, shape: tuple[int, int], width, fringe, fri
     # curved stretch (a body sampled finely along its length) as chords within
     # SIMPLIFY_PX of it (0.033 px chords at 430 px radius near the fins: ~500 edges -> ~30)
     poly = shapely.get_coordinates(shapely.simplify(shapely.Polygon(poly), SIMPLIFY_PX))[:-1]
-    geo = outline_geometry(poly, 0.0)
+    geo = outline_geometry(poly)
     s = np.broadcast_to(np.asarray(width(geo.normal) if callable(width) else width, float),
                         geo.ell.shape)
     a = np.broadcast_to(np.asarray(fringe(geo.normal) if callable(fringe) else fringe, float),
