@@ -10,7 +10,7 @@ import pytest
 import shapely
 from scipy.special import ndtr
 
-from cadra.imaging.silhouette.edges import PHI1
+from cadra.imaging.silhouette.edge_model import PHI1
 from cadra.imaging.silhouette.polygon import blurred_polygon
 
 #: a non-convex quadrilateral with a sharp tip (11 deg), a reflex vertex on a pixel centre

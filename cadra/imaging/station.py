@@ -54,7 +54,7 @@ from cadra.imaging.distorted import (
     wires_miss_cause,
 )
 from cadra.imaging.roll import measure_roll, wrap_period
-from cadra.imaging.silhouette.edges import MAX_EDGE_SIGMA_PX
+from cadra.imaging.silhouette.edge_model import MAX_EDGE_SIGMA_PX
 from cadra.imaging.silhouette.fit import FitSettings, ViewFit
 from cadra.imaging.silhouette.locate import locate_model, pose_from_coarse
 from cadra.imaging.view import (

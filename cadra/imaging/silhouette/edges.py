@@ -6,10 +6,11 @@ grouped into short contour segments, and in each segment a blurred-edge model
 ``I = L (1 - g) + D g + a L h``, ``g = Phi((delta - d) / s)`` (d the pixel centre's signed
 distance from the outline, + outside; L the local bright level, D the dark level, tied to it
 image-wide as ``D = r L + c`` by default; s the edge width; ``a L h`` the diffraction fringe,
-:func:`_edge_profile`) gives the segment's edge offset ``delta`` along the outward normal with
-its variance (:func:`stage_a`). The edge width and the fringe amplitude are fitted per image,
-each as ``x0 + x4 cos(4 theta)`` (theta the normal's angle to the pixel grid). The method is
-described in :mod:`cadra.imaging.silhouette.fit` and docs/stage1.md; all lengths in pixels.
+:mod:`cadra.imaging.silhouette.edge_model`, which also solves it) gives the segment's edge
+offset ``delta`` along the outward normal with its variance (:func:`stage_a`). The edge width
+and the fringe amplitude are fitted per image, each as ``x0 + x4 cos(4 theta)`` (theta the
+normal's angle to the pixel grid). The method is described in
+:mod:`cadra.imaging.silhouette.fit` and docs/stage1.md; all lengths in pixels.
 """
 
 from __future__ import annotations
@@ -20,17 +21,13 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-SQRT2PI = math.sqrt(2.0 * math.pi)
+from cadra.imaging.silhouette.edge_model import SQRT2PI, _segment_fit
 
 #: Turning angle above which an outline vertex is a sharp corner (excluded from the fit).
 CORNER_TURN_RAD = 0.3
 #: Outline curvature (1/px) above which the edge model's linear curvature bias no longer
 #: holds (radius < 4 px, a few blur widths): such stretches are treated like corners.
 MAX_EDGE_CURVATURE = 0.25
-#: Largest edge width (the profile's sigma, px) stage A fits. A fit that ends there is not
-#: following edges (a template far from the outline, a finned body at a wrong roll): real
-#: optics at this scale blur to about 1 px.
-MAX_EDGE_SIGMA_PX = 5.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,283 +166,6 @@ def _band_collect(best, sd, edge, tt, band2, u_lo, v_lo, W):
 # =============================================================================== stage A
 
 
-#: Normalization of the fringe profile: ``h`` peaks at +-1 (at one fringe width from the edge).
-PHI1 = math.exp(-0.5) / SQRT2PI
-
-
-@numba.njit(cache=True)
-def _edge_profile(x, s, ratio):
-    """The edge model's shape at ``x = delta - d`` (px) for edge width ``s``: the step
-    ``g = Phi(x / s)``, its derivative ``p = phi(x / s)`` (per unit x / s), the fringe
-    ``h = -z_f phi(z_f) / phi(1)`` with ``z_f = x / (ratio s)`` (+1 at one fringe width
-    outside the edge, -1 inside: the second derivative of a blurred step, scaled), and
-    ``hp = dh / dz_f``."""
-    z = x / s
-    g = 0.5 * math.erfc(-z / math.sqrt(2.0))
-    p = math.exp(-0.5 * z * z) / SQRT2PI
-    zf = z / ratio
-    pf = math.exp(-0.5 * zf * zf) / SQRT2PI
-    return g, p, -zf * pf / PHI1, -(1.0 - zf * zf) * pf / PHI1
-
-
-@numba.njit(cache=True)
-def gn_workspace(n, K, tied):
-    """The arrays :func:`_gn_accumulate` fills: per-segment normal equations ``A, b``, the
-    global profile's ``Hg, bg`` (6 unknowns with a tied dark level, else 4) and the pixels'
-    profile values ``G, P, Hh, Hp``."""
-    ng = 6 if tied else 4
-    return (np.empty((K, 3, 3)), np.empty((K, 3)), np.empty((ng, ng)), np.empty(ng),
-            np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-
-
-@numba.njit(cache=True)
-def pixel_terms(Lk, Dk, g, p, h, hp, a, s, ratio, tied, r):
-    """One pixel's edge model ``m = L (1 - g) + D g + a L h`` and its derivatives
-    ``(c0, c1, c2)`` by the segment's L, D and offset (``tied``: D = r L + c is no unknown,
-    ``c1 = 0``); ``g, p, h, hp`` from :func:`_edge_profile` at width ``s``."""
-    c0 = 1.0 - g + a * h
-    c1 = g
-    if tied:
-        c0 += r * g
-        c1 = 0.0
-    c2 = ((Dk - Lk) * p + a * Lk * hp / ratio) / s
-    return Lk * (1.0 - g) + Dk * g + a * Lk * h, c0, c1, c2
-
-
-@numba.njit(cache=True)
-def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P, Hh, Hp,
-                   reuse, want_global, tied, rc):
-    """Gauss-Newton normal equations per segment for (L, D, delta), and for the image's
-    global edge profile ``prof = (s0, a0, s4, a4)`` (segment q's width ``s0 + s4 c4[q]``, its
-    fringe amplitude ``a0 + a4 c4[q]``) into ``Hg`` (4x4) and ``bg``. Returns sum w r^2.
-    ``reuse``: take each pixel's profile values from ``G, P, Hh, Hp`` (filled by the
-    noise-model pass at the same state) instead of computing them; ``want_global``: fill
-    ``Hg, bg`` too (only the profile step needs them). ``tied``: the dark level is not a
-    segment's own unknown but ``D = rc[0] L + rc[1]`` (image-wide ``rc``, two more global
-    unknowns: ``Hg`` is then 6x6); the D row of each segment's system is left empty."""
-    A[:] = 0.0
-    b[:] = 0.0
-    Hg[:] = 0.0
-    bg[:] = 0.0
-    chi2 = 0.0
-    for j in range(I.shape[0]):
-        kk = k[j]
-        s = prof[0] + prof[2] * c4[kk]
-        a = prof[1] + prof[3] * c4[kk]
-        x = delta[kk] - d[j]
-        if reuse:
-            g, p, h, hp = G[j], P[j], Hh[j], Hp[j]
-        else:
-            g, p, h, hp = _edge_profile(x, s, ratio)
-        Lk = L[kk]
-        mj, c0, c1, c2 = pixel_terms(Lk, D[kk], g, p, h, hp, a, s, ratio, tied, rc[0])
-        r = I[j] - mj
-        ww = w[j]
-        A[kk, 0, 0] += ww * c0 * c0
-        A[kk, 0, 1] += ww * c0 * c1
-        A[kk, 0, 2] += ww * c0 * c2
-        A[kk, 1, 1] += ww * c1 * c1
-        A[kk, 1, 2] += ww * c1 * c2
-        A[kk, 2, 2] += ww * c2 * c2
-        b[kk, 0] += ww * c0 * r
-        b[kk, 1] += ww * c1 * r
-        b[kk, 2] += ww * c2 * r
-        chi2 += ww * r * r
-        if not want_global:
-            continue
-        # global profile: d/ds = -c2 x / s, d/da = L h; the cos(4 theta) parts times c4
-        js = -c2 * x / s
-        ja = Lk * h
-        jv = (js, ja, js * c4[kk], ja * c4[kk], Lk * g, g)
-        ng = Hg.shape[0]
-        for i0 in range(ng):
-            bg[i0] += ww * jv[i0] * r
-            for i1 in range(i0, ng):
-                Hg[i0, i1] += ww * jv[i0] * jv[i1]
-    for i0 in range(Hg.shape[0]):
-        for i1 in range(i0):
-            Hg[i0, i1] = Hg[i1, i0]
-    for kk in range(A.shape[0]):
-        if tied:
-            A[kk, 1, 1] = 1.0   # D is no segment unknown: its step solves to 0
-        A[kk, 1, 0] = A[kk, 0, 1]
-        A[kk, 2, 0] = A[kk, 0, 2]
-        A[kk, 2, 1] = A[kk, 1, 2]
-    return chi2
-
-
-@numba.njit(cache=True)
-def _solve3_ridge(A, b):
-    """Solve a symmetric 3x3 system (Cramer's rule) with a tiny relative ridge: a one-sided
-    segment keeps its unseen level instead of making the system singular."""
-    r = 1e-9 * (A[0, 0] + A[1, 1] + A[2, 2]) + 1e-15
-    a00, a11, a22 = A[0, 0] + r, A[1, 1] + r, A[2, 2] + r
-    a01, a02, a12 = A[0, 1], A[0, 2], A[1, 2]
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    c11 = a00 * a22 - a02 * a02
-    c12 = a01 * a02 - a00 * a12
-    c22 = a00 * a11 - a01 * a01
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    out = np.empty(3)
-    out[0] = (c00 * b[0] + c01 * b[1] + c02 * b[2]) / det
-    out[1] = (c01 * b[0] + c11 * b[1] + c12 * b[2]) / det
-    out[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det
-    return out
-
-
-#: Bounds on the profile's cos(4 theta) terms (the pixel's footprint: a box or a triangle of
-#: one variance, so small): |s4| <= S4_MAX s0, |a4| <= max(|a0|, A4_FLOOR). Looser, sharp
-#: optics fell into a false minimum (docs/stage1.md, "Sharp optics").
-S4_MAX = 0.05
-A4_FLOOR = 0.02
-
-
-@numba.njit(cache=True)
-def _profile_step(prof, Hg, bg, rc):
-    """Damped, bounded Gauss-Newton step of the global edge profile ``(s0, a0, s4, a4)``
-    and, when ``Hg`` is 6x6, of the tied dark level's ``rc`` (full step: it is linear)."""
-    Hr = Hg.copy()
-    ng = Hg.shape[0]
-    tr = 0.0
-    for i in range(ng):
-        tr += Hg[i, i]
-    for i in range(ng):
-        Hr[i, i] += 1e-9 * tr + 1e-15
-    st = np.linalg.solve(Hr, bg)
-    for i in range(ng):
-        if not math.isfinite(st[i]):
-            return
-    if ng == 6:
-        rc[0] = min(max(rc[0] + st[4], -0.5), 0.95)
-        rc[1] = min(max(rc[1] + st[5], -0.5), 0.95)
-    # damped and bounded: a strong fringe is nearly the shape of a width change, and a full
-    # step can throw the width (and every offset) far off
-    s = prof[0]
-    prof[0] = min(max(s + 0.5 * st[0], max(0.8 * s, 0.2)), min(1.25 * s, MAX_EDGE_SIGMA_PX))
-    prof[1] = min(max(prof[1] + 0.5 * st[1], -0.5), 0.5)
-    prof[2] = min(max(prof[2] + 0.5 * st[2], -S4_MAX * prof[0]), S4_MAX * prof[0])
-    a4 = max(abs(prof[1]), A4_FLOOR)
-    prof[3] = min(max(prof[3] + 0.5 * st[3], -a4), a4)
-
-
-@numba.njit(cache=True)
-def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, n_outer, L0, D0, tied):
-    """Stage A's iterations in one compiled loop (see :func:`stage_a`): per-segment levels
-    and offsets by Gauss-Newton, the damped global edge profile (width and fringe), the noise
-    model, and each offset's formal variance. ``tied``: each segment's dark level is
-    ``D = r L + c`` with image-wide ``(r, c)`` (``FitSettings.dark_level``)."""
-    n = I.shape[0]
-    L = np.full(K, L0)
-    D = np.full(K, D0)
-    cntL = np.zeros(K)
-    cntD = np.zeros(K)
-    sumL = np.zeros(K)
-    sumD = np.zeros(K)
-    for j in range(n):
-        if d[j] > 2.0:
-            sumL[k[j]] += I[j]
-            cntL[k[j]] += 1.0
-        elif d[j] < -2.0:
-            sumD[k[j]] += I[j]
-            cntD[k[j]] += 1.0
-    for q in range(K):
-        if cntL[q] > 0:
-            L[q] = sumL[q] / cntL[q]
-        if cntD[q] > 0:
-            D[q] = sumD[q] / cntD[q]
-    rc = np.array([D0 / L0 if L0 > 0.0 else 0.0, 0.0])
-    if tied:
-        for q in range(K):
-            D[q] = rc[0] * L[q] + rc[1]
-    delta = np.zeros(K)
-    prof = prof0.copy()
-    w = np.ones(n)
-    coef = coef_in.copy()
-    if has_coef:
-        # warm start: floored at a fifth of the model's mean variance, as in the noise pass
-        # (its quadratic can dip below 0 mid-range: docs/stage1.md, "A strong fringe")
-        vbar = 0.0
-        for j in range(n):
-            m0 = min(max(I[j], 0.0), 1.0)
-            w[j] = coef[0] + coef[1] * m0 + coef[2] * m0 * m0
-            vbar += w[j] / n
-        for j in range(n):
-            w[j] = 1.0 / max(w[j], 0.2 * vbar, 1e-12)
-    A, b, Hg, bg, G, P, Hh, Hp = gn_workspace(n, K, tied)
-    reuse = False   # G, P, Hh, Hp hold the current state's profile (after a noise-model pass)
-    chi2 = 0.0
-    for outer in range(n_outer):
-        for _ in range(2):
-            _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
-                           G, P, Hh, Hp, reuse, False, tied, rc)
-            reuse = False
-            for q in range(K):
-                st = _solve3_ridge(A[q], b[q])
-                L[q] += st[0]
-                D[q] = rc[0] * L[q] + rc[1] if tied else D[q] + st[1]
-                delta[q] += min(max(st[2], -1.5), 1.5)
-        _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
-                       G, P, Hh, Hp, False, True, tied, rc)
-        _profile_step(prof, Hg, bg, rc)
-        if tied:
-            for q in range(K):
-                D[q] = rc[0] * L[q] + rc[1]
-        if outer == 0 or outer == n_outer - 1:
-            # noise model var = v0 + v1 m + v2 m^2 from the residuals (m = model intensity)
-            N = np.zeros((3, 3))
-            rhs = np.zeros(3)
-            mean_r2 = 0.0
-            for j in range(n):
-                kk = k[j]
-                s = prof[0] + prof[2] * c4[kk]
-                a = prof[1] + prof[3] * c4[kk]
-                g, p, h, hp = _edge_profile(delta[kk] - d[j], s, ratio)
-                G[j] = g
-                P[j] = p
-                Hh[j] = h
-                Hp[j] = hp
-                m = L[kk] * (1.0 - g) + D[kk] * g + a * L[kk] * h
-                r2 = (I[j] - m) ** 2
-                mean_r2 += r2
-                x0, x1, x2 = 1.0, m, m * m
-                N[0, 0] += x0 * x0
-                N[0, 1] += x0 * x1
-                N[0, 2] += x0 * x2
-                N[1, 1] += x1 * x1
-                N[1, 2] += x1 * x2
-                N[2, 2] += x2 * x2
-                rhs[0] += x0 * r2
-                rhs[1] += x1 * r2
-                rhs[2] += x2 * r2
-            N[1, 0] = N[0, 1]
-            N[2, 0] = N[0, 2]
-            N[2, 1] = N[1, 2]
-            coef = _solve3_ridge(N, rhs)
-            floor = max(0.2 * mean_r2 / n, 1e-12)   # no pixel weighs > 5x the average
-            for j in range(n):
-                kk = k[j]
-                m = (L[kk] * (1.0 - G[j]) + D[kk] * G[j]
-                     + (prof[1] + prof[3] * c4[kk]) * L[kk] * Hh[j])
-                w[j] = 1.0 / max(coef[0] + coef[1] * m + coef[2] * m * m, floor)
-            reuse = True
-    chi2 = _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg,
-                          G, P, Hh, Hp, reuse, False, tied, rc)
-    scale = chi2 / max(n - (2 * K + 6 if tied else 3 * K), 1)
-    var_delta = np.empty(K)
-    e3 = np.zeros(3)
-    e3[2] = 1.0
-    contrast = np.abs(L - D)
-    typical = np.median(contrast)
-    for q in range(K):
-        var_delta[q] = _solve3_ridge(A[q], e3)[2] * scale
-        # a segment whose edge ran off or lost its contrast carries no information
-        if abs(delta[q]) > 2.0 or contrast[q] < 0.3 * typical or not var_delta[q] > 0.0:
-            var_delta[q] = np.inf
-    return L, D, delta, var_delta, prof, coef, w, chi2, rc
-
-
 @dataclass(frozen=True, eq=False)
 class StageAState:
     """Stage A's final state, what the offsets' covariance is computed from
@@ -525,9 +245,9 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
     ``img`` float (H, W); ``geo`` the outline (:func:`outline_geometry`); ``settings`` the
     :class:`cadra.imaging.silhouette.fit.FitSettings`; ``exclude`` True on pixels not to use;
     ``profile0`` the starting edge profile ``(s0, a0, s4, a4)``; ``noise_coef`` a previous
-    noise model (a warm start: fewer rounds); ``band_px`` overrides ``settings.band_px``
-    (``FitSettings.band_for``; None: the settings' own). None when fewer than 8 segments
-    are usable."""
+    noise model (a warm start: one weighted fit, not three); ``band_px`` overrides
+    ``settings.band_px`` (``FitSettings.band_for``; None: the settings' own). None when
+    fewer than 8 segments are usable."""
     band = settings.band_px if band_px is None else float(band_px)
     if not band > 0:
         raise ValueError(f"band_px: the pixel band's half-width must be positive, got {band}")
@@ -578,11 +298,10 @@ def stage_a(img, geo: Outline, settings, exclude, profile0: np.ndarray,
                                  np.bincount(k, geo.normal[e_u, 0], minlength=K)))
     I_u = np.ascontiguousarray(I_u, dtype=np.float64)
     d_u = np.ascontiguousarray(d_u)
-    # a cold start (no noise model yet) needs more rounds for the global profile to settle
     L, D, delta, var_delta, prof, coef, w, chi2, rc = _segment_fit(
         I_u, d_u, k, K, c4,
         np.asarray(profile0, float).copy(), float(settings.fringe_width_ratio), coef_in, has,
-        settings.warm_rounds if has else settings.cold_rounds, L0, D0,
+        settings.stage_a_max_iter, settings.stage_a_tol_px, L0, D0,
         settings.dark_level == "tied")
     s = float(prof[0])
     npix = len(I_u)

@@ -109,8 +109,10 @@ class FitSettings:
     #: run wide
     edge_offset: str = "wide"
     fringe_width_ratio: float = 1.2  # fringe profile width / edge width (1.2-1.4 alike)
-    cold_rounds: int = 8            # stage-A outer rounds from a cold start (no noise model)
-    warm_rounds: int = 2            # stage-A outer rounds warm-started from the last pose
+    #: stage A's joint least squares stops when no segment offset nor the edge width moves
+    #: by this much (px) in a step, or after this many steps (docs/stage1.md, step 3)
+    stage_a_tol_px: float = 1e-4
+    stage_a_max_iter: int = 30
     dark_level: str = "tied"        # "tied": D = r L + c image-wide; "segment": D per segment
 
     def band_for(self, edge_width_px: float) -> float:
@@ -471,7 +473,11 @@ def _tilt_sensitivity(tilt_step, pose, projection, seg, X, wts, keep, fit_phi):
 
 
 def _failed(reason: str, pose, outside: float) -> ViewFit:
+    """A failed fit; with part of the outline out of frame, the reason says so (the likely
+    cause of too few usable segments, a start far off)."""
     nan = math.nan
+    if 0.0 < outside <= 0.5:
+        reason = f"{reason} (model partly out of frame: {outside:.0%} of its outline)"
     return ViewFit(ok=False, reason=reason, pose=tuple(float(x) for x in pose),
                    cov=np.full((3, 3), np.nan), ref_px=(nan, nan), axis_angle_px_rad=nan,
                    sigma_ref_px=(nan, nan), sigma_axis_px_rad=nan, curvature_bias_px2=nan,

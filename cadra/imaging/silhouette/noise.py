@@ -17,17 +17,14 @@ import cv2
 import numba
 import numpy as np
 
-from cadra.imaging.silhouette.edges import (
-    EdgeSegments,
-    Outline,
+from cadra.imaging.silhouette.edge_model import (
     _edge_profile,
     _gn_accumulate,
     _solve3_ridge,
-    band_pixels,
     gn_workspace,
-    outline_geometry,
     pixel_terms,
 )
+from cadra.imaging.silhouette.edges import EdgeSegments, Outline, band_pixels, outline_geometry
 
 __all__ = ["noise_autocovariance", "noise_lags", "offset_covariance", "segment_correlation",
            "segment_covariance"]
@@ -184,9 +181,8 @@ def _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc):
     solve, image-wide unknowns held), and the model's intensity ``m_j`` there.
     """
     n = I.shape[0]
-    A, b, Hg, bg, G, P, Hh, Hp = gn_workspace(n, K, tied)
-    _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, Hg, bg, G, P, Hh, Hp,
-                   False, False, tied, rc)
+    A, b, C, Hg, bg = gn_workspace(K, tied)
+    _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, C, Hg, bg, False, tied, rc)
     rows = np.empty((K, 3))
     for q in range(K):
         for i in range(3):

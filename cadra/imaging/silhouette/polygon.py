@@ -15,7 +15,8 @@ import numpy as np
 import shapely
 from scipy.special import ndtr, owens_t
 
-from cadra.imaging.silhouette.edges import PHI1, SQRT2PI, outline_geometry
+from cadra.imaging.silhouette.edge_model import PHI1, SQRT2PI
+from cadra.imaging.silhouette.edges import outline_geometry
 
 #: :func:`blurred_polygon`: beyond this many edge widths from both ends of an edge, its
 #: Gaussian mass is the straight edge's
