@@ -62,11 +62,13 @@ def small_view(name: str = "top", size_px: int = 512, x_m: float = 0.0) -> View:
 
 def random_view_case(body: Body, rng: np.random.Generator, config: RenderConfig | None = None,
                      *, view_name: str = "top", size_px: int = 512, max_angle_deg: float = 25.0,
-                     speed_m_s: float = 800.0, clutter: bool = True) -> ViewCase:
+                     speed_m_s: float = 800.0, clutter: bool = True,
+                     inclination_deg: float | None = None) -> ViewCase:
     """Render ``body`` at a random pose (see the module docstring).
 
     Position: uniform within +-10 px of the frame centre (random subpixel phase); attitude:
-    inclinations uniform in +-``max_angle_deg`` (a sphere: arbitrary), random roll; velocity
+    inclinations uniform in +-``max_angle_deg`` (a sphere: arbitrary; ``inclination_deg``
+    fixes the first, theta, the random draws staying the same), random roll; velocity
     ``speed_m_s`` along +x (motion blur over the 35 ns exposure); flow clutter drawn when
     ``clutter`` (bow shock only if ``config.bow_shock``).
     """
@@ -74,6 +76,8 @@ def random_view_case(body: Body, rng: np.random.Generator, config: RenderConfig 
     view = small_view(view_name, size_px)
     lim = math.radians(max_angle_deg)
     theta, psi = rng.uniform(-lim, lim, 2)
+    if inclination_deg is not None:
+        theta = math.radians(inclination_deg)
     a = axis_from_inclinations(theta, psi)
     R = body_to_facility_matrix(quat_from_axis_roll(a, rng.uniform(0.0, 2 * math.pi)))
     r = np.zeros(3)

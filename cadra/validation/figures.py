@@ -63,6 +63,8 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "validate_roll_seed001": ("Seed 001 Table IV: roll lock-in", "pureroll.md"),
     "validate_roll_seed003": ("Seed 003: the global segmented roll fit", "segmented_roll.md"),
     "validate_roll_images": ("A finned body's roll from its images", "stage1.md"),
+    "validate_wide_blur": ("Stage one at a wide optics blur: the M-80's along-axis error and "
+                           "the sigmas, without and with the uniform edge offset", "stage1.md"),
     "validate_point_source": ("Point-source (direct-shadowgraph) stations: stage one against "
                               "the exact truth and the perspective bound, depth, end to end",
                               "stage1.md"),
