@@ -86,7 +86,7 @@ def pixel_terms(Lk, Dk, g, p, h, hp, a, s, ratio, tied, r):
 
 @numba.njit(cache=True)
 def _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, C, Hg, bg, want_global,
-                   tied, rc, lref=0.0):
+                   tied, rc, lref):
     """Gauss-Newton normal equations per segment for (L, D, delta) into ``A, b``, and (with
     ``want_global``) their coupling ``C`` (K, 3, ng) to the image-wide unknowns and those
     unknowns' own ``Hg, bg``: the edge profile ``prof = (s0, a0, s4, a4)`` and, ``tied``, the
@@ -438,7 +438,7 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, max_iter, tol,
                     break
         coef = _noise_weights(I, d, k, L, D, delta, prof, c4, ratio, w)
     chi2 = _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, C, Hg, bg, False,
-                          tied, rc)
+                          tied, rc, L0)
     scale = chi2 / max(n - (2 * K + 6 if tied else 3 * K), 1)
     var_delta = np.empty(K)
     contrast = np.abs(L - D)

@@ -182,7 +182,8 @@ def _offset_influence(I, d, k, K, w, L, D, delta, prof, c4, ratio, tied, rc):
     """
     n = I.shape[0]
     A, b, C, Hg, bg = gn_workspace(K, tied)
-    _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, C, Hg, bg, False, tied, rc)
+    _gn_accumulate(I, d, k, w, L, D, delta, prof, c4, ratio, A, b, C, Hg, bg, False, tied, rc,
+                   0.0)
     rows = np.empty((K, 3))
     for q in range(K):
         for i in range(3):
