@@ -258,8 +258,7 @@ def _take_step(dg, z, Y, L, D, delta, prof, rc, tied, lref):
     :data:`MAX_OFFSET_STEP_PX`); the tied level's step is in ``(r, c')`` about ``lref``
     (:func:`_gn_accumulate`). Returns the largest move of an offset or the width (px)."""
     ng = dg.shape[0]
-    old = np.empty(ng)
-    old[:4] = prof
+    old = prof.copy()
     s = prof[0]
     prof[0] = min(max(s + dg[0], max(s / WIDTH_STEP_FACTOR, 0.2)),
                   min(WIDTH_STEP_FACTOR * s, MAX_EDGE_SIGMA_PX))
@@ -268,7 +267,7 @@ def _take_step(dg, z, Y, L, D, delta, prof, rc, tied, lref):
     a4 = max(abs(prof[1]), A4_FLOOR)
     prof[3] = min(max(prof[3] + dg[3], -a4), a4)
     taken = np.empty(ng)
-    taken[:4] = prof - old[:4]
+    taken[:4] = prof - old
     if tied:
         # (r, c') about lref: r by dr, c = c' - r lref by dc' - dr lref
         r_new = min(max(rc[0] + dg[4], -0.5), 0.95)
@@ -292,6 +291,20 @@ def _take_step(dg, z, Y, L, D, delta, prof, rc, tied, lref):
 
 
 @numba.njit(cache=True)
+def _model_intensities(d, k, L, D, delta, prof, c4, ratio):
+    """Every pixel's model intensity ``m = L (1 - g) + D g + a L h`` at the current state
+    (as :func:`pixel_terms` gives it)."""
+    m = np.empty(d.shape[0])
+    for j in range(d.shape[0]):
+        kk = k[j]
+        s = prof[0] + prof[2] * c4[kk]
+        a = prof[1] + prof[3] * c4[kk]
+        g, _, h, _ = _edge_profile(delta[kk] - d[j], s, ratio)
+        m[j] = L[kk] * (1.0 - g) + D[kk] * g + a * L[kk] * h
+    return m
+
+
+@numba.njit(cache=True)
 def _noise_weights(I, d, k, L, D, delta, prof, c4, ratio, w):
     """The noise model ``var = v0 + v1 m + v2 m^2`` (m the model intensity) fitted to the
     squared residuals at the current state; ``w`` receives the weights ``1 / var``, floored
@@ -299,15 +312,10 @@ def _noise_weights(I, d, k, L, D, delta, prof, c4, ratio, w):
     n = I.shape[0]
     N = np.zeros((3, 3))
     rhs = np.zeros(3)
-    m = np.empty(n)
+    m = _model_intensities(d, k, L, D, delta, prof, c4, ratio)
     mean_r2 = 0.0
     for j in range(n):
-        kk = k[j]
-        s = prof[0] + prof[2] * c4[kk]
-        a = prof[1] + prof[3] * c4[kk]
-        g, _, h, _ = _edge_profile(delta[kk] - d[j], s, ratio)
-        mj = L[kk] * (1.0 - g) + D[kk] * g + a * L[kk] * h
-        m[j] = mj
+        mj = m[j]
         r2 = (I[j] - mj) ** 2
         mean_r2 += r2
         x = (1.0, mj, mj * mj)
@@ -371,12 +379,10 @@ def _segment_fit(I, d, k, K, c4, prof0, ratio, coef_in, has_coef, max_iter, tol,
         # pixels' own: a weight that follows a pixel's noise biases the fit), floored at a
         # fifth of the mean variance, as in the noise pass (its quadratic can dip below 0
         # mid-range: docs/stage1.md, "A strong fringe")
+        m = _model_intensities(d, k, L, D, delta, prof, c4, ratio)
         vbar = 0.0
         for j in range(n):
-            kk = k[j]
-            g, _, h, _ = _edge_profile(delta[kk] - d[j], prof[0] + prof[2] * c4[kk], ratio)
-            m0 = L[kk] * (1.0 - g) + D[kk] * g + (prof[1] + prof[3] * c4[kk]) * L[kk] * h
-            w[j] = coef[0] + coef[1] * m0 + coef[2] * m0 * m0
+            w[j] = coef[0] + coef[1] * m[j] + coef[2] * m[j] * m[j]
             vbar += w[j] / n
         for j in range(n):
             w[j] = 1.0 / max(w[j], 0.2 * vbar, 1e-12)
