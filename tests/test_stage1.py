@@ -84,6 +84,38 @@ def test_the_wires_formation_is_fitted_once_per_view(m2_shot):
         measure_shot(m2_shot / "shot.toml", workers=1, progress=False, formation="shot")
 
 
+def test_a_quick_look_without_the_profile_model_or_the_noise_model(m2_shot, monkeypatch):
+    """``formation="centroid"`` measures every wire by its centroids (no profile model) and
+    ``FitSettings(covariance="scaled")`` leaves out the predicted noise covariance: the shot's
+    quick look. The stations stay within their sigmas of the truth and of the full
+    measurement; only the full one measures the image noise's autocovariance."""
+    import cadra.imaging.silhouette.fit as fit_mod
+    from cadra.imaging.silhouette.fit import FitSettings
+
+    calls = []
+    acov = fit_mod.noise_autocovariance
+    monkeypatch.setattr(fit_mod, "noise_autocovariance",
+                        lambda *a, **k: calls.append(1) or acov(*a, **k))
+    full = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False)
+    n_full = len(calls)
+    quick = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False,
+                         formation="centroid", settings=FitSettings(covariance="scaled"))
+    assert n_full == 6 and len(calls) == n_full     # one per image, and none in the quick look
+    assert not quick.any_failed
+    assert quick.formations == {"top": "centroid", "side": "centroid"}
+    assert (quick.quality["wire_centres"] == "centroid").all()
+    assert (full.quality["wire_centres"] == "profile model").all()
+    assert all(v.wires.formation is None for r in quick.stations for v in r.views.values())
+    truth = pd.read_csv(m2_shot / "truth.csv")
+    t = quick.trajectory.merge(truth, on="station", suffixes=("", "_true"))
+    for c in ("x_m", "y_m", "z_m", "theta_deg", "psi_deg"):
+        assert ((t[c] - t[f"{c}_true"]).abs() < 6 * t[f"sigma_{c}"]).all(), c
+        d = (quick.trajectory[c] - full.trajectory[c]).abs()
+        assert (d < 2 * full.trajectory[f"sigma_{c}"]).all(), c
+    with pytest.raises(ValueError, match="formation must be"):
+        measure_shot(m2_shot / "shot.toml", workers=1, progress=False, formation="centroids")
+
+
 def test_each_image_is_read_and_its_wires_first_pass_made_once_in_one_process(m2_shot,
                                                                               monkeypatch):
     """The view's formation pass reads some of the shot's images first (here all three

@@ -55,10 +55,12 @@ def _main(argv: list[str] | None) -> int:
     parser.add_argument("--workers", type=number(int, 1), default=None,
                         help="processes (default: all cores; 1 = no subprocesses)")
     parser.add_argument("--no-overlays", action="store_true", help="skip the overlay PNGs")
-    parser.add_argument("--formation", choices=("view", "image"), default="view",
+    parser.add_argument("--formation", choices=("view", "image", "centroid"), default="view",
                         help="fit the wires' image formation once per view over the shot's "
                              "images, each image then held to it unless its score test "
-                             "rejects it (view, the default), or from each image alone (image)")
+                             "rejects it (view, the default), or from each image alone "
+                             "(image); centroid: no profile model, the wires' centroids "
+                             "(a quick look: faster, the affine's sigma less honest)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing output directory (atomically, at the end)")
     parser.add_argument("--truth", default=None,

@@ -136,13 +136,27 @@ def _variant(body, n, config, seed):
             "sigma_ratio": (_rms(VS) / _rms(VE)).tolist()}
 
 
+def read_blur_floor(paths, repeats: int = 5) -> float:
+    """The floor a shot's time is measured against (s): reading the image files and one
+    ``cv2.GaussianBlur`` of each, best of ``repeats``."""
+    import cv2
+
+    floors = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for p in paths:
+            img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+            cv2.GaussianBlur(img, (0, 0), 1.0)
+        floors.append(time.perf_counter() - t0)
+    return min(floors)
+
+
 def speed(tmpdir: Path, shot_spec: Path, write_outputs: Callable):
     """Render one shot's 32 images, then time stage one on one core and the read+blur floor.
 
     ``write_outputs(result, folder)``: stage one's writer, timed with a measurement that
     draws its overlays (:func:`cadra.report.stage1.write_stage1`; the report layer is this
     layer's sibling, so the caller hands it in)."""
-    import cv2
     import pandas as pd
 
     from cadra.imaging.shot import measure_shot
@@ -152,14 +166,7 @@ def speed(tmpdir: Path, shot_spec: Path, write_outputs: Callable):
     write_shot(simulate_shot(load_shot_spec(shot_spec)), shot_dir, images=True, progress=False)
     paths = sorted((shot_dir / "images").glob("*.png"))
     measure_shot(shot_dir / "shot.toml", workers=1, progress=False, overlays=False)  # warm
-    floors = []
-    for _ in range(5):
-        t0 = time.perf_counter()
-        for p in paths:
-            img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-            cv2.GaussianBlur(img, (0, 0), 1.0)
-        floors.append(time.perf_counter() - t0)
-    floor = min(floors)
+    floor = read_blur_floor(paths)
     runs = []
     for _ in range(5):   # this VM's CPU speed wanders by +-20 %: best of 5, median alongside
         t0 = time.perf_counter()
@@ -231,4 +238,5 @@ def figures(acc: dict, spd: dict, seconds: float) -> dict:
     return result
 
 
-__all__ = ["SCALE_MM_PER_PX", "SMALL_MODEL", "accuracy", "figures", "speed"]
+__all__ = ["SCALE_MM_PER_PX", "SMALL_MODEL", "accuracy", "figures", "read_blur_floor",
+           "speed"]

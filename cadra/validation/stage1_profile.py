@@ -16,7 +16,14 @@ stages a range engineer would name, each the cumulative time of the functions th
 - ``other``: the rest (the lines from the model's centres, combining views, tables).
 
 The profiler's overhead falls mostly on Python-level work, so the shares are approximate;
-the shot's time without the profiler is measured too (best of three).
+the shot's time without the profiler is measured too (best of three), with the read + blur
+floor of :func:`cadra.validation.stage1_bench.read_blur_floor` in the same run.
+
+What the honest sigmas cost is measured, not estimated from the shares: the same shot
+timed again (best of three each) without the wires' profile model (``formation="centroid"``:
+the centroids and their phase term), without the predicted noise covariance of the
+silhouette's offsets (``FitSettings(covariance="scaled")``: no noise autocovariance), and
+without either (``quick_look``, seconds and floors).
 """
 
 from __future__ import annotations
@@ -41,6 +48,16 @@ STAGES = {
 }
 
 
+def _walls(run, repeats: int = 3) -> float:
+    """The best of ``repeats`` wall times of ``run()`` (s)."""
+    walls = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run()
+        walls.append(time.perf_counter() - t0)
+    return min(walls)
+
+
 def _cumulative(stats: pstats.Stats, where: str, name: str) -> float:
     return sum(v[3] for (path, _, fn), v in stats.stats.items()
                if fn == name and path.replace("\\", "/").endswith(where))
@@ -50,7 +67,9 @@ def profile_shot(shot_spec: Path, formation: str = "view") -> dict:
     """Render ``shot_spec``'s shot, then its stage one's time on one core: the wall time
     (best of three), and under the profiler the share of each of :data:`STAGES`."""
     from cadra.imaging.shot import measure_shot
+    from cadra.imaging.silhouette.fit import FitSettings
     from cadra.synthetic.simulate import load_shot_spec, simulate_shot, write_shot
+    from cadra.validation.stage1_bench import read_blur_floor
 
     with tempfile.TemporaryDirectory() as tmp:
         shot = Path(tmp) / "shot"
@@ -62,23 +81,30 @@ def profile_shot(shot_spec: Path, formation: str = "view") -> dict:
                                 overlays=False, formation=formation)
 
         measure()   # warm: compiled kernels, caches
-        walls = []
-        for _ in range(3):
-            t0 = time.perf_counter()
-            measure()
-            walls.append(time.perf_counter() - t0)
+        floor = read_blur_floor(sorted((shot / "images").glob("*.png")))
+        walls = _walls(measure)
         prof = cProfile.Profile()
         t0 = time.perf_counter()
         prof.runcall(measure)
         profiled = time.perf_counter() - t0
+        scaled = FitSettings(covariance="scaled")
+        quick = {name: _walls(lambda f=f, s=s: measure_shot(
+                    shot / "shot.toml", workers=1, progress=False, overlays=False,
+                    formation=f, settings=s))
+                 for name, f, s in (("centroid", "centroid", None),
+                                    ("scaled", formation, scaled),
+                                    ("centroid_scaled", "centroid", scaled))}
     stats = pstats.Stats(prof)
     seconds = {stage: sum(_cumulative(stats, w, n) for w, n in funcs)
                for stage, funcs in STAGES.items()}
     seconds["other"] = max(profiled - sum(seconds.values()), 0.0)
-    return {"formation": formation, "shot_seconds_one_core": min(walls),
+    return {"formation": formation, "shot_seconds_one_core": walls,
+            "read_blur_floor_s": floor, "floor_ratio": walls / floor,
+            "quick_look": {**{f"{k}_s": v for k, v in quick.items()},
+                           **{f"{k}_floor_ratio": v / floor for k, v in quick.items()}},
             "profiled_seconds": profiled,
             "share": {k: v / profiled for k, v in seconds.items()},
-            "seconds_unprofiled_scale": {k: v / profiled * min(walls)
+            "seconds_unprofiled_scale": {k: v / profiled * walls
                                          for k, v in seconds.items()}}
 
 

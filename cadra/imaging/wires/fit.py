@@ -105,8 +105,8 @@ from cadra.imaging.wires.straightness import MODEL_BLOCK_SYS_PX
 from cadra.optics.projection import Projection
 from cadra.stats import chi2_quantile
 
-__all__ = ["CentroidPass", "WireFit", "WireMeasurement", "centroid_pass", "measure_wires",
-           "wire_profiles"]
+__all__ = ["CENTROIDS", "CentroidPass", "WireFit", "WireMeasurement", "centroid_pass",
+           "measure_wires", "wire_profiles"]
 
 #: Below this total blur (px) of the wires' fitted formation the profile model is not used
 #: (the centroid and its phase term are): at 0.4 px optics blur a few per cent error in the
@@ -119,6 +119,9 @@ MARK_CLEARANCE_PX = 6.0
 #: A wire-only solution is "poorly determined" when the propagated 1-sigma position error at
 #: an image corner exceeds this (px).
 MAX_CORNER_SIGMA_PX = 0.02
+#: :func:`measure_wires`' ``formation`` that asks for no profile model: every wire's
+#: centres by centroid, with their phase term (step 7)
+CENTROIDS = "centroid"
 
 
 @dataclass(frozen=True, eq=False)
@@ -284,7 +287,7 @@ def wire_profiles(image: np.ndarray, view: View, exclude: np.ndarray | None = No
 def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = None,
                   search_px: float = 30.0, step_px: float = 4.0,
                   half_window: int = 8, profile_model: bool = True,
-                  formation: Formation | None = None, distortion=None,
+                  formation: Formation | str | None = None, distortion=None,
                   first_pass: CentroidPass | None = None) -> WireMeasurement:
     """Find every wire of ``view`` in ``image`` and solve the image->plane affine.
 
@@ -305,7 +308,8 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
         (:func:`cadra.imaging.wires.formation.fit_formation`); this image then fits only its
         wires' widths with it held, unless its score test rejects it
         (:func:`~cadra.imaging.wires.formation.fit_widths`; the reason says so). None: the
-        formation is fitted from this image alone.
+        formation is fitted from this image alone. :data:`CENTROIDS`: no profile model
+        (as ``profile_model=False``: a shot's quick look, docs/stage1.md).
     distortion : the recorded image's :class:`~cadra.optics.distortion.Distortion` (None:
         none). Each wire's profiles are then taken along its curved image, and their centres
         mapped to ideal pixels, where the line is fitted: the lines, the affine and every
@@ -324,6 +328,11 @@ def measure_wires(image: np.ndarray, view: View, exclude: np.ndarray | None = No
     See the module docstring for the method. Profiles touching ``exclude``, another wire's
     crossing or the reference mark count in ``n_rejected``.
     """
+    if isinstance(formation, str):
+        if formation != CENTROIDS:
+            raise ValueError(f"formation must be a Formation, None or {CENTROIDS!r}, "
+                             f"not {formation!r}")
+        profile_model, formation = False, None
     img, exclude = _checked_image(image, exclude)
     if (profile_model and first_pass is not None
             and first_pass.settings[:3] == (search_px, step_px, half_window)
