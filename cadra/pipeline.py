@@ -57,7 +57,7 @@ def simulate(spec: ShotSpec | str | os.PathLike | dict, *, images: bool = True,
 
 def measure(shot, images=None, *, facility=None, workers: int | None = 1,
             progress: bool = False, overlays: bool = False,
-            formation="view") -> Stage1Result:
+            formation="view", settings=None) -> Stage1Result:
     """Stage one: every station's images -> the shot's trajectory, in memory.
 
     ``shot``: a :class:`SimulatedShot` with its images rendered (its images, record and
@@ -66,7 +66,10 @@ def measure(shot, images=None, *, facility=None, workers: int | None = 1,
     image files). ``workers``: processes (1: in this process; None: every core).
     ``overlays``: draw each image's overlay (what ``cadra1`` writes in ``overlays/``).
     ``formation``: the wires' image formation once per ``"view"`` of the shot (default), per
-    ``"image"``, or given (view name -> formation, e.g. another shot's ``formations``).
+    ``"image"``, given (view name -> formation, e.g. another shot's ``formations``), or
+    ``"centroid"``: no profile model (a quick look, docs/stage1.md). ``settings``: the
+    silhouette fit's :class:`~cadra.imaging.silhouette.fit.FitSettings` (default: its
+    defaults).
     """
     if isinstance(shot, SimulatedShot):
         if images is None:
@@ -77,7 +80,7 @@ def measure(shot, images=None, *, facility=None, workers: int | None = 1,
         facility = facility if facility is not None else shot.facility
         shot = shot.shot_file()
     return measure_shot(shot, images, facility=facility, workers=workers, progress=progress,
-                        overlays=overlays, formation=formation)
+                        overlays=overlays, formation=formation, settings=settings)
 
 
 def _shot_data(item) -> ShotData:

@@ -89,6 +89,7 @@ def test_a_quick_look_without_the_profile_model_or_the_noise_model(m2_shot, monk
     ``FitSettings(covariance="scaled")`` leaves out the predicted noise covariance: the shot's
     quick look. The stations stay within their sigmas of the truth and of the full
     measurement; only the full one measures the image noise's autocovariance."""
+    import cadra
     import cadra.imaging.silhouette.fit as fit_mod
     from cadra.imaging.silhouette.fit import FitSettings
 
@@ -98,8 +99,8 @@ def test_a_quick_look_without_the_profile_model_or_the_noise_model(m2_shot, monk
                         lambda *a, **k: calls.append(1) or acov(*a, **k))
     full = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False)
     n_full = len(calls)
-    quick = measure_shot(m2_shot / "shot.toml", workers=1, progress=False, overlays=False,
-                         formation="centroid", settings=FitSettings(covariance="scaled"))
+    quick = cadra.measure(m2_shot / "shot.toml", formation="centroid",
+                          settings=FitSettings(covariance="scaled"))
     assert n_full == 6 and len(calls) == n_full     # one per image, and none in the quick look
     assert not quick.any_failed
     assert quick.formations == {"top": "centroid", "side": "centroid"}
